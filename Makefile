@@ -1,0 +1,49 @@
+# Two entry points from a fresh clone (only Python 3.11 needed):
+#   make demo   - create .venv, install the package, run the main demo (video + JSON + plots in out/)
+#   make test   - create .venv, install with the [rl,dev] extras, run the default (fast) test suite
+# Further targets: make test-slow (long checks), make bench (benchmarks), make lint.
+
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+BIN := $(VENV)/bin
+OUT := out
+
+.PHONY: demo test test-slow bench lint clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+
+# The base install: what the simulator, planner and expert need.
+$(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml
+	$(BIN)/pip install --quiet -e .
+	touch $@
+
+# The dev install: torch pinned to the CPU build first (an unpinned torch pulls several GB of CUDA
+# wheels), then stable-baselines3, supersuit and the test tools.
+$(VENV)/.dev-installed: $(VENV)/.base-installed
+	$(BIN)/pip install --quiet torch==2.13.0
+	$(BIN)/pip install --quiet -e '.[rl,dev]'
+	touch $@
+
+demo: $(VENV)/.base-installed
+	mkdir -p $(OUT)
+	$(BIN)/impact-env show corridor --out $(OUT)/corridor_setup.png
+	$(BIN)/impact-env run corridor --controller random --seed 0 --episodes 1 \
+		--video $(OUT)/corridor_random.mp4 --json $(OUT)/corridor_random.json --plot $(OUT)/corridor_random.png
+	@echo "demo outputs in $(OUT)/"
+
+test: $(VENV)/.dev-installed
+	$(BIN)/python -m pytest -q -n 2
+
+test-slow: $(VENV)/.dev-installed
+	$(BIN)/python -m pytest -q -n 2 -m slow
+
+bench: $(VENV)/.base-installed
+	$(BIN)/python benchmarks/env_throughput.py
+
+lint: $(VENV)/.dev-installed
+	$(BIN)/ruff check impact_env planners baselines tests benchmarks
+
+clean:
+	rm -rf $(VENV) $(OUT) *.egg-info

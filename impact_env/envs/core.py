@@ -1,0 +1,233 @@
+"""The episode logic shared by the Gymnasium and PettingZoo environments.
+
+One :class:`TransportCore` owns a scenario, the pymunk :class:`~impact_env.physics.World` (rebuilt on every
+reset), the online STL monitor and the episode bookkeeping (fuel, impacts). The two environment classes
+only translate its inputs and outputs into their APIs.
+
+Reward (both environments):
+
+- ``"dense"``: the per-step increment of the online robustness estimate, ``r_k = rho_k - rho_(k-1)`` with
+  ``rho_0 = 0`` before the first step. The estimate ``rho_k`` is the robustness of the trace so far with its
+  last sample held to the horizon, so at the last step it is the trace's exact robustness. The rewards of
+  an episode therefore sum to its final robustness: this is potential-based shaping, which never changes
+  which behaviour is optimal (undiscounted).
+- ``"sparse"``: 0 on every step but the last, which gives the final robustness.
+- both: minus ``fuel_penalty`` times the step's fuel, sum over robots of |F| * control period (N s).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from impact_env.errors import ActionError, ImpactEnvError
+from impact_env.physics import ImpactEvent, World
+from impact_env.scenario import Scenario, load_scenario
+from impact_env.stl import OnlineMonitor
+
+REWARD_MODES = ("dense", "sparse")
+OBS_PER_BODY = 7  # x, y, vx, vy, cos(heading), sin(heading), angular velocity
+ACTION_PER_ROBOT = 3  # body-frame Fx, Fy, torque, each in [-1, 1]
+
+
+def speed_bounds(scenario: Scenario, duration_s: float) -> tuple[float, float]:
+    """Speeds no body can exceed within ``duration_s`` (m/s, rad/s): finite observation bounds.
+
+    Contacts with e <= 1 never add kinetic energy E, and thrust adds at most
+    dE/dt <= sum_i |F_i| |v_i| <= sum_i |F_i| sqrt(2 E / m_i), so sqrt(E) grows at most linearly:
+    sqrt(E(t)) <= sqrt(E(0)) + t * sum_i |F_i| / sqrt(2 m_i). Every speed is then <= sqrt(2 E / m).
+    Frictionless contacts through the centres create no spin, so only torque changes yaw rates.
+    """
+    bodies = scenario.bodies
+    e0 = sum(0.5 * b.mass_kg * (b.velocity_mps[0] ** 2 + b.velocity_mps[1] ** 2)
+             + 0.5 * b.inertia_kgm2 * b.angular_velocity_radps ** 2 for b in bodies)
+    growth = sum(math.hypot(*r.thrust_limit_N) / math.sqrt(2.0 * r.mass_kg) for r in scenario.robots)
+    energy = (math.sqrt(e0) + duration_s * growth) ** 2
+    v_max = math.sqrt(2.0 * energy / min(b.mass_kg for b in bodies))
+    w_max = max(abs(b.angular_velocity_radps) + (duration_s * b.torque_limit_Nm / b.inertia_kgm2 if b.is_robot else 0.0)
+                for b in bodies)
+    return v_max, max(w_max, 1.0)
+
+
+class EnvConfigError(ImpactEnvError, ValueError):
+    """An environment option is out of range or of the wrong kind."""
+
+
+@dataclass
+class EpisodeLog:
+    """What an episode produced so far: summary numbers for the CLI, the benchmark and ``info``."""
+
+    fuel_Ns: float = 0.0
+    impacts: list[ImpactEvent] = field(default_factory=list)
+    robustness: float = 0.0
+
+
+class TransportCore:
+    """Scenario + physics + STL monitor: reset, apply an action, observe.
+
+    Args:
+        scenario: a Scenario, a shipped scenario name or a path to a TOML file.
+        reward_mode: ``"dense"`` (default) or ``"sparse"``; see the module docstring.
+        fuel_penalty: reward cost per N s of fuel (>= 0).
+        restitution: simulate with this restitution instead of the scenario's (model mismatch studies).
+        thrust_noise: standard deviation of multiplicative thrust noise (0.05 = 5 %), re-clipped to limits.
+        initial_position_noise_m: objects start uniformly within this radius of their scenario position.
+    """
+
+    def __init__(self, scenario: Scenario | str, reward_mode: str = "dense", fuel_penalty: float = 0.0,
+                 restitution: float | None = None, thrust_noise: float = 0.0,
+                 initial_position_noise_m: float = 0.0) -> None:
+        self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        if reward_mode not in REWARD_MODES:
+            raise EnvConfigError(f"reward_mode must be one of {REWARD_MODES}, got {reward_mode!r}")
+        for name, value in (("fuel_penalty", fuel_penalty), ("thrust_noise", thrust_noise),
+                            ("initial_position_noise_m", initial_position_noise_m)):
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise EnvConfigError(f"{name} must be a finite number >= 0, got {value!r}")
+        if restitution is not None and not (isinstance(restitution, (int, float)) and 0.0 <= restitution <= 1.0):
+            raise EnvConfigError(f"restitution must be in [0, 1] or None, got {restitution!r}")
+        self.reward_mode = reward_mode
+        self.fuel_penalty = float(fuel_penalty)
+        self.restitution = restitution
+        self.thrust_noise = float(thrust_noise)
+        self.initial_position_noise_m = float(initial_position_noise_m)
+
+        sc = self.scenario
+        self.n_robots = len(sc.robots)
+        self.n_bodies = len(sc.bodies)
+        self.body_names = [b.name for b in sc.bodies]
+        self.dt_s = sc.control_period_s
+        self.monitor = OnlineMonitor(sc.formula, sc.region_map(), self.dt_s)
+        self.horizon_steps = self.monitor.horizon_steps
+        self.wrench_limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in sc.robots], dtype=float)
+        self._limits_py = [tuple(float(x) for x in row) for row in self.wrench_limits]
+
+        xmin, xmax, ymin, ymax = sc.world_box
+        v_max, w_max = speed_bounds(sc, self.horizon_steps * self.dt_s)
+        low = np.tile(np.array([xmin, ymin, -v_max, -v_max, -1.0, -1.0, -w_max], dtype=np.float32), self.n_bodies)
+        high = np.tile(np.array([xmax, ymax, v_max, v_max, 1.0, 1.0, w_max], dtype=np.float32), self.n_bodies)
+        self.obs_low = np.append(low, np.float32(0.0))
+        self.obs_high = np.append(high, np.float32(1.0))
+        self.world: World | None = None
+        self.step_count = 0
+        self.log = EpisodeLog()
+        self.last_wrenches: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * self.n_robots
+        self._state: list[tuple[float, ...]] = []
+        self._prev_estimate = 0.0
+
+    # ------------------------------------------------------------------------------------------ episode
+    @property
+    def obs_size(self) -> int:
+        return self.n_bodies * OBS_PER_BODY + 1
+
+    @property
+    def time_s(self) -> float:
+        return self.step_count * self.dt_s
+
+    def reset(self, rng: np.random.Generator) -> None:
+        """Start a new episode: a fresh pymunk world, an empty trace; randomness only from ``rng``."""
+        overrides = {}
+        if self.initial_position_noise_m > 0:
+            for body in self.scenario.objects:
+                r = self.initial_position_noise_m * math.sqrt(rng.uniform())
+                a = rng.uniform(0.0, 2.0 * math.pi)
+                overrides[body.name] = (body.position_m[0] + r * math.cos(a), body.position_m[1] + r * math.sin(a))
+        self.world = World(self.scenario, restitution=self.restitution, initial_positions_m=overrides)
+        self._rng = rng
+        self.step_count = 0
+        self.log = EpisodeLog()
+        self.last_wrenches = [(0.0, 0.0, 0.0)] * self.n_robots
+        self.monitor.reset()
+        self._state = self.world.read_state()
+        self.log.robustness = self.monitor.update(self._positions())
+        self._prev_estimate = 0.0
+
+    def _positions(self) -> dict[str, tuple[float, float]]:
+        return {name: (s[0], s[1]) for name, s in zip(self.body_names, self._state)}
+
+    def wrenches_from_action(self, action: Any) -> list[tuple[float, float, float]]:
+        """Scale a normalised action (n_robots * 3 numbers in [-1, 1]) to body-frame (Fx, Fy, torque).
+
+        Values outside [-1, 1] are clipped (so limits are never exceeded); NaN or infinite values raise
+        :class:`ActionError`, since no clipping can make sense of them.
+        """
+        a = np.asarray(action, dtype=float).reshape(-1)
+        if a.size != self.n_robots * ACTION_PER_ROBOT:
+            raise ActionError(f"action must have {self.n_robots * ACTION_PER_ROBOT} numbers (Fx, Fy, torque per "
+                              f"robot), got shape {np.shape(action)}")
+        if not np.all(np.isfinite(a)):
+            bad = np.flatnonzero(~np.isfinite(a)).tolist()
+            raise ActionError(f"action contains NaN or infinite values at indices {bad}; actions must be finite "
+                              "numbers in [-1, 1]")
+        scaled = np.clip(a, -1.0, 1.0).reshape(self.n_robots, ACTION_PER_ROBOT) * self.wrench_limits
+        if self.thrust_noise > 0:
+            scaled *= 1.0 + self.thrust_noise * self._rng.standard_normal(scaled.shape)
+            np.clip(scaled, -self.wrench_limits, self.wrench_limits, out=scaled)
+        return [tuple(row) for row in scaled.tolist()]
+
+    def step(self, action: Any) -> tuple[float, bool, dict[str, Any]]:
+        """Apply an action for one control period; returns (reward, terminated, info)."""
+        if self.world is None:
+            raise ImpactEnvError("call reset() before step()")
+        if self.step_count >= self.horizon_steps:
+            raise ImpactEnvError("the episode has ended (the task's horizon was reached); call reset()")
+        wrenches = self.wrenches_from_action(action)
+        self.last_wrenches = wrenches
+        events = self.world.step(wrenches)
+        self.step_count += 1
+        self._state = self.world.read_state()
+        estimate = self.monitor.update(self._positions())
+        terminated = self.step_count >= self.horizon_steps
+        if terminated:
+            events = events + self.world.flush_impacts()
+        fuel = self.dt_s * sum(math.hypot(fx, fy) for fx, fy, _ in wrenches)
+        log = self.log
+        log.fuel_Ns += fuel
+        log.impacts.extend(events)
+        log.robustness = estimate
+        if self.reward_mode == "dense":
+            reward = estimate - self._prev_estimate
+        else:
+            reward = estimate if terminated else 0.0
+        self._prev_estimate = estimate
+        reward -= self.fuel_penalty * fuel
+        info = {
+            "robustness": estimate,
+            "is_success": estimate > 0.0,
+            "impacts": [e.to_dict() for e in events],
+            "fuel_Ns": log.fuel_Ns,
+            "time_s": self.time_s,
+        }
+        return float(reward), terminated, info
+
+    # ------------------------------------------------------------------------------------- observation
+    def observation(self) -> np.ndarray:
+        """Central observation: per body (x, y, vx, vy, cos, sin, omega), then the fraction of time left."""
+        return self._observe(range(self.n_bodies))
+
+    def agent_observation(self, robot_index: int) -> np.ndarray:
+        """A robot's observation: the same layout with its own body first, then the others in order."""
+        order = [robot_index] + [i for i in range(self.n_bodies) if i != robot_index]
+        return self._observe(order)
+
+    def _observe(self, order) -> np.ndarray:
+        out = []
+        state = self._state
+        for i in order:
+            x, y, vx, vy, th, om = state[i]
+            out += (x, y, vx, vy, math.cos(th), math.sin(th), om)
+        out.append(max(0.0, 1.0 - self.step_count / self.horizon_steps))
+        obs = np.array(out, dtype=np.float32)
+        # a disc centre can sit a hair outside the box only by float32 rounding; keep obs inside the space
+        return np.clip(obs, self.obs_low, self.obs_high, out=obs)
+
+    def robot_forces_world(self) -> list[tuple[float, float]]:
+        """Last applied force of each robot rotated into the world frame (N), for rendering."""
+        out = []
+        for (fx, fy, _), s in zip(self.last_wrenches, self._state):
+            c, sn = math.cos(s[4]), math.sin(s[4])
+            out.append((c * fx - sn * fy, sn * fx + c * fy))
+        return out

@@ -1,0 +1,123 @@
+"""Gymnasium environment: central control of all robots of a transport scenario."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import EzPickle
+
+from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
+from impact_env.envs.render_support import make_frame
+from impact_env.scenario import Scenario
+
+
+class TransportEnv(gym.Env, EzPickle):
+    """Robots move passive free-floating objects by impacts, in a 2D frictionless microgravity world.
+
+    ## Description
+    A scenario (``impact_env/scenarios/*.toml`` or your own file) places robots and objects (discs) in a
+    box with solid obstacles. Robots are actuated free-flyers; objects move only when hit. Restitution is
+    the scenario's ``e`` for every contact. The task is an STL formula over the bodies' positions; the
+    reward is its spatial robustness (metres).
+
+    ## Action space
+    ``Box(-1, 1, (3 * n_robots,), float32)``: per robot, in scenario order, body-frame force x, force y
+    and torque, as fractions of the robot's ``thrust_limit_N`` (per body axis) and ``torque_limit_Nm``.
+    Values outside [-1, 1] are clipped; NaN or infinite values raise
+    :class:`~impact_env.errors.ActionError`. The wrench is held for one control period
+    (``control_period_s``, 0.1 s by default) of several physics substeps.
+
+    ## Observation space
+    ``Box(float32)`` of size ``7 * n_bodies + 1``: for each body (robots, then objects, scenario order)
+    ``x, y`` (m, within the world box), ``vx, vy`` (m/s), ``cos(heading), sin(heading)`` and angular
+    velocity (rad/s); last, the fraction of the episode's time left (1 at reset, 0 at the end).
+
+    ## Rewards
+    ``reward_mode="dense"`` (default): the per-step increment of the online STL robustness estimate
+    (the trace so far with its last sample held), so an episode's rewards sum to its final robustness.
+    ``reward_mode="sparse"``: the final robustness on the last step, 0 before. Both subtract
+    ``fuel_penalty * sum_robots |F| * dt`` (N s) if ``fuel_penalty > 0``.
+
+    ## Starting state
+    The scenario's initial positions, velocities and headings. With ``initial_position_noise_m > 0``,
+    objects start uniformly within that radius of their scenario position (drawn from the reset seed).
+
+    ## Episode end
+    ``terminated`` when the STL formula's horizon is reached (e.g. 100 s = 1000 steps for the corridor);
+    the final ``info["robustness"]`` is then the trace's exact robustness and ``info["is_success"]``
+    says whether it is positive. There is no truncation of its own (use ``max_episode_steps``).
+
+    ## Info
+    ``robustness`` (current estimate, m), ``is_success`` (robustness > 0), ``impacts`` (contacts that ended
+    during this step: dicts with ``time``, ``a``, ``b``, ``impulse`` and velocities before/after),
+    ``fuel_Ns`` (cumulative), ``time_s``.
+
+    ## Arguments
+    ``scenario`` (name, path or Scenario; default ``"corridor"``), ``reward_mode``, ``fuel_penalty``,
+    ``restitution`` (simulate with another e than the scenario's), ``thrust_noise`` (std of multiplicative
+    thrust noise), ``initial_position_noise_m``, ``render_mode`` (``"rgb_array"`` or ``"human"``),
+    ``render_width_px``.
+
+    ## Version history
+    * v0: initial release.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(self, scenario: Scenario | str = "corridor", reward_mode: str = "dense", fuel_penalty: float = 0.0,
+                 restitution: float | None = None, thrust_noise: float = 0.0,
+                 initial_position_noise_m: float = 0.0, render_mode: str | None = None,
+                 render_width_px: int = 600) -> None:
+        EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
+                          initial_position_noise_m, render_mode, render_width_px)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
+                                  restitution=restitution, thrust_noise=thrust_noise,
+                                  initial_position_noise_m=initial_position_noise_m)
+        self.scenario = self.core.scenario
+        self.metadata = dict(self.metadata, render_fps=round(1.0 / self.scenario.control_period_s))
+        self.render_mode = render_mode
+        self.render_width_px = render_width_px
+        n = self.core.n_robots * ACTION_PER_ROBOT
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
+        self.observation_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
+        self._renderer = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        self.core.reset(self.np_random)
+        if self.render_mode == "human":
+            self.render()
+        return self.core.observation(), self._reset_info()
+
+    def _reset_info(self) -> dict[str, Any]:
+        return {"robustness": self.core.log.robustness, "is_success": self.core.log.robustness > 0.0,
+                "impacts": [], "fuel_Ns": 0.0, "time_s": 0.0}
+
+    def step(self, action):
+        reward, terminated, info = self.core.step(action)
+        if self.render_mode == "human":
+            self.render()
+        return self.core.observation(), reward, terminated, False, info
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        if self.core.world is None:
+            raise gym.error.ResetNeeded("call reset() before render()")
+        if self._renderer is None:
+            from impact_env.rendering import Renderer
+
+            self._renderer = Renderer(self.scenario, self.render_mode, width_px=self.render_width_px,
+                                      fps=self.metadata["render_fps"])
+        return self._renderer.render(make_frame(self.core))
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

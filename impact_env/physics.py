@@ -1,0 +1,250 @@
+"""The pymunk world of a scenario: frictionless discs in microgravity, exact restitution, impact log.
+
+Design choices (each measured or taken from the reference notes in ``shared/reference``):
+
+- no gravity and ``space.damping = 1.0``: in pymunk damping is a velocity *retention* factor, so 1.0
+  means no damping at all (0.0 would stop every body);
+- robots and objects are DYNAMIC bodies; robots are driven by forces only (a kinematic robot has infinite
+  mass and would double the impulse it gives an object);
+- pymunk's pair restitution is the product of the two shapes' elasticities, so every shape gets
+  ``sqrt(e)`` and every pair, body-body or body-wall, bounces with exactly the scenario's ``e``;
+- the collision slop (allowed overlap) is 0.1 by default, half a disc radius here; it is set to 0.1 mm;
+- every contact is logged as an :class:`ImpactEvent` from pymunk's begin to separate callbacks, summing
+  ``arbiter.total_impulse`` over all the steps the contact lasts.
+
+Speed: pymunk's Python properties (and a typing mixin's ``__setattr__``) cost more than the physics itself
+at this size, so the substep loop calls the chipmunk functions that those properties wrap
+(``cpBodySetForce``, ``cpSpaceStep``, ...) when pymunk exposes them, and the public API otherwise. The
+two paths are tested to give bit-identical trajectories (``tests/test_physics.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import pymunk
+
+from impact_env.scenario import Scenario
+
+try:  # the C functions behind pymunk's properties, for the hot loop (see World.step)
+    from pymunk._chipmunk import lib as _cp
+except ImportError:  # pragma: no cover - a pymunk build without the cffi module: public API only
+    _cp = None
+
+WALL = "wall"  # name of the world boundary in impact events
+_SLOP_M = 1e-4
+_WALL_THICKNESS_M = 1.0
+
+
+@dataclass
+class ImpactEvent:
+    """One contact between two bodies (or a body and a wall/obstacle), from first touch to separation.
+
+    ``a``/``b`` are body or obstacle names; velocities are the bodies' linear velocities (m/s) at first
+    touch and at separation; ``impulse_Ns`` is the magnitude of the impulse summed over the contact.
+    """
+
+    time_s: float
+    a: str
+    b: str
+    impulse_Ns: float
+    a_velocity_before: tuple[float, float]
+    b_velocity_before: tuple[float, float]
+    a_velocity_after: tuple[float, float]
+    b_velocity_after: tuple[float, float]
+    duration_s: float = 0.0
+
+    def velocity_before(self, name: str) -> tuple[float, float]:
+        """Velocity (m/s) of body ``name`` (``a`` or ``b``) at first touch."""
+        return self._pick(name, self.a_velocity_before, self.b_velocity_before)
+
+    def velocity_after(self, name: str) -> tuple[float, float]:
+        """Velocity (m/s) of body ``name`` (``a`` or ``b``) at separation."""
+        return self._pick(name, self.a_velocity_after, self.b_velocity_after)
+
+    def _pick(self, name: str, va: tuple[float, float], vb: tuple[float, float]) -> tuple[float, float]:
+        if name == self.a:
+            return va
+        if name == self.b:
+            return vb
+        raise KeyError(f"impact between {self.a!r} and {self.b!r} does not involve {name!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "time": self.time_s, "a": self.a, "b": self.b, "impulse": self.impulse_Ns,
+            "a_velocity_before": list(self.a_velocity_before), "b_velocity_before": list(self.b_velocity_before),
+            "a_velocity_after": list(self.a_velocity_after), "b_velocity_after": list(self.b_velocity_after),
+            "duration": self.duration_s,
+        }
+
+
+class _Contact:
+    __slots__ = ("time_s", "a", "b", "body_a", "body_b", "va", "vb", "jx", "jy")
+
+
+# Module-level callbacks (lambdas would stop a World from being pickled).
+def _on_begin(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:
+    sa, sb = arbiter.shapes
+    c = _Contact()
+    c.time_s = world.time_s
+    c.a, c.b = world._shape_names[sa], world._shape_names[sb]
+    c.body_a, c.body_b = sa.body, sb.body
+    c.va, c.vb = tuple(sa.body.velocity), tuple(sb.body.velocity)
+    c.jx = c.jy = 0.0
+    world._open[(sa, sb)] = c
+
+
+def _on_post_solve(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:
+    c = world._open.get(arbiter.shapes)
+    if c is not None:
+        j = arbiter.total_impulse
+        c.jx += j.x
+        c.jy += j.y
+
+
+def _on_separate(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:
+    c = world._open.pop(arbiter.shapes, None)
+    if c is not None:
+        world._closed.append(_close(c, world.time_s))
+
+
+def _close(c: _Contact, time_s: float) -> ImpactEvent:
+    return ImpactEvent(
+        time_s=c.time_s, a=c.a, b=c.b, impulse_Ns=math.hypot(c.jx, c.jy),
+        a_velocity_before=c.va, b_velocity_before=c.vb,
+        a_velocity_after=tuple(c.body_a.velocity), b_velocity_after=tuple(c.body_b.velocity),
+        duration_s=time_s - c.time_s,
+    )
+
+
+class World:
+    """A fresh pymunk space for one episode of a scenario.
+
+    Args:
+        scenario: the scenario to build.
+        restitution: override of the scenario's restitution (model-mismatch studies); default the scenario's.
+        initial_positions_m: optional name -> (x, y) overriding bodies' initial positions.
+        fast: drive pymunk through its C functions in the substep loop (same results, ~3x faster).
+
+    Bodies are ordered as ``scenario.bodies`` (robots, then objects). Robot inputs are body-frame forces
+    (N) and torques (N m), held constant over a control period of ``scenario.substeps`` physics steps.
+    """
+
+    def __init__(self, scenario: Scenario, restitution: float | None = None,
+                 initial_positions_m: Mapping[str, tuple[float, float]] | None = None, fast: bool = True) -> None:
+        self.scenario = scenario
+        self.restitution = scenario.restitution if restitution is None else float(restitution)
+        self.dt_s = scenario.physics_dt_s
+        self.substeps = scenario.substeps
+        self.n_substeps_done = 0
+        self._open: dict[tuple[pymunk.Shape, pymunk.Shape], _Contact] = {}
+        self._closed: list[ImpactEvent] = []
+        self._shape_names: dict[pymunk.Shape, str] = {}
+
+        space = pymunk.Space()
+        space.gravity = (0.0, 0.0)
+        space.damping = 1.0
+        space.collision_slop = _SLOP_M
+        self.space = space
+        elasticity = math.sqrt(self.restitution)
+        overrides = dict(initial_positions_m or {})
+
+        self.bodies: list[pymunk.Body] = []
+        for spec in scenario.bodies:
+            body = pymunk.Body(spec.mass_kg, spec.inertia_kgm2, body_type=pymunk.Body.DYNAMIC)
+            body.position = overrides.pop(spec.name, spec.position_m)
+            body.velocity = spec.velocity_mps
+            body.angle = spec.heading_rad
+            body.angular_velocity = spec.angular_velocity_radps
+            shape = pymunk.Circle(body, spec.radius_m)
+            self._add_shape(shape, spec.name, elasticity)
+            space.add(body, shape)
+            self.bodies.append(body)
+        if overrides:
+            raise KeyError(f"initial_positions_m names unknown bodies: {sorted(overrides)}")
+        self.robots = self.bodies[: len(scenario.robots)]
+
+        static = space.static_body
+        xmin, xmax, ymin, ymax = scenario.world_box
+        w = _WALL_THICKNESS_M
+        for box in ((xmin - w, xmax + w, ymin - w, ymin), (xmin - w, xmax + w, ymax, ymax + w),
+                    (xmin - w, xmin, ymin, ymax), (xmax, xmax + w, ymin, ymax)):
+            x0, x1, y0, y1 = box
+            self._add_shape(pymunk.Poly(static, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]), WALL, elasticity)
+        for obstacle in scenario.obstacles:
+            self._add_shape(pymunk.Poly(static, [tuple(v) for v in obstacle.polygon.vertices]), obstacle.name,
+                            elasticity)
+        space.add(*[s for s in self._shape_names if s.body is static])
+        space.on_collision(None, None, begin=_on_begin, post_solve=_on_post_solve, separate=_on_separate, data=self)
+        self._fast = None
+        if _cp is not None and fast:
+            try:
+                self._fast = (space._space, [b._body for b in self.robots])
+            except AttributeError:  # pragma: no cover - pymunk internals moved: use the public API
+                self._fast = None
+
+    def _add_shape(self, shape: pymunk.Shape, name: str, elasticity: float) -> None:
+        shape.elasticity = elasticity
+        shape.friction = 0.0
+        self._shape_names[shape] = name
+
+    @property
+    def time_s(self) -> float:
+        return self.n_substeps_done * self.dt_s
+
+    def step(self, wrenches: Sequence[tuple[float, float, float]]) -> list[ImpactEvent]:
+        """Advance one control period with each robot's body-frame (Fx, Fy, torque) held constant.
+
+        The wrenches must already respect the thrust limits (the environments clip them). Returns the
+        impact events that ended (separated) during this period.
+        """
+        if self._fast is not None:
+            return self._step_fast(wrenches)
+        robots = self.robots
+        space_step = self.space.step
+        dt = self.dt_s
+        for _ in range(self.substeps):
+            for body, (fx, fy, tau) in zip(robots, wrenches):
+                c, s = math.cos(body.angle), math.sin(body.angle)
+                body.force = (c * fx - s * fy, s * fx + c * fy)
+                body.torque = tau
+            space_step(dt)
+            self.n_substeps_done += 1
+        closed, self._closed = self._closed, []
+        return closed
+
+    def _step_fast(self, wrenches: Sequence[tuple[float, float, float]]) -> list[ImpactEvent]:
+        space_ptr, body_ptrs = self._fast
+        cp, cos, sin = _cp, math.cos, math.sin
+        dt = self.dt_s
+        pairs = list(zip(body_ptrs, wrenches))
+        for _ in range(self.substeps):
+            for ptr, (fx, fy, tau) in pairs:
+                a = cp.cpBodyGetAngle(ptr)
+                c, s = cos(a), sin(a)
+                cp.cpBodySetForce(ptr, (c * fx - s * fy, s * fx + c * fy))
+                cp.cpBodySetTorque(ptr, tau)
+            self.space._locked = True  # as pymunk's own step(): callbacks may not add or remove shapes
+            try:
+                cp.cpSpaceStep(space_ptr, dt)
+            finally:
+                self.space._locked = False
+            self.n_substeps_done += 1
+        closed, self._closed = self._closed, []
+        return closed
+
+    def flush_impacts(self) -> list[ImpactEvent]:
+        """Close the contacts still open (end of episode): their 'after' velocities are the current ones."""
+        events = [_close(c, self.time_s) for c in self._open.values()]
+        self._open.clear()
+        return sorted(events, key=lambda e: e.time_s)
+
+    def read_state(self) -> list[tuple[float, float, float, float, float, float]]:
+        """Per body (x, y, vx, vy, heading, angular velocity) in SI units, scenario body order."""
+        out = []
+        for b in self.bodies:
+            p, v = b.position, b.velocity
+            out.append((p.x, p.y, v.x, v.y, b.angle, b.angular_velocity))
+        return out

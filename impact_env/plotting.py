@@ -1,0 +1,213 @@
+"""matplotlib figures of a scenario and of a run: what the README, the planners and the CLI save as PNG.
+
+Only the object-oriented API (:class:`matplotlib.figure.Figure`) is used: no pyplot global state, no
+backend selection, nothing shown on screen, so it works headless and in parallel tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Circle, FancyArrowPatch, Patch, Polygon, Rectangle
+
+if TYPE_CHECKING:
+    from matplotlib.artist import Artist
+    from matplotlib.axes import Axes
+
+    from impact_env.scenario import Scenario
+
+DPI = 120
+ROBOT_COLOUR = "tab:blue"
+OBJECT_COLOUR = "tab:orange"
+OBSTACLE_COLOUR = "0.45"
+REGION_COLOUR = "tab:green"
+IMPACT_COLOUR = "red"
+# trajectory colours per body: blues for robots, oranges/browns for objects, cycled
+ROBOT_TRACE_COLOURS = ("tab:blue", "tab:cyan", "tab:purple", "navy", "steelblue")
+OBJECT_TRACE_COLOURS = ("tab:orange", "tab:brown", "goldenrod", "tab:red", "chocolate")
+
+
+def draw_scenario(scenario: Scenario, ax: Axes | None = None) -> Axes:
+    """Draw the world box, obstacles, regions, bodies at their start and their final positions (m).
+
+    Bodies are circles of their radius at ``position_m``; a ``final_position_m`` is an 'x' with a dashed
+    circle, and robots that have one get an arrow from start to final. A new figure is made when ``ax``
+    is None (reach it through ``ax.figure``).
+    """
+    if ax is None:
+        ax = _new_figure(*_xy_figsize(scenario)).add_subplot()
+    handles = _draw_scenario(scenario, ax)
+    ax.set_title(f"{scenario.name}  (restitution e = {scenario.restitution:g}, tf = {scenario.tf_s:g} s)")
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize="small")
+    return ax
+
+
+def save_scenario_figure(scenario: Scenario, path: str | Path) -> Path:
+    """Draw ``scenario`` (see :func:`draw_scenario`) and save it as a PNG at ``DPI`` dots per inch.
+
+    A path without a suffix gets ``.png``; missing parent folders are created. Returns the written path.
+    """
+    path = _png_path(path)
+    fig = _new_figure(*_xy_figsize(scenario))
+    draw_scenario(scenario, fig.add_subplot())
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")
+    fig.clear()  # an OO Figure is not registered with pyplot: clearing and dropping it frees it
+    return path
+
+
+def plot_run(scenario: Scenario, times_s: np.ndarray, positions: np.ndarray, impacts: Sequence[dict[str, Any]],
+             robustness: float, path: str | Path) -> Path:
+    """Save a two-panel PNG of one run: the xy view (left) and position components over time (right).
+
+    Args:
+        scenario: the scenario that was run; drawn underneath the trajectories.
+        times_s: (T,) sample times (s), increasing.
+        positions: (T, n_bodies, 2) body positions (m), bodies in ``scenario.bodies`` order.
+        impacts: impact events as dicts with keys ``'time'`` (s), ``'a'``, ``'b'`` (body or obstacle names,
+            or ``"wall"``) and ``'impulse'`` (N s). Body-body impacts are red stars at body ``a``'s position
+            (interpolated at the impact time) on the left; every impact is a dotted vertical line on the
+            right (red for body-body, grey for a wall or obstacle).
+        robustness: STL robustness of the run (m), shown in the title.
+        path: where to write the PNG (``.png`` is added when there is no suffix).
+
+    Raises:
+        ValueError: ``times_s`` or ``positions`` has the wrong shape, or an impact lacks a key.
+    """
+    times_s = np.asarray(times_s, dtype=float)
+    positions = np.asarray(positions, dtype=float)
+    bodies = scenario.bodies
+    n = len(bodies)
+    if times_s.ndim != 1 or times_s.size == 0:
+        raise ValueError(f"times_s must be a non-empty 1-D array (T,), got shape {times_s.shape}")
+    if positions.shape != (times_s.size, n, 2):
+        raise ValueError(f"positions must have shape (T, n_bodies, 2) = ({times_s.size}, {n}, 2) for scenario "
+                         f"{scenario.name!r} (bodies {[b.name for b in bodies]}), got {positions.shape}")
+    for k, impact in enumerate(impacts):
+        missing = [key for key in ("time", "a", "b", "impulse") if key not in impact]
+        if missing:
+            raise ValueError(f"impacts[{k}] lacks key(s) {missing}; each impact needs 'time', 'a', 'b', 'impulse'")
+    path = _png_path(path)
+    index = {b.name: i for i, b in enumerate(bodies)}
+    colours = _trace_colours(scenario)
+
+    w, h = _xy_figsize(scenario)
+    fig = _new_figure(w + 7.0, max(h, 4.5))
+    ax_xy, ax_t = fig.subplots(1, 2, gridspec_kw={"width_ratios": [w, 6.0]})
+
+    handles = _draw_scenario(scenario, ax_xy)
+    for i, body in enumerate(bodies):
+        (line,) = ax_xy.plot(positions[:, i, 0], positions[:, i, 1], color=colours[i], lw=1.5,
+                             label=f"{body.name} path")
+        ax_xy.plot(*positions[-1, i], "o", color=colours[i], ms=4)
+        handles.append(line)
+    body_impacts = [m for m in impacts if m["a"] in index and m["b"] in index]
+    if body_impacts:
+        stars = np.array([[np.interp(m["time"], times_s, positions[:, index[m["a"]], c]) for c in (0, 1)]
+                          for m in body_impacts])
+        handles.append(ax_xy.scatter(stars[:, 0], stars[:, 1], marker="*", s=140, color=IMPACT_COLOUR,
+                                     edgecolor="k", linewidth=0.5, zorder=6, label="body-body impact"))
+    ax_xy.set_title("xy view")
+    ax_xy.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+                 fontsize="small")
+
+    for i, body in enumerate(bodies):
+        ax_t.plot(times_s, positions[:, i, 0], color=colours[i], lw=1.5, label=f"{body.name} x")
+        ax_t.plot(times_s, positions[:, i, 1], color=colours[i], lw=1.5, ls="--", label=f"{body.name} y")
+    for m in impacts:
+        between_bodies = m["a"] in index and m["b"] in index
+        ax_t.axvline(m["time"], color=IMPACT_COLOUR if between_bodies else "0.6", ls=":", lw=1.0)
+    ax_t.set_xlabel("time (s)")
+    ax_t.set_ylabel("position (m)")
+    ax_t.set_title("positions over time (x solid, y dashed; impacts dotted)")
+    ax_t.grid(True, alpha=0.3)
+    ax_t.legend(loc="best", fontsize="small", ncol=2)
+
+    count = len(body_impacts)
+    fig.suptitle(f"{scenario.name}: robustness rho = {robustness:.3f} m  "
+                 f"({count} body-body impact{'' if count == 1 else 's'})")
+    fig.savefig(path, dpi=DPI)
+    fig.clear()
+    return path
+
+
+# --------------------------------------------------------------------------------------------- helpers
+
+
+def _new_figure(width_in: float, height_in: float) -> Figure:
+    return Figure(figsize=(width_in, height_in), layout="constrained")
+
+
+def _xy_figsize(scenario: Scenario) -> tuple[float, float]:
+    """Figure size (in) for the xy view: longest side 7 in, plus room on the right for the legend."""
+    xmin, xmax, ymin, ymax = scenario.world_box
+    aspect = (ymax - ymin) / (xmax - xmin)
+    w, h = (7.0, 7.0 * aspect) if aspect <= 1.0 else (7.0 / aspect, 7.0)
+    return max(w, 2.5) + 2.0, max(h, 2.5) + 0.6
+
+
+def _png_path(path: str | Path) -> Path:
+    path = Path(path)
+    if not path.suffix:
+        path = path.with_suffix(".png")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _trace_colours(scenario: Scenario) -> list[str]:
+    return ([ROBOT_TRACE_COLOURS[i % len(ROBOT_TRACE_COLOURS)] for i in range(len(scenario.robots))]
+            + [OBJECT_TRACE_COLOURS[i % len(OBJECT_TRACE_COLOURS)] for i in range(len(scenario.objects))])
+
+
+def _draw_scenario(scenario: Scenario, ax: Axes) -> list[Artist]:
+    """Draw the scenario on ``ax`` and return legend handles for the kinds of thing present."""
+    xmin, xmax, ymin, ymax = scenario.world_box
+    ax.add_patch(Rectangle((xmin, ymin), xmax - xmin, ymax - ymin, fill=False, ec="k", lw=1.5, zorder=1))
+    for obstacle in scenario.obstacles:
+        v = obstacle.polygon.vertices
+        ax.add_patch(Polygon(v, closed=True, fc=OBSTACLE_COLOUR, ec="0.2", hatch="//", lw=1.0, zorder=2))
+        cx, cy = v.mean(axis=0)
+        ax.text(cx, cy, obstacle.name, ha="center", va="center", color="w", fontsize=9, weight="bold", zorder=3,
+                bbox={"boxstyle": "round,pad=0.2", "fc": "0.25", "ec": "none"})
+    for region in scenario.regions:
+        v = region.polygon.vertices
+        ax.add_patch(Polygon(v, closed=True, fc=REGION_COLOUR, alpha=0.25, ec=REGION_COLOUR, lw=1.5, zorder=2))
+        rxmin, _, _, rymax = region.polygon.bounds
+        ax.text(rxmin, rymax, f" {region.name}", ha="left", va="top", color="darkgreen", fontsize=9, zorder=3)
+    robot_names = {b.name for b in scenario.robots}
+    for body in scenario.bodies:
+        colour = ROBOT_COLOUR if body.name in robot_names else OBJECT_COLOUR
+        x, y = body.position_m
+        ax.add_patch(Circle((x, y), body.radius_m, fc=colour, ec="k", lw=0.8, alpha=0.9, zorder=4))
+        ax.text(x + 0.75 * body.radius_m, y + 0.75 * body.radius_m, body.name, fontsize=9, zorder=7)
+        if body.final_position_m is None:
+            continue
+        fx, fy = body.final_position_m
+        ax.add_patch(Circle((fx, fy), body.radius_m, fill=False, ec=colour, ls="--", lw=1.0, zorder=4))
+        ax.plot(fx, fy, "x", color=colour, ms=7, mew=1.5, zorder=5)
+        if body.name in robot_names and np.hypot(fx - x, fy - y) > 1e-9:
+            ax.add_patch(FancyArrowPatch((x, y), (fx, fy), arrowstyle="-|>", mutation_scale=12, color=colour,
+                                         lw=1.0, alpha=0.7, shrinkA=0, shrinkB=0, zorder=3))
+    pad = 0.03 * max(xmax - xmin, ymax - ymin)
+    ax.set_xlim(xmin - pad, xmax + pad)
+    ax.set_ylim(ymin - pad, ymax + pad)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+    handles: list[Artist] = []
+    if scenario.robots:
+        handles.append(Patch(fc=ROBOT_COLOUR, ec="k", label="robot"))
+    if scenario.objects:
+        handles.append(Patch(fc=OBJECT_COLOUR, ec="k", label="object"))
+    if scenario.obstacles:
+        handles.append(Patch(fc=OBSTACLE_COLOUR, ec="0.2", hatch="//", label="obstacle"))
+    if scenario.regions:
+        handles.append(Patch(fc=REGION_COLOUR, alpha=0.25, ec=REGION_COLOUR, label="region"))
+    if any(b.final_position_m is not None for b in scenario.bodies):
+        handles.append(Line2D([], [], color="0.3", marker="x", ls="--", label="final position"))
+    return handles

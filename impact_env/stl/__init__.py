@@ -1,0 +1,32 @@
+"""Signal Temporal Logic over body position traces (the paper's Eq. 2a-2d).
+
+* :func:`parse` turns text such as ``F[0,100] in(O1, goal) & G[0,100] !in(R1, W1)`` into a syntax tree of
+  :class:`Formula` nodes (bounds in seconds), which the planner also compiles into MILP constraints;
+* :func:`robustness` / :func:`robustness_signal` evaluate it offline on a trace (vectorised numpy);
+* :class:`OnlineMonitor` gives the same numbers one environment step at a time, for dense rewards.
+"""
+
+from __future__ import annotations
+
+from impact_env.stl.formula import (
+    Always,
+    And,
+    Eventually,
+    FalseFormula,
+    Formula,
+    InRegion,
+    Not,
+    Or,
+    TrueFormula,
+    Until,
+    horizon_steps,
+    interval_steps,
+)
+from impact_env.stl.monitor import OnlineMonitor
+from impact_env.stl.parser import parse
+from impact_env.stl.robustness import robustness, robustness_signal
+
+__all__ = [
+    "Always", "And", "Eventually", "FalseFormula", "Formula", "InRegion", "Not", "OnlineMonitor", "Or",
+    "TrueFormula", "Until", "horizon_steps", "interval_steps", "parse", "robustness", "robustness_signal",
+]

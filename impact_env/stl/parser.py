@@ -1,0 +1,204 @@
+"""Parse STL text into the syntax tree of :mod:`impact_env.stl.formula`, without eval.
+
+A hand-written tokenizer and recursive-descent parser. Grammar, loosest binding first::
+
+    formula := conj ('|' conj)*
+    conj    := until ('&' until)*
+    until   := unary ('U' interval unary)?          # non-associative: a U b U c needs parentheses
+    unary   := '!' unary | 'F' interval unary | 'G' interval unary | atom
+    atom    := 'in' '(' NAME ',' NAME ')' | 'true' | 'false' | '(' formula ')'
+    interval:= '[' NUMBER ',' NUMBER ']'            # seconds, 0 <= a <= b
+
+so ``F[0,100] in(O1, goal) & G[0,100] !in(R1, W1)`` is ``And(F(...), G(Not(...)))``. Names match
+``[A-Za-z_][A-Za-z0-9_]*``; ``F``, ``G``, ``U``, ``in``, ``true``, ``false`` are keywords only where the grammar
+expects an operator, so a body may still be called ``F``. Numbers: ``0``, ``2.5``, ``.5``, ``1e2``, ``1e-05``.
+A chain ``a & b & c`` becomes one n-ary And; a parenthesised group stays a separate node, which is what makes
+``parse(str(f)) == f`` hold for every tree.
+
+Errors are :class:`STLSyntaxError` with the 0-based column of the offending token.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import NamedTuple
+
+from impact_env.errors import STLSyntaxError
+from impact_env.stl.formula import (
+    Always,
+    And,
+    Eventually,
+    FalseFormula,
+    Formula,
+    InRegion,
+    Not,
+    Or,
+    TrueFormula,
+    Until,
+)
+
+_NUMBER = re.compile(r"(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_PUNCT = frozenset("()[],!&|")
+_HINTS = {
+    "-": " (interval bounds are seconds >= 0)",
+    "~": " (write '!' for negation)",
+    "^": " (write '&' for and)",
+    "=": " (predicates are written in(BODY, REGION))",
+}
+_PREDICATE_HINT = "a predicate like in(O1, goal)"
+
+
+class _Token(NamedTuple):
+    kind: str  # "name", "number", one of the punctuation characters, or "end"
+    text: str
+    column: int
+
+
+def _tokenize(text: str) -> list[_Token]:
+    tokens: list[_Token] = []
+    i, n = 0, len(text)
+    while i < n:
+        ch = text[i]
+        if ch.isspace():
+            i += 1
+            continue
+        if ch in _PUNCT:
+            tokens.append(_Token(ch, ch, i))
+            i += 1
+            continue
+        match = _NUMBER.match(text, i) or _NAME.match(text, i)
+        if match is None:
+            raise STLSyntaxError(f"unknown token {ch!r}{_HINTS.get(ch, '')}", text, i)
+        kind = "number" if ch.isdigit() or ch == "." else "name"
+        tokens.append(_Token(kind, match.group(), i))
+        i = match.end()
+    tokens.append(_Token("end", "", n))
+    return tokens
+
+
+class _Parser:
+    def __init__(self, text: str) -> None:
+        self.text = text
+        self.tokens = _tokenize(text)
+        self.pos = 0
+
+    # -- helpers ------------------------------------------------------------------------------------------
+    def peek(self, ahead: int = 0) -> _Token:
+        return self.tokens[min(self.pos + ahead, len(self.tokens) - 1)]
+
+    def advance(self) -> _Token:
+        tok = self.peek()
+        self.pos += 1
+        return tok
+
+    def error(self, message: str, tok: _Token) -> STLSyntaxError:
+        return STLSyntaxError(message, self.text, tok.column)
+
+    def expect(self, kind: str, message: str) -> _Token:
+        tok = self.peek()
+        if tok.kind != kind:
+            found = "end of formula" if tok.kind == "end" else repr(tok.text)
+            raise self.error(f"{message}, found {found}", tok)
+        return self.advance()
+
+    def is_keyword(self, word: str) -> bool:
+        tok = self.peek()
+        return tok.kind == "name" and tok.text == word
+
+    # -- grammar ------------------------------------------------------------------------------------------
+    def formula(self) -> Formula:
+        items = [self.conj()]
+        while self.peek().kind == "|":
+            self.advance()
+            items.append(self.conj())
+        return items[0] if len(items) == 1 else Or(tuple(items))
+
+    def conj(self) -> Formula:
+        items = [self.until()]
+        while self.peek().kind == "&":
+            self.advance()
+            items.append(self.until())
+        return items[0] if len(items) == 1 else And(tuple(items))
+
+    def until(self) -> Formula:
+        left = self.unary()
+        if not self.is_keyword("U"):
+            return left
+        self.advance()
+        a_s, b_s = self.interval("U")
+        right = self.unary()
+        if self.is_keyword("U"):
+            raise self.error("'U' is not associative; add parentheses, e.g. (a U[0, 1] b) U[0, 2] c", self.peek())
+        return Until(a_s, b_s, left, right)
+
+    def unary(self) -> Formula:
+        tok = self.peek()
+        if tok.kind == "!":
+            self.advance()
+            return Not(self.unary())
+        if tok.kind == "name" and tok.text in ("F", "G"):
+            self.advance()
+            a_s, b_s = self.interval(tok.text)
+            child = self.unary()
+            return Eventually(a_s, b_s, child) if tok.text == "F" else Always(a_s, b_s, child)
+        return self.atom()
+
+    def atom(self) -> Formula:
+        tok = self.peek()
+        if tok.kind == "(":
+            self.advance()
+            inner = self.formula()
+            self.expect(")", f"expected ')' to close the '(' at column {tok.column}")
+            return inner
+        if tok.kind == "end":
+            raise self.error(f"unexpected end of formula, expected {_PREDICATE_HINT}", tok)
+        if tok.kind != "name":
+            raise self.error(f"expected {_PREDICATE_HINT} before {tok.text!r}", tok)
+        if tok.text == "in":
+            return self.predicate()
+        if tok.text in ("true", "false"):
+            self.advance()
+            return TrueFormula() if tok.text == "true" else FalseFormula()
+        if tok.text == "U":
+            raise self.error("'U' needs a formula on its left, e.g. in(A, r) U[0, 5] in(B, s)", tok)
+        raise self.error(f"unknown name {tok.text!r}; expected {_PREDICATE_HINT}, '!', 'F[a,b]', 'G[a,b]', "
+                         "'true', 'false' or '('", tok)
+
+    def predicate(self) -> InRegion:
+        self.advance()  # 'in'
+        self.expect("(", "expected '(' after 'in', as in in(O1, goal)")
+        body = self.expect("name", "expected a body name inside in(BODY, REGION)")
+        self.expect(",", "expected ',' between body and region in in(BODY, REGION)")
+        region = self.expect("name", "expected a region name inside in(BODY, REGION)")
+        self.expect(")", f"expected ')' to close in({body.text}, {region.text}")
+        return InRegion(body.text, region.text)
+
+    def interval(self, op: str) -> tuple[float, float]:
+        opening = self.expect("[", f"expected '[' after '{op}' (write {op}[a,b] with a, b in seconds)")
+        a_tok = self.expect("number", "expected a number of seconds for the interval start")
+        self.expect(",", "expected ',' between the interval bounds")
+        b_tok = self.expect("number", "expected a number of seconds for the interval end")
+        self.expect("]", "expected ']' after interval")
+        a_s, b_s = float(a_tok.text), float(b_tok.text)
+        if not (math.isfinite(a_s) and math.isfinite(b_s)):
+            raise self.error(f"interval [{a_tok.text}, {b_tok.text}] must have finite bounds", opening)
+        if a_s > b_s:
+            raise self.error(f"interval [{a_tok.text}, {b_tok.text}] has a > b", opening)
+        return a_s, b_s
+
+
+def parse(text: str) -> Formula:
+    """Parse STL text such as ``F[0,100] in(O1, goal) & G[0,100] !in(R1, W1)`` (bounds in seconds)."""
+    if not isinstance(text, str):
+        raise STLSyntaxError(f"an STL formula must be a string, got {type(text).__name__}")
+    parser = _Parser(text)
+    result = parser.formula()
+    tok = parser.peek()
+    if tok.kind != "end":
+        if tok.kind == ")":
+            raise parser.error("unmatched ')'", tok)
+        raise parser.error(f"unexpected {tok.text!r} after a complete formula; join formulas with '&' or '|'",
+                           tok)
+    return result

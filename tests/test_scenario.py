@@ -1,0 +1,112 @@
+"""Scenario loading: shipped files match the paper's numbers; every invalid field gives a ScenarioError
+that names its path."""
+
+from __future__ import annotations
+
+import pytest
+
+from impact_env.errors import ScenarioError
+from impact_env.scenario import load_scenario, scenario_from_dict, scenario_names
+from tests.helpers import DELETE, modified, two_body_dict
+
+
+def test_shipped_scenarios_are_listed_and_load():
+    assert scenario_names() == ["corridor", "obstacle_avoidance", "throw_and_catch_exp"]
+    for name in scenario_names():
+        sc = load_scenario(name)
+        assert sc.name == name
+        assert sc.formula.horizon_s <= sc.tf_s
+
+
+def test_corridor_numbers_from_the_paper():
+    sc = load_scenario("corridor")
+    assert sc.world_box == (-1.0, 3.0, 0.0, 10.0)
+    assert sc.restitution == 0.75 and sc.tf_s == 100.0
+    assert [r.name for r in sc.robots] == ["R1", "R2"] and [o.name for o in sc.objects] == ["O1"]
+    assert sc.body("R1").position_m == (1.0, 1.0) and sc.body("R2").position_m == (1.0, 9.0)
+    assert sc.body("O1").position_m == (1.0, 2.0)
+    assert sc.region_map()["goal"].bounds == (0.25, 1.75, 7.25, 8.75)
+    assert sc.region_map()["W1"].bounds == (-1.0, 0.0, 0.0, 10.0)
+    assert sc.body("R1").mass_kg == 16.8 and sc.body("R1").radius_m == 0.2
+    assert sc.body("R1").thrust_limit_N == (2.8, 2.8)
+    assert sc.bezier_segments == {"R1": 4, "R2": 3, "O1": 6}
+    assert sc.formula.bodies() == {"R1", "R2", "O1"}
+
+
+def test_lab_and_obstacle_numbers():
+    lab = load_scenario("throw_and_catch_exp")
+    assert lab.restitution == 0.47 and lab.tf_s == 20.0 and lab.world_box == (0.0, 4.0, -1.5, 1.5)
+    obs = load_scenario("obstacle_avoidance")
+    assert obs.tf_s == 150.0 and obs.region_map()["obs"].bounds == (3.0, 7.0, 2.0, 4.0)
+    assert obs.body("O1").final_position_m == (5.0, 1.0)
+
+
+def test_user_file_by_path(tmp_path):
+    text = (load_scenario("corridor").source and
+            __import__("importlib.resources").resources.files("impact_env.scenarios")
+            .joinpath("corridor.toml").read_text())
+    path = tmp_path / "mine.toml"
+    path.write_text(text.replace('name = "corridor"', 'name = "mine"'))
+    assert load_scenario(path).name == "mine"
+    assert load_scenario(str(path)).name == "mine"
+
+
+@pytest.mark.parametrize("path,value,message", [
+    ("robots.0.radius_m", -0.2, "robots[0].radius_m must be > 0, got -0.2"),
+    ("objects.0.mass_kg", 0, "objects[0].mass_kg must be > 0"),
+    ("restitution", 1.5, "restitution must be in [0, 1]"),
+    ("restitution", "high", "restitution must be a finite number"),
+    ("robots.0.colour", "red", "robots[0].colour: unknown key"),
+    ("wheels", 4, "wheels: unknown key"),
+    ("robots.0.position_m", [1.0], "robots[0].position_m must be a list of 2 numbers"),
+    ("robots.0.position_m", [-5.0, 5.0], "outside the world box"),
+    ("objects.0.position_m", [2.1, 5.0], "overlap"),
+    ("world.box", [1, 0, 0, 1], "world.box must have xmin < xmax"),
+    ("substeps", 0, "substeps must be >= 1"),
+    ("robots.0.thrust_limit_N", [2.8, -1], "robots[0].thrust_limit_N[1] must be > 0"),
+    ("task", "F[0,10] in(O9, goal)", "task names body 'O9'"),
+    ("task", "F[0,10] in(O1, moon)", "task names region 'moon'"),
+    ("task", "F[0,10] in(O1, goal", "task:"),
+    ("task", "in(O1, goal)", "no temporal operator"),
+    ("task", "F[0,50] in(O1, goal)", "exceeds tf_s"),
+    ("robots.0.thrust_limit_N", DELETE, "robots[0].thrust_limit_N is required"),
+    ("regions.0.box", DELETE, "regions[0] needs exactly one of"),
+])
+def test_invalid_fields_name_their_path(path, value, message):
+    with pytest.raises(ScenarioError, match=_escape(message)):
+        scenario_from_dict(modified(two_body_dict(), path, value))
+
+
+def _escape(text: str) -> str:
+    import re
+
+    return re.escape(text)
+
+
+def test_nonconvex_polygon_and_bad_segments():
+    data = two_body_dict()
+    data["obstacles"] = [{"name": "L", "polygon": [[5, 1], [7, 1], [7, 3], [6, 2], [5, 3]]}]
+    with pytest.raises(ScenarioError, match="not convex"):
+        scenario_from_dict(data)
+    data = two_body_dict()
+    data["planner"] = {"bezier_segments": {"R7": 3}}
+    with pytest.raises(ScenarioError, match="planner.bezier_segments.R7: no body named 'R7'"):
+        scenario_from_dict(data)
+
+
+def test_substep_check_suggests_a_number():
+    data = two_body_dict(substeps=1)
+    data["robots"][0]["velocity_bound_mps"] = [2.0, 2.0]
+    with pytest.raises(ScenarioError, match=r"use substeps >= \d+"):
+        scenario_from_dict(data)
+
+
+def test_unknown_name_missing_file_and_bad_toml(tmp_path):
+    with pytest.raises(ScenarioError, match="unknown scenario 'corrid'.*corridor"):
+        load_scenario("corrid")
+    with pytest.raises(ScenarioError, match="does not exist"):
+        load_scenario(tmp_path / "nope.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("name = \n")
+    with pytest.raises(ScenarioError, match="not valid TOML"):
+        load_scenario(bad)
