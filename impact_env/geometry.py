@@ -36,6 +36,13 @@ class ConvexPolygon:
         object.__setattr__(self, "vertices", v)
         object.__setattr__(self, "normals", normals)
         object.__setattr__(self, "offsets", np.einsum("ij,ij->i", normals, v))
+        # axis-aligned boxes (most regions) get a closed-form scalar path
+        box = None
+        if len(v) == 4:
+            xs, ys = sorted(set(np.round(v[:, 0], 15))), sorted(set(np.round(v[:, 1], 15)))
+            if len(xs) == 2 and len(ys) == 2:
+                box = (float(xs[0]), float(xs[1]), float(ys[0]), float(ys[1]))
+        object.__setattr__(self, "_box", box)
         # plain-float copies for the scalar fast path used once per control step
         object.__setattr__(self, "_edges_py", [
             (float(v[i, 0]), float(v[i, 1]), float(edges[i, 0]), float(edges[i, 1]),
@@ -97,6 +104,13 @@ class ConvexPolygon:
 
     def signed_distance_xy(self, x: float, y: float) -> float:
         """Scalar version of :meth:`signed_distance`, a few microseconds, for per-step monitoring."""
+        box = self._box
+        if box is not None:
+            dx = max(box[0] - x, x - box[1])  # > 0 outside in x
+            dy = max(box[2] - y, y - box[3])
+            if dx <= 0.0 and dy <= 0.0:
+                return -(dx if dx > dy else dy)
+            return -math.hypot(dx if dx > 0.0 else 0.0, dy if dy > 0.0 else 0.0)
         worst = -math.inf
         for _, _, _, _, nx, ny, off, _ in self._edges_py:
             d = nx * x + ny * y - off

@@ -21,8 +21,9 @@ two paths are tested to give bit-identical trajectories (``tests/test_physics.py
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import pymunk
 
@@ -182,6 +183,7 @@ class World:
         if _cp is not None and fast:
             try:
                 self._fast = (space._space, [b._body for b in self.robots])
+                self._all_ptrs = [b._body for b in self.bodies]
             except AttributeError:  # pragma: no cover - pymunk internals moved: use the public API
                 self._fast = None
 
@@ -243,6 +245,13 @@ class World:
 
     def read_state(self) -> list[tuple[float, float, float, float, float, float]]:
         """Per body (x, y, vx, vy, heading, angular velocity) in SI units, scenario body order."""
+        if self._fast is not None:
+            cp = _cp
+            out = []
+            for ptr in self._all_ptrs:
+                p, v = cp.cpBodyGetPosition(ptr), cp.cpBodyGetVelocity(ptr)
+                out.append((p.x, p.y, v.x, v.y, cp.cpBodyGetAngle(ptr), cp.cpBodyGetAngularVelocity(ptr)))
+            return out
         out = []
         for b in self.bodies:
             p, v = b.position, b.velocity

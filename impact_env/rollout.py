@@ -76,10 +76,14 @@ def write_video(frames: list[np.ndarray], path: str, fps: int) -> None:
     """Write RGB frames (H, W, 3) uint8 to an mp4 (H.264 through the ffmpeg that imageio-ffmpeg ships)."""
     import imageio_ffmpeg
 
+    if not frames:
+        raise ValueError("no frames to write")
     h, w = frames[0].shape[:2]
+    pad = ((0, h % 2), (0, w % 2), (0, 0))  # H.264 in yuv420p needs even sizes
+    h, w = h + h % 2, w + w % 2
     writer = imageio_ffmpeg.write_frames(str(path), (w, h), fps=fps, macro_block_size=1, quality=7,
                                          ffmpeg_log_level="error")
     writer.send(None)
     for frame in frames:
-        writer.send(np.ascontiguousarray(frame))
+        writer.send(np.ascontiguousarray(np.pad(frame, pad, mode="edge") if any(p[1] for p in pad) else frame))
     writer.close()

@@ -210,7 +210,8 @@ def _region(table: Any, where: str) -> Region:
     box = f.get("box", None, kind="box")
     vertices = f.get("polygon", None)
     if (box is None) == (vertices is None):
-        raise ScenarioError(f"{where} needs exactly one of 'box = [xmin, xmax, ymin, ymax]' or 'polygon = [[x, y], ...]'")
+        raise ScenarioError(f"{where} needs exactly one of 'box = [xmin, xmax, ymin, ymax]' "
+                            "or 'polygon = [[x, y], ...]'")
     f.finish()
     if box is not None:
         return Region(name, ConvexPolygon.from_box(*box))
@@ -373,11 +374,14 @@ def _check_task(scenario: Scenario) -> None:
         raise ScenarioError(f"task: {exc}") from None
     bodies = {b.name for b in scenario.bodies}
     regions = set(scenario.region_map())
-    for n in sorted(formula.bodies() - bodies):
-        raise ScenarioError(f"task names body {n!r}, which is not in the scenario (bodies: {', '.join(sorted(bodies))})")
-    for n in sorted(formula.regions() - regions):
-        raise ScenarioError(f"task names region {n!r}, which is not in the scenario (regions and obstacles: "
-                            f"{', '.join(sorted(regions))})")
+    unknown_bodies = sorted(formula.bodies() - bodies)
+    if unknown_bodies:
+        raise ScenarioError(f"task names body {unknown_bodies[0]!r}, which is not in the scenario "
+                            f"(bodies: {', '.join(sorted(bodies))})")
+    unknown_regions = sorted(formula.regions() - regions)
+    if unknown_regions:
+        raise ScenarioError(f"task names region {unknown_regions[0]!r}, which is not in the scenario "
+                            f"(regions and obstacles: {', '.join(sorted(regions))})")
     if formula.horizon_s <= 0:
         raise ScenarioError("task has no temporal operator, so the episode would have no steps; "
                             "wrap it, e.g. 'F[0,100] in(O1, goal)'")

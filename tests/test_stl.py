@@ -236,29 +236,46 @@ def test_monitor_reset_and_errors() -> None:
         OnlineMonitor(parse("F[0.2,0.3] in(A, r1)"), regions, dt=0.5)
 
 
-def run_monitor_state_sizes(text: str, n: int) -> list[int]:
-    regions = {"goal": ConvexPolygon.from_box(4, 5, 0, 1), "bad": ConvexPolygon.from_box(1, 2, 0, 1)}
+class CountingBox(ConvexPolygon):
+    """A box that counts its scalar signed-distance calls (the monitor's predicate evaluations)."""
+
+    calls = 0
+
+    def signed_distance_xy(self, x: float, y: float) -> float:
+        CountingBox.calls += 1
+        return super().signed_distance_xy(x, y)
+
+
+def run_monitor(text: str, n: int) -> tuple[list[int], list[int]]:
+    """Live state size and number of predicate evaluations after each of n updates at dt = 0.1 s."""
+    regions = {"goal": CountingBox(ConvexPolygon.from_box(4, 5, 0, 1).vertices),
+               "bad": CountingBox(ConvexPolygon.from_box(1, 2, 0, 1).vertices)}
     monitor = OnlineMonitor(parse(text), regions, dt=0.1)
     assert monitor.horizon_steps > n  # the monitor must keep working during the whole trace
-    sizes = []
+    sizes, calls = [], []
     for k in range(n):
+        before = CountingBox.calls
         monitor.update({"A": (0.001 * k, 0.5), "B": (math.sin(0.01 * k), 0.3)})
         sizes.append(monitor.live_state_size())
-    return sizes
+        calls.append(CountingBox.calls - before)
+    return sizes, calls
 
 
-def test_monitor_state_is_bounded_for_flat_formula() -> None:
-    # per-step work is proportional to the live state (accumulators, buffers, tentative values)
-    sizes = run_monitor_state_sizes("F[0,1000] in(A, goal) & G[0,1000] (!in(A, bad) & !in(B, bad))", 5000)
+def test_monitor_work_is_bounded_for_flat_formula() -> None:
+    # per-step work is the predicate evaluations plus a pass over the live state (accumulators, buffers,
+    # tentative values); neither may grow with k
+    sizes, calls = run_monitor("F[0,1000] in(A, goal) & G[0,1000] (!in(A, bad) & !in(B, bad))", 5000)
     assert max(sizes) <= 5
     assert sizes[10] == sizes[4999]
+    assert set(calls) == {3}
 
 
-def test_monitor_state_is_bounded_by_nested_window() -> None:
+def test_monitor_work_is_bounded_by_nested_window() -> None:
     # F[0,2] at dt = 0.1 spans 21 samples: at most 21 accumulators and 20 tentative values, whatever k is
-    sizes = run_monitor_state_sizes("G[0,1000] F[0,2] in(A, goal)", 5000)
+    sizes, calls = run_monitor("G[0,1000] F[0,2] in(A, goal)", 5000)
     assert max(sizes) <= 2 * 21 + 4
     assert max(sizes[4000:]) == max(sizes[100:1100])
+    assert set(calls) == {1}
 
 
 # ---------------------------------------------------------------------------------------------------- parser
@@ -362,7 +379,7 @@ def test_signed_distance_matches_shapely() -> None:
         shape = shapely.Polygon(polygon.vertices)
         points = nrng.uniform(-3, 3, (50, 2))
         got = polygon.signed_distance(points)
-        for (x, y), d in zip(points, got):
+        for (x, y), d in zip(points, got, strict=True):
             point = shapely.Point(x, y)
             want = shape.exterior.distance(point) * (1.0 if shape.contains(point) else -1.0)
             assert d == pytest.approx(want, abs=1e-9)

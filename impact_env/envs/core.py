@@ -154,19 +154,29 @@ class TransportCore:
         Values outside [-1, 1] are clipped (so limits are never exceeded); NaN or infinite values raise
         :class:`ActionError`, since no clipping can make sense of them.
         """
-        a = np.asarray(action, dtype=float).reshape(-1)
-        if a.size != self.n_robots * ACTION_PER_ROBOT:
-            raise ActionError(f"action must have {self.n_robots * ACTION_PER_ROBOT} numbers (Fx, Fy, torque per "
-                              f"robot), got shape {np.shape(action)}")
-        if not np.all(np.isfinite(a)):
-            bad = np.flatnonzero(~np.isfinite(a)).tolist()
+        values = action.tolist() if isinstance(action, np.ndarray) else action
+        if isinstance(values, (list, tuple)) and len(values) and isinstance(values[0], (list, tuple)):
+            values = [x for row in values for x in row]  # (n_robots, 3) given
+        n = self.n_robots * ACTION_PER_ROBOT
+        try:
+            values = [float(x) for x in values]
+        except (TypeError, ValueError):
+            raise ActionError(f"action must be {n} numbers (Fx, Fy, torque per robot), got {action!r}") from None
+        if len(values) != n:
+            raise ActionError(f"action must have {n} numbers (Fx, Fy, torque per robot), got shape {np.shape(action)}")
+        if not all(map(math.isfinite, values)):
+            bad = [i for i, x in enumerate(values) if not math.isfinite(x)]
             raise ActionError(f"action contains NaN or infinite values at indices {bad}; actions must be finite "
                               "numbers in [-1, 1]")
-        scaled = np.clip(a, -1.0, 1.0).reshape(self.n_robots, ACTION_PER_ROBOT) * self.wrench_limits
+        wrenches = []
+        for i, limits in enumerate(self._limits_py):
+            row = values[3 * i: 3 * i + 3]
+            wrenches.append(tuple((1.0 if x > 1.0 else (-1.0 if x < -1.0 else x)) * lim for x, lim in zip(row, limits)))
         if self.thrust_noise > 0:
-            scaled *= 1.0 + self.thrust_noise * self._rng.standard_normal(scaled.shape)
-            np.clip(scaled, -self.wrench_limits, self.wrench_limits, out=scaled)
-        return [tuple(row) for row in scaled.tolist()]
+            noisy = np.array(wrenches) * (1.0 + self.thrust_noise * self._rng.standard_normal((self.n_robots, 3)))
+            np.clip(noisy, -self.wrench_limits, self.wrench_limits, out=noisy)
+            wrenches = [tuple(row) for row in noisy.tolist()]
+        return wrenches
 
     def step(self, action: Any) -> tuple[float, bool, dict[str, Any]]:
         """Apply an action for one control period; returns (reward, terminated, info)."""
@@ -222,7 +232,8 @@ class TransportCore:
         out.append(max(0.0, 1.0 - self.step_count / self.horizon_steps))
         obs = np.array(out, dtype=np.float32)
         # a disc centre can sit a hair outside the box only by float32 rounding; keep obs inside the space
-        return np.clip(obs, self.obs_low, self.obs_high, out=obs)
+        np.minimum(obs, self.obs_high, out=obs)
+        return np.maximum(obs, self.obs_low, out=obs)
 
     def robot_forces_world(self) -> list[tuple[float, float]]:
         """Last applied force of each robot rotated into the world frame (N), for rendering."""

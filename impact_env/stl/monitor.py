@@ -61,7 +61,7 @@ from impact_env.stl.robustness import check_regions
 
 _INF = math.inf
 _NONE: tuple[float, ...] = ()  # "no tentative values"
-Positions = Mapping[str, tuple[float, float]]
+_Positions = Mapping[str, tuple[float, float]]
 _PredItem = tuple[Callable[[float, float], float], str, bool]  # (signed distance, body, negate)
 
 
@@ -77,40 +77,11 @@ class _Node:
         self.ts = lo  # time of tent[0]
         self.tent: Sequence[float] = _NONE  # tentative values at needed t in (k - h, k)
 
-    def step(self, k: int, pos: Positions) -> None:
+    def step(self, k: int, pos: _Positions) -> None:
         raise NotImplementedError
 
     def state_size(self) -> int:
         return len(self.tent)
-
-
-class _Pred(_Node):
-    """in(body, region), or its negation: signed distance (m) via the scalar fast path."""
-
-    __slots__ = ("body", "distance", "negate")
-
-    def __init__(self, lo: int, hi: int, body: str, distance: Callable[[float, float], float], negate: bool) -> None:
-        super().__init__(lo, hi, 0)
-        self.body, self.distance, self.negate = body, distance, negate
-
-    def step(self, k: int, pos: Positions) -> None:
-        x, y = pos[self.body]
-        v = self.distance(x, y)
-        if self.negate:
-            v = -v
-        self.c = v
-        self.out = v if k >= self.lo else None
-
-
-class _Const(_Node):
-    __slots__ = ()
-
-    def __init__(self, lo: int, hi: int, value: float) -> None:
-        super().__init__(lo, hi, 0)
-        self.c = value
-
-    def step(self, k: int, pos: Positions) -> None:
-        self.out = self.c if k >= self.lo else None
 
 
 class _Not(_Node):
@@ -120,7 +91,7 @@ class _Not(_Node):
         super().__init__(child.lo, child.hi, child.h)
         self.child = child
 
-    def step(self, k: int, pos: Positions) -> None:
+    def step(self, k: int, pos: _Positions) -> None:
         ch = self.child
         self.c = -ch.c
         out = ch.out
@@ -132,8 +103,11 @@ class _Not(_Node):
 
 
 class _Static(_Node):
-    """And/Or whose children all have horizon 0 (final at once). Predicate children are evaluated inline,
-    which saves a node call each in the common "avoid every wall" conjunction."""
+    """And/Or whose children all have horizon 0, hence final at once; also a lone predicate or constant.
+
+    Predicates (in(body, region) or its negation) are evaluated inline with the scalar signed distance,
+    which saves a node call each in the common "avoid every wall" conjunction.
+    """
 
     __slots__ = ("preds", "kids", "is_and")
 
@@ -141,7 +115,7 @@ class _Static(_Node):
         super().__init__(lo, hi, 0)
         self.preds, self.kids, self.is_and = tuple(preds), tuple(kids), is_and
 
-    def step(self, k: int, pos: Positions) -> None:
+    def step(self, k: int, pos: _Positions) -> None:
         if self.is_and:
             v = _INF
             for distance, body, negate in self.preds:
@@ -179,7 +153,7 @@ class _Bool(_Node):
         self.buffers: tuple[dict[int, float] | None, ...] = tuple({} if ch.h < h else None for ch in children)
         self.pairs = tuple(zip(self.children, self.buffers, strict=True))
 
-    def step(self, k: int, pos: Positions) -> None:
+    def step(self, k: int, pos: _Positions) -> None:
         pairs, reduce = self.pairs, self.reduce
         if k <= self.hi:
             self.c = reduce([ch.c for ch in self.children])
@@ -213,7 +187,7 @@ class _Window(_Node):
         self.accs: list[float] = []  # accs[i]: max/min of the child finals so far in the window of acc_t0 + i
         self.acc_t0 = lo
 
-    def step(self, k: int, pos: Positions) -> None:
+    def step(self, k: int, pos: _Positions) -> None:
         ch, a, b, lo, hi, is_max, accs = self.child, self.a, self.b, self.lo, self.hi, self.is_max, self.accs
         if k <= hi:
             self.c = ch.c
@@ -266,7 +240,7 @@ class _Until(_Node):
         self.bests: list[float] = []  # bests[i]: max over tau' in [t + a, tau] of min(right(tau'), run)
         self.acc_t0 = lo
 
-    def step(self, k: int, pos: Positions) -> None:
+    def step(self, k: int, pos: _Positions) -> None:
         L, R, a, b, lo, hi, hm = self.left, self.right, self.a, self.b, self.lo, self.hi, self.hm
         runs, bests, buf_l, buf_r = self.runs, self.bests, self.buf_left, self.buf_right
         if k <= hi:
@@ -309,20 +283,13 @@ class _Until(_Node):
                 run, best = _INF, -_INF
             # sample k stands for every tau' >= k (held last sample), so the loop stops there
             for sg in range(min(max(t, tau + 1), k), min(t + b, k) + 1):
-                if sg == k:
-                    lv = L.c
-                else:
-                    lv = buf_l[sg] if sg <= fin_l else L.tent[sg - L.ts]
+                at_k = sg == k
+                lv = L.c if at_k else (buf_l[sg] if sg <= fin_l else L.tent[sg - L.ts])
                 if lv < run:
                     run = lv
-                if sg >= t + a or sg == k:
-                    if sg == k:
-                        rv = R.c
-                    else:
-                        rv = buf_r[sg] if sg <= fin_r else R.tent[sg - R.ts]
-                    m = rv if rv < run else run
-                    if m > best:
-                        best = m
+                if at_k or sg >= t + a:
+                    rv = R.c if at_k else (buf_r[sg] if sg <= fin_r else R.tent[sg - R.ts])
+                    best = max(best, min(rv, run))
             tent.append(best)
         self.ts, self.tent = t0, tent
 
@@ -346,9 +313,9 @@ def _compile(f: Formula, lo: int, hi: int, dt: float, regions: Mapping[str, Conv
     node: _Node
     item = _pred_item(f, regions)
     if item is not None:
-        node = _Pred(lo, hi, item[1], item[0], item[2])
-    elif isinstance(f, (TrueFormula, FalseFormula)):
-        node = _Const(lo, hi, _INF if isinstance(f, TrueFormula) else -_INF)
+        node = _Static(lo, hi, [item], [], True)
+    elif isinstance(f, (TrueFormula, FalseFormula)):  # the empty And is +inf, the empty Or -inf
+        node = _Static(lo, hi, [], [], isinstance(f, TrueFormula))
     elif isinstance(f, Not):
         node = _Not(_compile(f.child, lo, hi, dt, regions, nodes))
     elif isinstance(f, (And, Or)):
@@ -438,16 +405,16 @@ class OnlineMonitor:
         """Append sample k = steps (body name -> (x, y) in m) and return the robustness of samples 0..k."""
         pos: dict[str, tuple[float, float]] = {}
         for name in self._bodies:
+            if name not in positions:
+                raise STLBindingError(f"formula names body {name!r} but the positions have "
+                                      f"{', '.join(map(str, positions)) or 'none'}")
+            p = positions[name]
             try:
-                p = positions[name]
                 x, y = p[0], p[1]
                 if type(x) is not float or type(y) is not float:
                     x, y = float(x), float(y)
-            except KeyError:
-                raise STLBindingError(f"formula names body {name!r} but the positions have "
-                                      f"{', '.join(map(str, positions)) or 'none'}") from None
-            except (TypeError, ValueError, IndexError):
-                raise STLError(f"positions[{name!r}] must be (x, y) in metres, got {positions[name]!r}") from None
+            except (TypeError, ValueError, IndexError, KeyError):
+                raise STLError(f"positions[{name!r}] must be (x, y) in metres, got {p!r}") from None
             if x - x != 0.0 or y - y != 0.0:  # NaN or infinite
                 raise STLError(f"positions[{name!r}] must be finite, got ({x}, {y})")
             pos[name] = (x, y)

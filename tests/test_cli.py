@@ -1,0 +1,69 @@
+"""The impact-env command: list, show, run (JSON summary, video, plot) and its error messages."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from impact_env.cli import main
+
+
+def test_scenarios_lists_the_shipped_ones(capsys):
+    assert main(["scenarios"]) == 0
+    out = capsys.readouterr().out
+    for name in ("corridor", "obstacle_avoidance", "throw_and_catch_exp"):
+        assert name in out
+
+
+def test_show_writes_a_png(tmp_path):
+    out = tmp_path / "setup.png"
+    assert main(["show", "obstacle_avoidance", "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_run_writes_summary_video_and_plot(tmp_path):
+    paths = {k: tmp_path / f"r.{k}" for k in ("json", "mp4", "png")}
+    code = main(["run", "throw_and_catch_exp", "--controller", "random", "--seed", "3", "--episodes", "2",
+                 "--json", str(paths["json"]), "--video", str(paths["mp4"]), "--plot", str(paths["png"])])
+    assert code == 0
+    summary = json.loads(paths["json"].read_text())
+    assert summary["scenario"] == "throw_and_catch_exp" and summary["controller"] == "random"
+    assert isinstance(summary["success"], bool) and isinstance(summary["robustness"], float)
+    assert isinstance(summary["fuel_Ns"], float) and summary["fuel_Ns"] > 0
+    assert [e["seed"] for e in summary["episodes"]] == [3, 4]
+    for impact in summary["impacts"]:
+        assert {"time", "a", "b", "impulse"} <= set(impact)
+    assert paths["mp4"].stat().st_size > 1000 and paths["png"].stat().st_size > 1000
+
+
+def test_run_zero_controller_on_a_user_file(tmp_path):
+    from importlib.resources import files
+
+    text = files("impact_env.scenarios").joinpath("throw_and_catch_exp.toml").read_text()
+    path = tmp_path / "lab.toml"
+    path.write_text(text)
+    out = tmp_path / "zero.json"
+    assert main(["run", str(path), "--controller", "zero", "--json", str(out)]) == 0
+    summary = json.loads(out.read_text())
+    assert summary["success"] is False and summary["impacts"] == [] and summary["fuel_Ns"] == 0.0
+    assert summary["robustness"] == pytest.approx(-0.6, abs=1e-6)
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["run", "nowhere"], "unknown scenario 'nowhere'"),
+    (["run", "corridor", "--controller", "magic"], "unknown controller 'magic'"),
+    (["run", "corridor", "--episodes", "0"], "--episodes must be >= 1"),
+    (["run", "corridor", "--restitution", "3"], "restitution must be in [0, 1]"),
+])
+def test_errors_are_one_line_messages(argv, message, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_console_script_is_installed():
+    result = subprocess.run([sys.executable, "-m", "impact_env.cli", "scenarios"], capture_output=True, text=True)
+    assert result.returncode == 0 and "corridor" in result.stdout
