@@ -1,0 +1,44 @@
+"""Typed errors of the planners."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from impact_env.errors import ImpactEnvError
+
+
+class PlannerError(ImpactEnvError):
+    """Base class of planner errors."""
+
+
+class UnsupportedSpecError(PlannerError, ValueError):
+    """The task uses an STL construct the MILP planner cannot encode (e.g. nested temporal operators)."""
+
+
+class SolverNotAvailableError(PlannerError, ImportError):
+    """The requested solver backend is not installed; the message says which extra installs it."""
+
+
+class InfeasiblePlanError(PlannerError):
+    """No plan satisfies the task; ``groups`` names the constraint groups that conflict."""
+
+    def __init__(self, message: str, groups: list[str] | None = None) -> None:
+        super().__init__(message)
+        self.groups = list(groups or [])
+
+
+class PlanTimeoutError(PlannerError):
+    """The solver hit its time limit. ``plan`` is the best plan found (or None) and ``mip_gap`` its gap."""
+
+    def __init__(self, message: str, plan: Any = None, mip_gap: float | None = None) -> None:
+        super().__init__(message)
+        self.plan = plan
+        self.mip_gap = mip_gap
+
+
+class PlanCheckError(PlannerError, ValueError):
+    """A plan violates continuity, bounds, thrust limits or the impact law; lists every violation."""
+
+    def __init__(self, violations: list[str]) -> None:
+        super().__init__("plan check failed:\n  " + "\n  ".join(violations))
+        self.violations = violations
