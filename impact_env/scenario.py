@@ -75,6 +75,8 @@ class Scenario:
     control_period_s: float = 0.1
     substeps: int = 10
     bezier_segments: dict[str, int] = field(default_factory=dict)
+    planner_intervals: int | None = None  # time-grid intervals of the offline planner
+    planner_robot_degree: int | None = None  # degree of the robots' Bezier curves in the planner
     source: str = ""
 
     @property
@@ -297,6 +299,12 @@ def _build(data: dict, source: str) -> Scenario:
     segments = planner.get("bezier_segments", {})
     if not isinstance(segments, dict):
         raise ScenarioError("planner.bezier_segments must be a table like { R1 = 4, O1 = 6 }")
+    intervals = planner.get("intervals", None, kind="int")
+    if intervals is not None and intervals < 2:
+        raise ScenarioError(f"planner.intervals must be >= 2, got {intervals}")
+    degree = planner.get("robot_degree", None, kind="int")
+    if degree is not None and not 2 <= degree <= 8:
+        raise ScenarioError(f"planner.robot_degree must be in 2..8, got {degree}")
     planner.finish()
     top.finish()
 
@@ -336,7 +344,8 @@ def _build(data: dict, source: str) -> Scenario:
     scenario = Scenario(
         name=name, description=description, world_box=world_box, obstacles=obstacles, regions=regions,
         robots=robots, objects=objects, restitution=restitution, tf_s=tf, task=task,
-        control_period_s=period, substeps=substeps, bezier_segments=dict(segments), source=source,
+        control_period_s=period, substeps=substeps, bezier_segments=dict(segments), planner_intervals=intervals,
+        planner_robot_degree=degree, source=source,
     )
     _check_task(scenario)
     return scenario

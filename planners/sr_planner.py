@@ -1,0 +1,258 @@
+"""The spatially robust offline planner (paper Sec. IV-A, IV-B and V) as a MILP over Bezier curves.
+
+    plan = plan_spatially_robust(load_scenario("corridor"))
+
+Maximises the STL spatial robustness rho of the scenario's task subject to satisfying it (rho >= 0), the
+point-mass impact law in real velocities, conditional smoothness, velocity bounds, thrust limits, robot
+separation and obstacle clearance. The model is solved by an open-source solver (HiGHS by default); a
+second stage fixes the binaries and smooths the robots' accelerations with a convex QP (Eq. 28) while
+keeping rho. See ``planners/milp/`` for each constraint family.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from impact_env.scenario import Scenario
+from planners.errors import PlannerError, PlanTimeoutError
+from planners.milp.collisions import add_robot_separation
+from planners.milp.impacts import ImpactVars, add_impacts
+from planners.milp.model import LinExpr, Model
+from planners.milp.stl_encoding import STLEncoder
+from planners.milp.trajectories import (
+    Grid,
+    ObjectTrajectory,
+    RobotTrajectory,
+    acceleration_l1,
+    add_kinematics,
+    allowed_box,
+    value,
+)
+from planners.plan import BodyPlan, Plan, PlannedImpact, Segment
+from planners.solvers import solve
+from planners.solvers.base import Progress, SolverOptions, Status
+
+DEFAULT_INTERVALS = 10
+DEFAULT_DEGREE = 4
+
+
+@dataclass
+class PlannerConfig:
+    """Options of the spatially robust planner.
+
+    intervals / robot_degree: the time grid and the robots' curve degree (default: the scenario's
+    ``[planner]`` hints, else 10 and 4). thrust_fraction: share of each robot's thrust limit the plan may
+    use (the rest is the controller's margin). acceleration_weight: the L1 acceleration cost is scaled so
+    that it can move rho by at most this many metres. smooth: run the QP smoothing stage. solver,
+    time_limit_s, mip_gap, threads, verbose, seed, progress: passed to the solver. warm_start: a previous
+    plan on the same grid to start from.
+    """
+
+    intervals: int | None = None
+    robot_degree: int | None = None
+    thrust_fraction: float = 0.5
+    acceleration_weight: float = 1e-4
+    smooth: bool = True
+    obstacle_clearance: bool = True
+    solver: str = "highs"
+    time_limit_s: float | None = 60.0
+    mip_gap: float = 1e-4
+    threads: int | None = None
+    verbose: bool = False
+    seed: int = 0
+    progress: Callable[[Progress], None] | None = None
+    warm_start: Plan | None = None
+    diagnose_infeasibility: bool = True
+
+
+@dataclass
+class BuiltModel:
+    """The MILP with handles on its variables, for solving and for reading a solution back."""
+
+    model: Model
+    grid: Grid
+    robots: list[RobotTrajectory]
+    objects: list[ObjectTrajectory]
+    impacts: ImpactVars
+    rho: LinExpr
+    acceleration_cost: LinExpr
+    build_time_s: float
+    conjunct_groups: list[str] = field(default_factory=list)
+
+
+def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
+    """Build the MILP of the spatially robust planner (no solving)."""
+    start = time.perf_counter()
+    if not scenario.objects:
+        raise PlannerError(f"scenario {scenario.name!r} has no object to transport")
+    if not 0.0 < config.thrust_fraction <= 1.0:
+        raise PlannerError(f"thrust_fraction must be in (0, 1], got {config.thrust_fraction}")
+    n = config.intervals or scenario.planner_intervals or DEFAULT_INTERVALS
+    degree = config.robot_degree or scenario.planner_robot_degree or DEFAULT_DEGREE
+    if n < 2 or degree < 2:
+        raise PlannerError(f"need at least 2 intervals and robot degree >= 2, got {n} and {degree}")
+    grid = Grid(n, scenario.tf_s)
+    model = Model(name=f"sr:{scenario.name}")
+    boxes = {b.name: allowed_box(scenario, b) for b in scenario.bodies}
+    robots = [RobotTrajectory(model, b, grid, degree, boxes[b.name]) for b in scenario.robots]
+    objects = [ObjectTrajectory(model, b, grid, boxes[b.name]) for b in scenario.objects]
+    add_kinematics(model, robots, objects, config.thrust_fraction)
+    impacts = add_impacts(model, robots, objects, scenario.restitution, scenario.world_box)
+    add_robot_separation(model, robots, scenario.world_box)
+
+    trajectories = {t.spec.name: t for t in robots + objects}
+    encoder = STLEncoder(model, grid, lambda body, k: trajectories[body].points(k), boxes, scenario.region_map())
+    if config.obstacle_clearance:
+        for body in scenario.bodies:
+            for obstacle in scenario.obstacles:
+                for k in range(n):
+                    encoder.clearance(body.name, obstacle.name, k, body.radius_m, group="obstacle clearance")
+
+    # one group per top-level conjunct of the task, so that infeasibility names the conflicting parts
+    formula = scenario.formula
+    conjuncts = formula.children if type(formula).__name__ == "And" else (formula,)
+    rho = model.add_var(0.0, encoder.bound, name="rho")
+    groups = []
+    for c in conjuncts:
+        r_c = encoder.encode(c)
+        group = f"task: {c}"
+        groups.append(group)
+        model.add(r_c >= 0.0, group=group)
+        model.add(rho <= r_c, group="task encoding")
+
+    cost = acceleration_l1(model, robots)
+    n_terms = sum(len(r.acceleration_points(k)) * 2 for r in robots for k in range(n))
+    a_bound = max(max(r.spec.thrust_limit_N) / r.spec.mass_kg for r in robots)
+    weight = config.acceleration_weight / max(1, n_terms) / a_bound
+    model.set_objective(rho - cost * weight, maximize=True)
+    return BuiltModel(model, grid, robots, objects, impacts, rho, cost, time.perf_counter() - start, groups)
+
+
+def plan_spatially_robust(scenario: Scenario, config: PlannerConfig | None = None) -> Plan:
+    """Find the plan of maximal spatial robustness; see the module docstring.
+
+    Raises:
+        InfeasiblePlanError: no plan satisfies the task; ``.groups`` names the conflicting constraint groups.
+        PlanTimeoutError: time limit reached; ``.plan`` is the best plan found (or None) and ``.mip_gap``.
+        UnsupportedSpecError: the task uses STL the planner cannot encode.
+    """
+    config = config or PlannerConfig()
+    built = build_model(scenario, config)
+    options = SolverOptions(time_limit_s=config.time_limit_s, mip_gap=config.mip_gap, threads=config.threads,
+                            verbose=config.verbose, progress=config.progress, seed=config.seed,
+                            warm_start=_warm_start(built, config.warm_start))
+    result = solve(built.model, config.solver, options)
+    if result.status == Status.INFEASIBLE:
+        from planners.solvers.diagnose import explain_infeasible
+
+        if config.diagnose_infeasibility:
+            raise explain_infeasible(built.model, config.solver, SolverOptions(time_limit_s=10.0))
+        from planners.errors import InfeasiblePlanError
+
+        raise InfeasiblePlanError(f"no plan satisfies the task of {scenario.name!r}")
+    if result.status in (Status.ERROR, Status.UNBOUNDED):
+        raise PlannerError(f"solver {config.solver} failed on {scenario.name!r}: {result.status.value} "
+                           f"{result.message}")
+    if not result.has_solution:
+        raise PlanTimeoutError(f"no plan found within the time limit of {config.time_limit_s} s "
+                               f"(try a longer --time-limit or fewer intervals)")
+    x = _polish(built, result.x, config)
+    plan = extract_plan(scenario, built, x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
+    plan.check(scenario, tol=1e-6)
+    if result.status == Status.TIME_LIMIT:
+        raise PlanTimeoutError(f"time limit of {config.time_limit_s} s reached with gap {result.mip_gap:.3g}; "
+                               f"best robustness {plan.robustness:.4f} m", plan=plan, mip_gap=result.mip_gap)
+    return plan
+
+
+def _polish(built: BuiltModel, x: np.ndarray, config: PlannerConfig) -> np.ndarray:
+    """Second stage: binaries fixed exactly, rho kept, then minimise squared accelerations (Eq. 28) if
+    ``config.smooth`` (a convex QP), else the same linear objective (an LP). Fixing the binaries also
+    removes the integrality tolerance's leak through big-M rows, so the impact law holds to the LP
+    tolerance. Falls back to ``x`` if the second stage fails."""
+    m = built.model
+    fixed = Model(m.name + ":polish", list(m.col_lo), list(m.col_hi), [False] * m.n_vars, m.col_names,
+                  list(m.rows), list(m.row_groups))
+    for i, is_int in enumerate(m.integer):
+        if is_int:
+            fixed.col_lo[i] = fixed.col_hi[i] = float(round(x[i]))
+    rho = built.rho.value(x)
+    fixed.add(built.rho >= rho - 1e-7, group="keep robustness")
+    if config.smooth:
+        fixed.set_objective(LinExpr(), maximize=False)
+        for r in built.robots:
+            for k in range(built.grid.intervals):
+                for p in r.acceleration_points(k):
+                    for axis in range(2):
+                        fixed.add_quadratic(p[axis], 1.0)
+    else:
+        fixed.set_objective(m.objective, maximize=m.maximize)
+    result = solve(fixed, "highs", SolverOptions(time_limit_s=config.time_limit_s, verbose=config.verbose))
+    if result.status == Status.OPTIMAL and result.x is not None:
+        return result.x
+    return x
+
+
+def extract_plan(scenario: Scenario, built: BuiltModel, x: np.ndarray, solver: str, solve_time_s: float,
+                 mip_gap: float) -> Plan:
+    """Read a solution vector back into a :class:`Plan`."""
+    grid = built.grid
+    bodies: dict[str, BodyPlan] = {}
+    for r in built.robots:
+        segs = [Segment(*grid.interval(k), np.array([value(p, x) for p in r.points(k)])) for k in range(grid.intervals)]
+        bodies[r.spec.name] = BodyPlan(r.spec.name, "robot", segs)
+    for o in built.objects:
+        segs = [Segment(*grid.interval(k), np.array([value(p, x) for p in o.points(k)])) for k in range(grid.intervals)]
+        bodies[o.spec.name] = BodyPlan(o.spec.name, "object", segs)
+    impacts = []
+    robots = {r.spec.name: r for r in built.robots}
+    objects = {o.spec.name: o for o in built.objects}
+    for (rn, on, k), z in sorted(built.impacts.z.items(), key=lambda item: item[0][2]):
+        if z.value(x) > 0.5:
+            r, o = robots[rn], objects[on]
+            impacts.append(PlannedImpact(
+                time_s=grid.knot(k), robot=rn, object=on, position=tuple(value(o.position_at_knot(k), x)),
+                object_velocity_before=tuple(value(o.velocity(k - 1), x)),
+                object_velocity_after=tuple(value(o.velocity(k), x)),
+                robot_velocity_before=tuple(value(r.velocity_end(k - 1), x)),
+                robot_velocity_after=tuple(value(r.velocity_start(k), x))))
+    m = built.model
+    stats = {"intervals": grid.intervals, "robot_degree": built.robots[0].degree, "binaries": m.n_binaries,
+             "variables": m.n_vars, "rows": m.n_rows}
+    return Plan(scenario=scenario.name, planner="sr", robustness=float(built.rho.value(x)), bodies=bodies,
+                impacts=impacts, solver=solver, solve_time_s=solve_time_s, build_time_s=built.build_time_s,
+                mip_gap=float(mip_gap), stats=stats)
+
+
+def _warm_start(built: BuiltModel, plan: Plan | None) -> np.ndarray | None:
+    """A partial start vector (NaN where unknown) from a previous plan on the same grid and degree."""
+    if plan is None:
+        return None
+    x = np.full(built.model.n_vars, np.nan)
+    for r in built.robots:
+        bp = plan.bodies.get(r.spec.name)
+        if bp is None or len(bp.segments) != built.grid.intervals or len(bp.segments[0].control_points) != r.degree + 1:
+            return None
+        for k, seg in enumerate(bp.segments):
+            for p, v in zip(r.points(k), seg.control_points):
+                for axis in range(2):
+                    (idx,) = p[axis].terms
+                    x[idx] = v[axis]
+    for o in built.objects:
+        bp = plan.bodies.get(o.spec.name)
+        if bp is None or len(bp.segments) != built.grid.intervals:
+            return None
+        for k in range(built.grid.intervals + 1):
+            v = bp.segments[min(k, built.grid.intervals - 1)].control_points[0 if k < built.grid.intervals else -1]
+            for axis in range(2):
+                (idx,) = o.position_at_knot(k)[axis].terms
+                x[idx] = v[axis]
+    hits = {(i.robot, i.object, round(i.time_s / built.grid.dt_s)) for i in plan.impacts}
+    for key, z in built.impacts.z.items():
+        (idx,) = z.terms
+        x[idx] = 1.0 if key in hits else 0.0
+    return x
