@@ -19,7 +19,7 @@ import numpy as np
 
 from impact_env.scenario import Scenario
 from planners.errors import PlannerError, PlanTimeoutError
-from planners.milp.collisions import add_robot_separation
+from planners.milp.collisions import add_robot_object_separation, add_robot_separation
 from planners.milp.impacts import ImpactVars, add_impacts
 from planners.milp.model import LinExpr, Model
 from planners.milp.stl_encoding import STLEncoder
@@ -44,10 +44,20 @@ DEFAULT_DEGREE = 4
 class PlannerConfig:
     """Options of the spatially robust planner.
 
+    The solve is lexicographic: (1) maximise rho; (2) with rho kept, minimise the number of impacts plus
+    the L1 acceleration (Eq. 28), warm-started, for at most ``refine_time_s`` (0 skips it); (3) with the
+    binaries fixed, an LP with the stage-2 objective, or with ``smooth`` a convex QP minimising squared
+    accelerations (Eq. 28). The QP is off by default: HiGHS's QP solver takes 1-30 s on these models, 10x
+    the MILP, and stage 2 already minimises the L1 acceleration.
+
     intervals / robot_degree: the time grid and the robots' curve degree (default: the scenario's
     ``[planner]`` hints, else 10 and 4). thrust_fraction: share of each robot's thrust limit the plan may
-    use (the rest is the controller's margin). acceleration_weight: the L1 acceleration cost is scaled so
-    that it can move rho by at most this many metres. smooth: run the QP smoothing stage. solver,
+    use (the rest is the controller's margin). robot_object_separation: keep robots' discs off objects'
+    discs except on the intervals next to their impacts (off by default, as in the paper: it is
+    conservative over whole intervals, can make short tasks infeasible, and costs ~10x solve time; the
+    controller keeps robots off objects instead). acceleration_weight: the L1 acceleration cost is scaled so
+    that it can move rho by at most this many metres in stage 1 (a tie-break below the MIP gap).
+    impact_weight: the same for the impact count. smooth: run the QP smoothing stage. solver,
     time_limit_s, mip_gap, threads, verbose, seed, progress: passed to the solver. warm_start: a previous
     plan on the same grid to start from.
     """
@@ -55,9 +65,12 @@ class PlannerConfig:
     intervals: int | None = None
     robot_degree: int | None = None
     thrust_fraction: float = 0.5
-    acceleration_weight: float = 1e-4
-    smooth: bool = True
+    acceleration_weight: float = 1e-6
+    impact_weight: float = 1e-6
+    refine_time_s: float = 5.0
+    smooth: bool = False
     obstacle_clearance: bool = True
+    robot_object_separation: bool = False
     solver: str = "highs"
     time_limit_s: float | None = 60.0
     mip_gap: float = 1e-4
@@ -102,7 +115,9 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
     objects = [ObjectTrajectory(model, b, grid, boxes[b.name]) for b in scenario.objects]
     add_kinematics(model, robots, objects, config.thrust_fraction)
     impacts = add_impacts(model, robots, objects, scenario.restitution, scenario.world_box)
-    add_robot_separation(model, robots, scenario.world_box)
+    separation = add_robot_separation(model, robots, scenario.world_box)
+    if config.robot_object_separation:
+        add_robot_object_separation(model, robots, objects, impacts, scenario.world_box, separation)
 
     trajectories = {t.spec.name: t for t in robots + objects}
     encoder = STLEncoder(model, grid, lambda body, k: trajectories[body].points(k), boxes, scenario.region_map())
@@ -115,20 +130,29 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
     # one group per top-level conjunct of the task, so that infeasibility names the conflicting parts
     formula = scenario.formula
     conjuncts = formula.children if type(formula).__name__ == "And" else (formula,)
-    rho = model.add_var(0.0, encoder.bound, name="rho")
-    groups = []
+    encoded = []
     for c in conjuncts:
-        r_c = encoder.encode(c)
+        encoder.group = f"task: {c}"  # a conjunct's encoding rows live in its own group
+        encoded.append(encoder.encode(c))
+    # satisfaction (rho >= 0) lives in the conjuncts' own groups, not in a bound, so that an infeasible task
+    # is explained by the conjuncts that cause it
+    rho = model.add_var(-encoder.bound, max(-encoder.bound, min(encoder.upper_bound(r) for r in encoded)),
+                        name="rho")
+    groups = []
+    for c, r_c in zip(conjuncts, encoded):
         group = f"task: {c}"
         groups.append(group)
         model.add(r_c >= 0.0, group=group)
-        model.add(rho <= r_c, group="task encoding")
+        model.add(rho <= r_c, group="robustness objective")
 
     cost = acceleration_l1(model, robots)
     n_terms = sum(len(r.acceleration_points(k)) * 2 for r in robots for k in range(n))
     a_bound = max(max(r.spec.thrust_limit_N) / r.spec.mass_kg for r in robots)
     weight = config.acceleration_weight / max(1, n_terms) / a_bound
-    model.set_objective(rho - cost * weight, maximize=True)
+    # fewer impacts among equally robust plans: a touch with no momentum exchange is a valid point-mass
+    # "impact" but not something a robot can fly
+    n_impacts = sum(impacts.z.values(), LinExpr())
+    model.set_objective(rho - cost * weight - n_impacts * config.impact_weight, maximize=True)
     return BuiltModel(model, grid, robots, objects, impacts, rho, cost, time.perf_counter() - start, groups)
 
 
@@ -160,13 +184,41 @@ def plan_spatially_robust(scenario: Scenario, config: PlannerConfig | None = Non
     if not result.has_solution:
         raise PlanTimeoutError(f"no plan found within the time limit of {config.time_limit_s} s "
                                f"(try a longer --time-limit or fewer intervals)")
-    x = _polish(built, result.x, config)
-    plan = extract_plan(scenario, built, x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
+    x = result.x
+    solve_time = result.solve_time_s
+    if result.status == Status.OPTIMAL and config.refine_time_s > 0:
+        x, refine_time = _refine(built, x, config)
+        solve_time += refine_time
+    x = _polish(built, x, config)
+    plan = extract_plan(scenario, built, x, result.solver, solve_time, result.mip_gap or 0.0)
     plan.check(scenario, tol=1e-6)
     if result.status == Status.TIME_LIMIT:
         raise PlanTimeoutError(f"time limit of {config.time_limit_s} s reached with gap {result.mip_gap:.3g}; "
                                f"best robustness {plan.robustness:.4f} m", plan=plan, mip_gap=result.mip_gap)
     return plan
+
+
+def _copy(m: Model, name: str, integer: bool = True) -> Model:
+    integrality = list(m.integer) if integer else [False] * m.n_vars
+    return Model(m.name + ":" + name, list(m.col_lo), list(m.col_hi), integrality,
+                 m.col_names, list(m.rows), list(m.row_groups))
+
+
+def _refine(built: BuiltModel, x: np.ndarray, config: PlannerConfig) -> tuple[np.ndarray, float]:
+    """Stage 2: keep rho, minimise impacts + L1 acceleration; returns the better of x and the new incumbent."""
+    m = _copy(built.model, "refine")
+    m.add(built.rho >= built.rho.value(x) - 1e-7, group="keep robustness")
+    n_impacts = sum(built.impacts.z.values(), LinExpr())
+    a_bound = max(max(r.spec.thrust_limit_N) / r.spec.mass_kg for r in built.robots)
+    n_terms = max(1, len(built.acceleration_cost.terms))
+    # one impact outweighs any change in total acceleration
+    m.set_objective(n_impacts + built.acceleration_cost * (0.5 / (n_terms * a_bound)), maximize=False)
+    options = SolverOptions(time_limit_s=config.refine_time_s, mip_gap=1e-3, threads=config.threads,
+                            verbose=config.verbose, seed=config.seed, warm_start=x)
+    result = solve(m, config.solver, options)
+    if result.x is not None and result.status in (Status.OPTIMAL, Status.TIME_LIMIT) and not m.check(result.x, 1e-5):
+        return result.x, result.solve_time_s
+    return x, result.solve_time_s
 
 
 def _polish(built: BuiltModel, x: np.ndarray, config: PlannerConfig) -> np.ndarray:
@@ -175,8 +227,7 @@ def _polish(built: BuiltModel, x: np.ndarray, config: PlannerConfig) -> np.ndarr
     removes the integrality tolerance's leak through big-M rows, so the impact law holds to the LP
     tolerance. Falls back to ``x`` if the second stage fails."""
     m = built.model
-    fixed = Model(m.name + ":polish", list(m.col_lo), list(m.col_hi), [False] * m.n_vars, m.col_names,
-                  list(m.rows), list(m.row_groups))
+    fixed = _copy(m, "polish", integer=False)
     for i, is_int in enumerate(m.integer):
         if is_int:
             fixed.col_lo[i] = fixed.col_hi[i] = float(round(x[i]))
@@ -190,7 +241,7 @@ def _polish(built: BuiltModel, x: np.ndarray, config: PlannerConfig) -> np.ndarr
                     for axis in range(2):
                         fixed.add_quadratic(p[axis], 1.0)
     else:
-        fixed.set_objective(m.objective, maximize=m.maximize)
+        fixed.set_objective(built.acceleration_cost, maximize=False)
     result = solve(fixed, "highs", SolverOptions(time_limit_s=config.time_limit_s, verbose=config.verbose))
     if result.status == Status.OPTIMAL and result.x is not None:
         return result.x

@@ -87,11 +87,50 @@ class STLEncoder:
         self.bound = math.hypot(max(xs) - min(xs), max(ys) - min(ys))
         self.big_m = 2.0 * self.bound
         self._memo: dict[tuple[int, int], LinExpr] = {}
+        self._ub: dict[int, float] = {}  # id(robustness expression) -> an upper bound of its value
+        self._pred_ub: dict[tuple[str, str, bool], float] = {}
         self._faces: dict[tuple[str, str, int], list[tuple[int, LinExpr | None]]] = {}
         self.group = "task encoding"
 
-    def _var(self, name: str) -> LinExpr:
-        return self.model.add_var(-self.bound, self.bound, name=name)
+    def _var(self, name: str, ub: float | None = None) -> LinExpr:
+        """A robustness variable with the tightest upper bound known: it is what makes the LP relaxation
+        prove the geometric optimum at once instead of after a long branch and bound."""
+        ub = self.bound if ub is None else min(ub, self.bound)
+        r = self.model.add_var(-self.bound, ub, name=name)
+        self._ub[id(r)] = ub
+        return r
+
+    def upper_bound(self, r: LinExpr) -> float:
+        if not r.terms:
+            return r.const
+        return self._ub.get(id(r), self.bound)
+
+    def predicate_upper_bound(self, body: str, region: str, inside: bool) -> float:
+        """Largest robustness the predicate can have for this body anywhere in its allowed box.
+
+        Inside: the Chebyshev radius of the region intersected with the box's reach (a 3-variable LP).
+        Outside: the largest distance beyond any face over the box's corners.
+        """
+        key = (body, region, inside)
+        if key not in self._pred_ub:
+            poly = self.regions[region]
+            x0, x1, y0, y1 = self.boxes[body]
+            if inside:
+                from planners.solvers import solve
+                from planners.solvers.base import Status
+
+                lp = Model(name="chebyshev")
+                cx, cy, r = lp.add_var(x0, x1), lp.add_var(y0, y1), lp.add_var(-self.bound, self.bound)
+                for n, b in zip(poly.normals, poly.offsets):
+                    lp.add(cx * float(n[0]) + cy * float(n[1]) + r <= float(b), group="faces")
+                lp.set_objective(r, maximize=True)
+                result = solve(lp, "highs")
+                ub = float(result.objective) + 1e-9 if result.status == Status.OPTIMAL else self.bound
+            else:
+                corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+                ub = float(np.max(corners @ poly.normals.T - poly.offsets)) + 1e-9
+            self._pred_ub[key] = ub
+        return self._pred_ub[key]
 
     # ------------------------------------------------------------------------------------- at t = 0
     def encode(self, formula: Formula) -> LinExpr:
@@ -105,18 +144,19 @@ class STLEncoder:
             ks = self._window(f.a_s, f.b_s)
             return self._pick_max([self._on_interval(f.child, k) for k in ks], "F")
         if isinstance(f, Always):
-            r = self._var("G")
-            for k in self._window(f.a_s, f.b_s):
-                self.model.add(r <= self._on_interval(f.child, k), group=self.group)
+            children = [self._on_interval(f.child, k) for k in self._window(f.a_s, f.b_s)]
+            r = self._var("G", min(self.upper_bound(c) for c in children))
+            for c in children:
+                self.model.add(r <= c, group=self.group)
             return r
         if isinstance(f, Until):
             ks = self._window(f.a_s, f.b_s)
             candidates = []
             for k in ks:
-                r_k = self._var(f"U@{k}")
-                self.model.add(r_k <= self._on_interval(f.right, k), group=self.group)
-                for j in range(0, k + 1):
-                    self.model.add(r_k <= self._on_interval(f.left, j), group=self.group)
+                parts = [self._on_interval(f.right, k)] + [self._on_interval(f.left, j) for j in range(k + 1)]
+                r_k = self._var(f"U@{k}", min(self.upper_bound(c) for c in parts))
+                for c in parts:
+                    self.model.add(r_k <= c, group=self.group)
                 candidates.append(r_k)
             return self._pick_max(candidates, "U")
         # an atemporal formula at t = 0: the state at time 0 is the first control point of interval 0
@@ -161,7 +201,7 @@ class STLEncoder:
 
     def _inside(self, body: str, region: str, k: int, first_point_only: bool) -> LinExpr:
         poly = self.regions[region]
-        r = self._var(f"in({body},{region})@{k}")
+        r = self._var(f"in({body},{region})@{k}", self.predicate_upper_bound(body, region, inside=True))
         for p in self._pts(body, k, first_point_only):
             for n, b in zip(poly.normals, poly.offsets):
                 self.model.add(r <= b - (p[0] * float(n[0]) + p[1] * float(n[1])), group=self.group)
@@ -170,8 +210,9 @@ class STLEncoder:
     def _outside(self, body: str, region: str, k: int, first_point_only: bool, margin: LinExpr | None = None
                  ) -> LinExpr:
         """r <= distance outside one face of the region, for every control point (Eq. 22)."""
-        r = margin if margin is not None else self._var(f"!in({body},{region})@{k}")
-        for face, w in self.face_choice(body, region, k if not first_point_only else -1):
+        r = margin if margin is not None else self._var(f"!in({body},{region})@{k}",
+                                                        self.predicate_upper_bound(body, region, inside=False))
+        for face, w in self.face_choice(body, region, k if not first_point_only else -1, self.group):
             n, b = self.regions[region].normals[face], self.regions[region].offsets[face]
             for p in self._pts(body, max(k, 0), first_point_only):
                 dist = p[0] * float(n[0]) + p[1] * float(n[1]) - float(b)
@@ -179,12 +220,12 @@ class STLEncoder:
                 self.model.add(r <= dist + slack, group=self.group)
         return r
 
-    def face_choice(self, body: str, region: str, k: int) -> list[tuple[int, LinExpr | None]]:
+    def face_choice(self, body: str, region: str, k: int, group: str) -> list[tuple[int, LinExpr | None]]:
         """The faces the body may be beyond on interval k, each with its binary (None if it is the only one).
 
         A face whose outer half-space does not meet the body's allowed box can never be used and gets no
         binary; the binaries are shared by every constraint on (body, region, k), e.g. the task and the
-        obstacle clearance.
+        obstacle clearance; their "one face" row joins the group of the constraint that first asked.
         """
         key = (body, region, k)
         if key not in self._faces:
@@ -199,14 +240,14 @@ class STLEncoder:
                 choice = [(useful[0], None)]
             else:
                 ws = [self.model.add_binary(name=f"face[{body},{region},{k},{f}]") for f in useful]
-                self.model.add(sum(ws, LinExpr()) == 1, group=self.group)
+                self.model.add(sum(ws, LinExpr()) == 1, group=group)
                 choice = list(zip(useful, ws))
             self._faces[key] = choice
         return self._faces[key]
 
     def clearance(self, body: str, region: str, k: int, margin_m: float, group: str) -> None:
         """Keep the body's whole interval k at least ``margin_m`` outside the region (solid obstacles)."""
-        for face, w in self.face_choice(body, region, k):
+        for face, w in self.face_choice(body, region, k, group):
             n, b = self.regions[region].normals[face], self.regions[region].offsets[face]
             for p in self.points(body, k):
                 dist = p[0] * float(n[0]) + p[1] * float(n[1]) - float(b)
@@ -216,7 +257,7 @@ class STLEncoder:
     # ------------------------------------------------------------------------------- min / max
     def _combine(self, f: Formula, rs: list[LinExpr], tag: str) -> LinExpr:
         if isinstance(f, And):
-            r = self._var(f"and{tag}")
+            r = self._var(f"and{tag}", min(self.upper_bound(c) for c in rs))
             for c in rs:
                 self.model.add(r <= c, group=self.group)
             return r
@@ -225,9 +266,11 @@ class STLEncoder:
     def _pick_max(self, rs: list[LinExpr], name: str) -> LinExpr:
         if len(rs) == 1:
             return rs[0]
-        r = self._var(name)
+        ub = max(self.upper_bound(c) for c in rs)
+        r = self._var(name, ub)
         bs = [self.model.add_binary(name=f"pick[{name}]") for _ in rs]
         self.model.add(sum(bs, LinExpr()) >= 1, group=self.group)
         for c, b in zip(rs, bs):
-            self.model.add(r <= c + (1 - b) * self.big_m, group=self.group)
+            # r <= ub always; the row must not bind when b = 0, and c >= -bound: M = ub + bound
+            self.model.add(r <= c + (1 - b) * (ub + self.bound), group=self.group)
         return r

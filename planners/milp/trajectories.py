@@ -175,11 +175,11 @@ def acceleration_l1(model: Model, robots: list[RobotTrajectory]) -> LinExpr:
     """Sum of |acceleration| over the robots' acceleration control points (m/s^2): Eq. 28 in L1 form."""
     total = LinExpr()
     for r in robots:
-        a_bound = max(r.spec.thrust_limit_N) / r.spec.mass_kg
         for k in range(r.grid.intervals):
             for p in r.acceleration_points(k):
                 for axis in range(2):
-                    u = model.add_var(0.0, a_bound, name=f"{r.spec.name}.|acc|")
+                    # no upper bound: the cost must never act as a second thrust limit
+                    u = model.add_var(0.0, name=f"{r.spec.name}.|acc|")
                     model.add([u >= p[axis], u >= -p[axis]], group="acceleration cost")
                     total = total + u
     return total

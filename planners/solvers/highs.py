@@ -7,18 +7,19 @@ module: highspy and CasADi's bundled HiGHS plugin each ship a ``libhighs.so.1`` 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 
 import highspy
 import numpy as np
 
-from planners.milp.model import LinExpr, Model
-from planners.solvers.base import Progress, SolverOptions, SolveResult, Status
+from planners.milp.model import Model
+from planners.solvers.base import Progress, SolveResult, SolverOptions, Status
+from planners.solvers.diagnose import resolve_infeasible_or_unbounded
 
 NAME = "highs"
 _REPORT_INTERVAL_S = 1.0
+_scheduler_threads: int | None = None  # thread count this module last sized HiGHS's global scheduler to
 
 
 def _lp(model: Model) -> highspy.HighsLp:
@@ -72,8 +73,13 @@ def _set_options(h: highspy.Highs, options: SolverOptions) -> None:
     h.setOptionValue("mip_rel_gap", float(options.mip_gap))
     h.setOptionValue("random_seed", int(options.seed))
     if options.threads is not None:
-        # HiGHS sizes one global scheduler on first use; changing its size needs a reset.
-        h.resetGlobalScheduler(True)
+        # HiGHS sizes one process-wide scheduler on first use and refuses a later, different `threads`
+        # (model status kNotset) unless the scheduler is reset; do not change `threads` while another
+        # HiGHS solve runs in a second Python thread.
+        global _scheduler_threads
+        if options.threads != _scheduler_threads:
+            h.resetGlobalScheduler(True)
+            _scheduler_threads = int(options.threads)
         h.setOptionValue("threads", int(options.threads))
 
 
@@ -101,14 +107,16 @@ def _attach_progress(h: highspy.Highs, options: SolverOptions, errors: list[Base
     next_at = [_REPORT_INTERVAL_S]
 
     def on_interrupt(event: highspy.HighsCallbackEvent) -> None:
-        out = event.data_out
-        t = out.running_time
-        if t < next_at[0]:
-            return
-        next_at[0] = t + _REPORT_INTERVAL_S
-        primal, dual, gap = out.mip_primal_bound, out.mip_dual_bound, out.mip_gap
-        has_incumbent = math.isfinite(primal)
+        # Everything inside the try: an exception escaping into HiGHS's C++ (a KeyboardInterrupt can land
+        # on any bytecode here) would unwind through the solver instead of stopping it cleanly.
         try:
+            out = event.data_out
+            t = out.running_time
+            if t < next_at[0]:
+                return
+            next_at[0] = t + _REPORT_INTERVAL_S
+            primal, dual, gap = out.mip_primal_bound, out.mip_dual_bound, out.mip_gap
+            has_incumbent = math.isfinite(primal)
             report(Progress(elapsed_s=t, incumbent=primal if has_incumbent else None,
                             bound=dual if math.isfinite(dual) else None,
                             gap=gap if has_incumbent and math.isfinite(gap) else None))
@@ -148,10 +156,10 @@ def solve(model: Model, options: SolverOptions | None = None) -> SolveResult:
     h.run()
     if errors:
         raise errors[0]
-    result = _result(h, model, is_mip, time.perf_counter() - t0)
-    if result.message == "infeasible or unbounded":
-        result = _resolve_infeasible_or_unbounded(model, options, result.solve_time_s, t0)
-    return result
+    if h.getModelStatus() == highspy.HighsModelStatus.kUnboundedOrInfeasible:
+        # presolve's verdict (common for MIPs): tell the two apart with a zero objective
+        return resolve_infeasible_or_unbounded(solve, model, options, t0, NAME)
+    return _result(h, model, is_mip, time.perf_counter() - t0)
 
 
 def _result(h: highspy.Highs, model: Model, is_mip: bool, elapsed_s: float) -> SolveResult:
@@ -174,9 +182,7 @@ def _result(h: highspy.Highs, model: Model, is_mip: bool, elapsed_s: float) -> S
     if ms == S.kInfeasible:
         return SolveResult(Status.INFEASIBLE, None, None, None, None, elapsed_s, NAME)
     if ms == S.kUnbounded:
-        return SolveResult(Status.UNBOUNDED, x, None, None, None, elapsed_s, NAME)
-    if ms == S.kUnboundedOrInfeasible:
-        return SolveResult(Status.ERROR, None, None, None, None, elapsed_s, NAME, "infeasible or unbounded")
+        return SolveResult(Status.UNBOUNDED, None, None, None, None, elapsed_s, NAME)
     if ms == S.kTimeLimit:
         if not is_mip:
             bound = gap = None
@@ -185,23 +191,3 @@ def _result(h: highspy.Highs, model: Model, is_mip: bool, elapsed_s: float) -> S
     return SolveResult(Status.ERROR, x, objective, None, None, elapsed_s, NAME,
                        f"HiGHS stopped with model status {h.modelStatusToString(ms)!r}")
 
-
-def _resolve_infeasible_or_unbounded(model: Model, options: SolverOptions, elapsed_s: float,
-                                     t0: float) -> SolveResult:
-    """Presolve proved 'infeasible or unbounded': decide by solving the model with a zero objective.
-
-    Infeasible without an objective -> INFEASIBLE; feasible -> the objective is unbounded (rational data).
-    """
-    remaining = None
-    if options.time_limit_s is not None:
-        remaining = max(options.time_limit_s - elapsed_s, 0.0)
-    feasibility = dataclasses.replace(model, objective=LinExpr(), quadratic={})
-    check = solve(feasibility, dataclasses.replace(options, time_limit_s=remaining, progress=None, warm_start=None))
-    elapsed = time.perf_counter() - t0
-    if check.status is Status.INFEASIBLE:
-        return SolveResult(Status.INFEASIBLE, None, None, None, None, elapsed, NAME)
-    if check.status is Status.OPTIMAL:
-        return SolveResult(Status.UNBOUNDED, check.x, None, None, None, elapsed, NAME,
-                           "feasible, and the objective is unbounded")
-    return SolveResult(check.status if check.status is Status.TIME_LIMIT else Status.ERROR, None, None, None,
-                       None, elapsed, NAME, "infeasible or unbounded (not resolved within the limits)")

@@ -1,0 +1,152 @@
+"""A figure of a plan after the paper's Fig. 4: the xy view, and positions and velocities over time.
+
+Only the object-oriented matplotlib API is used (no pyplot), like :mod:`impact_env.plotting`, whose
+:func:`~impact_env.plotting.draw_scenario` draws the world underneath the planned paths.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.transforms import blended_transform_factory
+
+from impact_env.plotting import DPI, IMPACT_COLOUR, OBJECT_TRACE_COLOURS, ROBOT_TRACE_COLOURS, draw_scenario
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+    from impact_env.scenario import Scenario
+    from planners.plan import BodyPlan, Plan
+
+ROBOT_LW = 1.3
+OBJECT_LW = 2.6
+
+
+def plot_plan(scenario: Scenario, plan: Plan, path: str | Path | None = None, samples: int = 400) -> Figure:
+    """Draw ``plan`` on ``scenario``; save a PNG at ``DPI`` if ``path`` is given (``.png`` added if no suffix).
+
+    Left: the xy view with the scenario underneath, each body's planned path, the robots' Bezier control
+    points (small faint dots) and the impacts (red stars I1, I2, ... at their positions). Right, sharing
+    the time axis: positions (x solid, y dashed) and velocities (vx solid, vy dashed) over time, objects
+    drawn thicker; each segment is sampled on its own and lines are broken at impacts, so a velocity jump
+    is a vertical gap. Impact times are dotted vertical lines labelled like the stars.
+
+    Args:
+        samples: sample points per body over [0, tf] (spread over its segments, at least 2 per segment).
+
+    Returns the Figure with three axes: xy view, positions, velocities.
+    """
+    colours = _colours(scenario)
+    xmin, xmax, ymin, ymax = scenario.world_box
+    aspect = (ymax - ymin) / (xmax - xmin)
+    # the xy view gets ~6 in along its longer side, its legend 2.4 in on its right; the time panels 7.5 in
+    xy_w, xy_h = (6.0, 6.0 * aspect) if aspect <= 1.0 else (6.0 / aspect, 6.0)
+    fig = Figure(figsize=(xy_w + 2.4 + 7.5, max(5.5, xy_h + 1.3)), layout="constrained")
+    grid = fig.add_gridspec(2, 2, width_ratios=[xy_w + 2.4, 7.5])
+    ax_xy = fig.add_subplot(grid[:, 0])
+    ax_pos = fig.add_subplot(grid[0, 1])
+    ax_vel = fig.add_subplot(grid[1, 1], sharex=ax_pos)
+
+    _draw_xy(scenario, plan, ax_xy, colours, samples)
+    _draw_time(scenario, plan, ax_pos, ax_vel, colours, samples)
+
+    gap = f", gap {100 * plan.mip_gap:.2f}%" if plan.mip_gap > 1e-3 else ""
+    fig.suptitle(f"{plan.scenario}: planner \"{plan.planner}\", robustness rho = {plan.robustness:.3f} m  "
+                 f"({plan.solver}, {plan.solve_time_s:.1f} s{gap}; {len(plan.impacts)} impacts)")
+    if path is not None:
+        path = Path(path)
+        if not path.suffix:
+            path = path.with_suffix(".png")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=DPI)
+    return fig
+
+
+def _colours(scenario: Scenario) -> dict[str, str]:
+    out = {b.name: ROBOT_TRACE_COLOURS[i % len(ROBOT_TRACE_COLOURS)] for i, b in enumerate(scenario.robots)}
+    out.update({b.name: OBJECT_TRACE_COLOURS[i % len(OBJECT_TRACE_COLOURS)] for i, b in enumerate(scenario.objects)})
+    return out
+
+
+def _sample(body: BodyPlan, samples: int, what: str, break_at: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Times (T,) and values (T, 2) of ``body.<what>``, each segment sampled on its own (so the value at a
+    knot is the left segment's end, then the right segment's start); a NaN row is inserted after every
+    segment that ends at one of ``break_at`` so that matplotlib leaves a gap there."""
+    per_segment = max(2, samples // len(body.segments) + 1)
+    times, values = [], []
+    for seg in body.segments:
+        t = np.linspace(seg.t0_s, seg.t1_s, per_segment)
+        times.append(t)
+        values.append(getattr(seg, what)(t))
+        if any(abs(seg.t1_s - tb) < 1e-9 for tb in break_at):
+            times.append(np.array([seg.t1_s]))
+            values.append(np.full((1, 2), np.nan))
+    return np.concatenate(times), np.concatenate(values)
+
+
+def _draw_xy(scenario: Scenario, plan: Plan, ax: Axes, colours: dict[str, str], samples: int) -> None:
+    draw_scenario(scenario, ax)
+    legend = ax.get_legend()
+    handles = list(legend.legend_handles) if legend is not None else []
+    for body in scenario.bodies:
+        bp = plan.bodies[body.name]
+        _, xy = _sample(bp, samples, "position", [])
+        lw = OBJECT_LW if bp.kind == "object" else ROBOT_LW
+        (line,) = ax.plot(xy[:, 0], xy[:, 1], color=colours[body.name], lw=lw, zorder=5,
+                          label=f"{body.name} planned path")
+        handles.append(line)
+        if bp.kind == "robot":
+            cps = np.concatenate([s.control_points for s in bp.segments])
+            ax.scatter(cps[:, 0], cps[:, 1], s=7, color=colours[body.name], alpha=0.35, lw=0, zorder=5)
+    if any(b.kind == "robot" for b in plan.bodies.values()):
+        handles.append(Line2D([], [], ls="", marker="o", ms=3, color="0.4", alpha=0.5,
+                              label="robot Bezier control points"))
+    if plan.impacts:
+        pts = np.array([imp.position for imp in plan.impacts])
+        handles.append(ax.scatter(pts[:, 0], pts[:, 1], marker="*", s=170, color=IMPACT_COLOUR, edgecolor="k",
+                                  linewidth=0.5, zorder=8, label="impact"))
+        for k, imp in enumerate(plan.impacts, start=1):
+            ax.annotate(f"I{k}", imp.position, xytext=(6, -13), textcoords="offset points", fontsize=9,
+                        color=IMPACT_COLOUR, weight="bold", zorder=9,
+                        bbox={"boxstyle": "round,pad=0.1", "fc": "w", "ec": "none", "alpha": 0.7})
+    ax.set_title("xy view")
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+              fontsize="small")
+
+
+def _draw_time(scenario: Scenario, plan: Plan, ax_pos: Axes, ax_vel: Axes, colours: dict[str, str],
+               samples: int) -> None:
+    handles = []
+    for body in scenario.bodies:
+        bp = plan.bodies[body.name]
+        lw = OBJECT_LW if bp.kind == "object" else ROBOT_LW
+        breaks = [imp.time_s for imp in plan.impacts_of(body.name)]
+        t, pos = _sample(bp, samples, "position", [])  # positions are continuous: no gaps
+        for axis, ls in ((0, "-"), (1, "--")):
+            ax_pos.plot(t, pos[:, axis], color=colours[body.name], lw=lw, ls=ls)
+        t, vel = _sample(bp, samples, "velocity", breaks)
+        for axis, ls in ((0, "-"), (1, "--")):
+            ax_vel.plot(t, vel[:, axis], color=colours[body.name], lw=lw, ls=ls)
+        handles.append(Line2D([], [], color=colours[body.name], lw=lw, label=body.name))
+    handles += [Line2D([], [], color="0.3", ls="-", label="x / vx"), Line2D([], [], color="0.3", ls="--",
+                                                                           label="y / vy")]
+    for ax in (ax_pos, ax_vel):
+        label_at = blended_transform_factory(ax.transData, ax.transAxes)
+        for k, imp in enumerate(plan.impacts, start=1):
+            ax.axvline(imp.time_s, color=IMPACT_COLOUR, ls=":", lw=1.0)
+            ax.text(imp.time_s, 0.98, f" I{k}", transform=label_at, ha="left", va="top", fontsize=8,
+                    color=IMPACT_COLOUR)
+        ax.grid(True, alpha=0.3)
+    ax_pos.set_xlim(0.0, plan.tf_s)
+    ax_pos.set_ylabel("position (m)")
+    ax_pos.set_title("positions (x solid, y dashed)")
+    ax_pos.tick_params(labelbottom=False)
+    ax_vel.set_ylabel("velocity (m/s)")
+    ax_vel.set_xlabel("time (s)")
+    ax_vel.set_title("velocities (vx solid, vy dashed); impacts dotted")
+    ax_pos.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+                  fontsize="small")
