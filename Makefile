@@ -20,10 +20,11 @@ $(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml
 	touch $@
 
 # The dev install: torch pinned to the CPU build first (an unpinned torch pulls several GB of CUDA
-# wheels), then stable-baselines3, supersuit and the test tools.
+# wheels), then stable-baselines3, supersuit, SCIP (so the tests cover that planner backend too) and the
+# test tools.
 $(VENV)/.dev-installed: $(VENV)/.base-installed
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e '.[rl,dev]'
+	$(BIN)/pip install --quiet -e '.[rl,dev,scip]'
 	touch $@
 
 demo: $(VENV)/.base-installed
@@ -41,6 +42,7 @@ test-slow: $(VENV)/.dev-installed
 
 bench: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/env_throughput.py
+	$(BIN)/python benchmarks/planner.py
 
 lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check impact_env planners baselines tests benchmarks

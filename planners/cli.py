@@ -1,7 +1,7 @@
 """The ``impact-env plan`` subcommand: run the spatially robust planner on a scenario.
 
     impact-env plan SCENARIO [--solver highs|scip|gurobi] [--time-limit S] [--mip-gap G] [--threads N]
-                    [--intervals N] [--degree D] [--no-smooth] [--out plan.json] [--plot plan.png] [--quiet]
+                    [--intervals N] [--degree D] [--smooth] [--out plan.json] [--plot plan.png] [--quiet]
 
 Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``). Prints a header with the
 model size, a progress line at most once a second during the solve, then the robustness, solve time, gap
@@ -47,8 +47,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="time-grid intervals; impacts happen at its knots (default: the scenario's [planner] hint)")
     p.add_argument("--degree", type=int, default=None, metavar="D",
                    help="degree of the robots' Bezier curves (default: the scenario's [planner] hint)")
-    p.add_argument("--no-smooth", action="store_true",
-                   help="skip the second stage that smooths the robots' accelerations (Eq. 28)")
+    p.add_argument("--smooth", action="store_true",
+                   help="finish with a QP that minimises squared accelerations (Eq. 28); slower (1-30 s)")
     p.add_argument("--seed", type=int, default=0, help="solver random seed (solve times vary with it)")
     p.add_argument("--out", help="write the plan as JSON (planners.plan.Plan.save)")
     p.add_argument("--plot", help="write a PNG of the plan: xy view, positions and velocities over time")
@@ -63,7 +63,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     _check_options(args)
     scenario = load_scenario(args.scenario)
     say = (lambda text: None) if args.quiet else (lambda text: print(text, flush=True))
-    config = PlannerConfig(intervals=args.intervals, robot_degree=args.degree, smooth=not args.no_smooth,
+    config = PlannerConfig(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth,
                            solver=args.solver, time_limit_s=args.time_limit, mip_gap=args.mip_gap,
                            threads=args.threads, seed=args.seed, progress=None if args.quiet else progress_printer())
 

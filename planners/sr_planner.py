@@ -59,7 +59,8 @@ class PlannerConfig:
     that it can move rho by at most this many metres in stage 1 (a tie-break below the MIP gap).
     impact_weight: the same for the impact count. smooth: run the QP smoothing stage. solver,
     time_limit_s, mip_gap, threads, verbose, seed, progress: passed to the solver. warm_start: a previous
-    plan on the same grid to start from.
+    plan on the same grid to start from. bound_propagation: give every robustness variable its exact upper
+    bound (off only to measure what it buys, see benchmarks/planner.py).
     """
 
     intervals: int | None = None
@@ -80,6 +81,7 @@ class PlannerConfig:
     progress: Callable[[Progress], None] | None = None
     warm_start: Plan | None = None
     diagnose_infeasibility: bool = True
+    bound_propagation: bool = True
 
 
 @dataclass
@@ -120,7 +122,8 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
         add_robot_object_separation(model, robots, objects, impacts, scenario.world_box, separation)
 
     trajectories = {t.spec.name: t for t in robots + objects}
-    encoder = STLEncoder(model, grid, lambda body, k: trajectories[body].points(k), boxes, scenario.region_map())
+    encoder = STLEncoder(model, grid, lambda body, k: trajectories[body].points(k), boxes, scenario.region_map(),
+                         bound_propagation=config.bound_propagation)
     if config.obstacle_clearance:
         for body in scenario.bodies:
             for obstacle in scenario.obstacles:
@@ -174,7 +177,8 @@ def plan_spatially_robust(scenario: Scenario, config: PlannerConfig | None = Non
         from planners.solvers.diagnose import explain_infeasible
 
         if config.diagnose_infeasibility:
-            raise explain_infeasible(built.model, config.solver, SolverOptions(time_limit_s=10.0))
+            # each check is capped: an undecided check keeps its group (a superset is still a true answer)
+            raise explain_infeasible(built.model, config.solver, SolverOptions(time_limit_s=2.0))
         from planners.errors import InfeasiblePlanError
 
         raise InfeasiblePlanError(f"no plan satisfies the task of {scenario.name!r}")
@@ -185,12 +189,13 @@ def plan_spatially_robust(scenario: Scenario, config: PlannerConfig | None = Non
         raise PlanTimeoutError(f"no plan found within the time limit of {config.time_limit_s} s "
                                f"(try a longer --time-limit or fewer intervals)")
     x = result.x
-    solve_time = result.solve_time_s
+    refine_time = 0.0
     if result.status == Status.OPTIMAL and config.refine_time_s > 0:
         x, refine_time = _refine(built, x, config)
-        solve_time += refine_time
+    t0 = time.perf_counter()
     x = _polish(built, x, config)
-    plan = extract_plan(scenario, built, x, result.solver, solve_time, result.mip_gap or 0.0)
+    plan = extract_plan(scenario, built, x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
+    plan.stats.update(refine_s=refine_time, polish_s=time.perf_counter() - t0)
     plan.check(scenario, tol=1e-6)
     if result.status == Status.TIME_LIMIT:
         raise PlanTimeoutError(f"time limit of {config.time_limit_s} s reached with gap {result.mip_gap:.3g}; "

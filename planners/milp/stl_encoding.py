@@ -75,11 +75,15 @@ class STLEncoder:
         points: ``points(body, k)`` gives the control points (LinExpr pairs) of the body on interval k.
         boxes: per body, the box its centre stays in (for big-Ms and to skip impossible faces).
         regions: name -> convex polygon.
+        bound_propagation: bound every robustness variable by what its predicates can reach (else only by
+            the scene's diagonal; kept to measure the difference).
     """
 
     def __init__(self, model: Model, grid: Grid, points: Callable[[str, int], list[Point]],
-                 boxes: dict[str, tuple[float, float, float, float]], regions: dict[str, ConvexPolygon]) -> None:
+                 boxes: dict[str, tuple[float, float, float, float]], regions: dict[str, ConvexPolygon],
+                 bound_propagation: bool = True) -> None:
         self.model, self.grid, self.points, self.boxes, self.regions = model, grid, points, boxes, regions
+        self.bound_propagation = bound_propagation
         corners = [(b[0], b[2]) for b in boxes.values()] + [(b[1], b[3]) for b in boxes.values()]
         corners += [tuple(v) for poly in regions.values() for v in poly.vertices]
         xs, ys = [c[0] for c in corners], [c[1] for c in corners]
@@ -95,7 +99,7 @@ class STLEncoder:
     def _var(self, name: str, ub: float | None = None) -> LinExpr:
         """A robustness variable with the tightest upper bound known: it is what makes the LP relaxation
         prove the geometric optimum at once instead of after a long branch and bound."""
-        ub = self.bound if ub is None else min(ub, self.bound)
+        ub = self.bound if ub is None or not self.bound_propagation else min(ub, self.bound)
         r = self.model.add_var(-self.bound, ub, name=name)
         self._ub[id(r)] = ub
         return r
