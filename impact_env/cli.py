@@ -64,11 +64,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise ImpactEnvError(f"--episodes must be >= 1, got {args.episodes}")
     sc = load_scenario(args.scenario)
     env = TransportEnv(sc, render_mode="rgb_array" if args.video else None, **_env_kwargs(args))
-    controller = make_controller(args.controller, sc)
+    controller = make_controller(args.controller, sc, plan=args.plan)
     results = []
     for k in range(args.episodes):
         seed = args.seed + k
         res = run_episode(env, controller, seed=seed, record_frames=bool(args.video) and k == 0)
+        if hasattr(controller, "report"):  # e.g. the expert's planned-versus-executed numbers
+            res.extra = controller.report()
         results.append(res)
         print(f"episode {k + 1}/{args.episodes} seed={seed}: robustness={res.robustness:+.4f} m "
               f"success={res.success} impacts={len(res.impacts)} fuel={res.fuel_Ns:.2f} N s "
@@ -78,14 +80,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
         write_video(first.frames, args.video, fps=env.metadata["render_fps"])
         print(f"wrote {args.video}")
     if args.plot:
-        from impact_env.plotting import plot_run
+        if hasattr(controller, "plot_episode"):  # the expert draws executed against planned (Fig. 6)
+            controller.plot_episode(first, args.plot)
+        else:
+            from impact_env.plotting import plot_run
 
-        plot_run(sc, first.times_s, first.positions, first.impacts, first.robustness, args.plot)
+            plot_run(sc, first.times_s, first.positions, first.impacts, first.robustness, args.plot)
         print(f"wrote {args.plot}")
     summary = {
         "scenario": sc.name, "controller": args.controller, "env_options": _env_kwargs(args),
         # the first episode's numbers at the top level; every episode under "episodes"
-        **{k: v for k, v in first.summary().items() if k in ("success", "robustness", "impacts", "fuel_Ns")},
+        **{k: v for k, v in first.summary().items()
+           if k in ("success", "robustness", "impacts", "fuel_Ns", "controller_ms", "controller_report")},
         "success_rate": float(np.mean([r.success for r in results])),
         "robustness_mean": float(np.mean([r.robustness for r in results])),
         "robustness_std": float(np.std([r.robustness for r in results])),
@@ -121,6 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--video", help="mp4 of the first episode")
     p.add_argument("--json", help="JSON summary (success, robustness, impacts, fuel_Ns, per-episode details)")
     p.add_argument("--plot", help="PNG of the first episode's trajectories and impacts")
+    p.add_argument("--plan", help="a saved plan (impact-env plan ... --out plan.json) for controllers that use one")
     p.add_argument("--reward", choices=["dense", "sparse"], default="dense")
     p.add_argument("--fuel-penalty", type=float, default=0.0)
     p.add_argument("--restitution", type=float, default=None, help="simulate with this e (model mismatch)")

@@ -69,11 +69,12 @@ def available_controllers() -> list[str]:
 def make_controller(spec: str, scenario: Any, **options: Any) -> Controller:
     """Build a controller from its name (``zero``, ``random`` or a registered one).
 
-    Registered factories are called as ``factory(scenario, **options)``.
+    Registered factories are called as ``factory(scenario, **options)``; options that are None are left
+    out (e.g. ``plan=None`` when ``--plan`` was not given).
     """
     if spec in BUILTIN:
-        return BUILTIN[spec]()
+        return BUILTIN[spec]()  # they take no options
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         if ep.name == spec:
-            return ep.load()(scenario, **options)
+            return ep.load()(scenario, **{k: v for k, v in options.items() if v is not None})
     raise ControllerError(f"unknown controller {spec!r}; available: {', '.join(available_controllers())}")

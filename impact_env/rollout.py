@@ -28,6 +28,7 @@ class EpisodeResult:
     times_s: np.ndarray | None = None
     positions: np.ndarray | None = None
     frames: list[np.ndarray] | None = None
+    extra: dict[str, Any] | None = None  # the controller's own report, if it has one
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready dict (no arrays)."""
@@ -37,6 +38,7 @@ class EpisodeResult:
             "impacts": self.impacts, "fuel_Ns": float(self.fuel_Ns), "steps": self.steps,
             "return": float(self.return_), "wall_time_s": self.wall_time_s,
             "controller_ms": {"median": float(np.median(ms)), "p99": float(np.percentile(ms, 99))},
+            **({"controller_report": self.extra} if self.extra else {}),
         }
 
 

@@ -150,3 +150,64 @@ def _draw_time(scenario: Scenario, plan: Plan, ax_pos: Axes, ax_vel: Axes, colou
     ax_vel.set_title("velocities (vx solid, vy dashed); impacts dotted")
     ax_pos.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
                   fontsize="small")
+
+
+def plot_execution(scenario: Scenario, plan: Plan, times_s: np.ndarray, positions: np.ndarray,
+                   impacts: list[dict], robustness: float, path: str | Path | None = None) -> Figure:
+    """The paper's Fig. 6 view: executed (solid) against planned (dotted) paths, and each object's
+    position and velocity over time with the planned and the executed impacts.
+
+    ``positions`` is (T, n_bodies, 2) in scenario body order, sampled at ``times_s`` (T,).
+    """
+    positions = np.asarray(positions, dtype=float)
+    times_s = np.asarray(times_s, dtype=float)
+    names = [b.name for b in scenario.bodies]
+    if positions.ndim != 3 or positions.shape[1:] != (len(names), 2) or len(times_s) != len(positions):
+        raise ValueError(f"positions must be (T, {len(names)}, 2) matching times_s (T,), got {positions.shape} "
+                         f"and {times_s.shape}")
+    colours = _colours(scenario)
+    fig = Figure(figsize=(13, 6.5), layout="constrained")
+    grid = fig.add_gridspec(2, 2, width_ratios=[1, 1.4])
+    ax = fig.add_subplot(grid[:, 0])
+    draw_scenario(scenario, ax)
+    t_plan = np.linspace(0.0, plan.tf_s, 600)
+    for i, name in enumerate(names):
+        ax.plot(*plan.position(name, t_plan).T, ":", color=colours[name], lw=1.2)
+        ax.plot(positions[:, i, 0], positions[:, i, 1], "-", color=colours[name], lw=1.8, label=f"{name} executed")
+    for imp in plan.impacts:
+        ax.plot(*imp.position, "*", color=IMPACT_COLOUR, ms=12, mec="k", mew=0.5)
+    ax.set_title("executed (solid) vs planned (dotted)")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
+
+    ax_p, ax_v = fig.add_subplot(grid[0, 1]), fig.add_subplot(grid[1, 1])
+    dt = np.gradient(times_s)
+    for i, name in enumerate(names):
+        if name not in {o.name for o in scenario.objects}:
+            continue
+        planned_v = np.array([plan.velocity(name, t) for t in times_s])
+        executed_v = np.gradient(positions[:, i], axis=0) / dt[:, None]
+        for axis, style in ((0, "-"), (1, "--")):
+            ax_p.plot(times_s, positions[:, i, axis], style, color=colours[name], lw=1.8,
+                      label=f"{name} {'xy'[axis]} executed")
+            ax_p.plot(times_s, plan.position(name, times_s)[:, axis], style, color="grey", lw=1.0,
+                      label=f"{name} {'xy'[axis]} planned")
+            ax_v.plot(times_s, executed_v[:, axis], style, color=colours[name], lw=1.5)
+            ax_v.plot(times_s, planned_v[:, axis], style, color="grey", lw=1.0)
+    for imp in plan.impacts:
+        for a in (ax_p, ax_v):
+            a.axvline(imp.time_s, color=IMPACT_COLOUR, ls=":", lw=1.0)
+    for imp in impacts:
+        if {imp["a"], imp["b"]} <= set(names):
+            for a in (ax_p, ax_v):
+                a.axvline(imp["time"], color="k", ls="-", lw=0.6, alpha=0.5)
+    ax_p.set_ylabel("object position (m)")
+    ax_p.legend(fontsize=7, ncol=2)
+    ax_v.set_ylabel("object velocity (m/s)")
+    ax_v.set_xlabel("time (s); impacts: planned red dotted, executed black")
+    for a in (ax_p, ax_v):
+        a.grid(alpha=0.3)
+    fig.suptitle(f"{scenario.name}: executed robustness {robustness:+.3f} m (planned {plan.robustness:.3f} m)")
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=DPI)
+    return fig
