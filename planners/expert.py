@@ -139,7 +139,8 @@ class Expert:
         x, y, vx, vy, c, s, om = states[self.names.index(name)]
         return np.array([x, y, math.atan2(s, c), vx, vy, om])
 
-    def _object_prediction(self, name: str, states: np.ndarray, t: float, t_target: float) -> tuple[np.ndarray, np.ndarray]:
+    def _object_prediction(self, name: str, states: np.ndarray, t: float, t_target: float
+                           ) -> tuple[np.ndarray, np.ndarray]:
         """Object position and velocity at ``t_target``: free flight from the observation, unless another
         planned impact on it comes first, in which case the plan's state just before ``t_target``."""
         pending = [i for i in self.plan.impacts_of(name) if t < i.time_s < t_target - 1e-9]
@@ -157,7 +158,8 @@ class Expert:
         nxt = min(later, key=lambda i: i.time_s)
         return (np.asarray(nxt.position) - position_at_impact) / (nxt.time_s - impact.time_s)
 
-    def _replan(self, robot, t: float, state: np.ndarray, impact: PlannedImpact, states: np.ndarray) -> _Replanned | None:
+    def _replan(self, robot, t: float, state: np.ndarray, impact: PlannedImpact, states: np.ndarray
+                ) -> _Replanned | None:
         obj = self.scenario.body(impact.object)
         x_o, v_o = self._object_prediction(impact.object, states, t, impact.time_s)
         v_des = self._desired_object_velocity(impact, x_o)

@@ -12,7 +12,8 @@ from tests.helpers import two_body
 
 
 @pytest.mark.parametrize("e,m_r,m_o", [(0.75, 16.8, 16.8), (0.47, 16.8, 8.0), (1.0, 5.0, 16.8)])
-@pytest.mark.parametrize("v_o,v_des", [((0.0, 0.0), (0.1, 0.2)), ((0.1, -0.05), (-0.05, 0.15)), ((0.2, 0.0), (0.0, 0.0))])
+@pytest.mark.parametrize("v_o,v_des", [((0.0, 0.0), (0.1, 0.2)), ((0.1, -0.05), (-0.05, 0.15)),
+                                       ((0.2, 0.0), (0.0, 0.0))])
 def test_inverse_then_forward_gives_the_desired_velocity(e, m_r, m_o, v_o, v_des):
     c = required_contact((3.0, 4.0), v_o, v_des, m_r, 0.2, m_o, 0.25, e)
     np.testing.assert_allclose(np.linalg.norm(np.subtract((3.0, 4.0), c.robot_position)), 0.45)
@@ -34,7 +35,8 @@ def test_inverse_model_in_the_simulator(v_o, v_des):
     # start both 2 s before contact on their straight approach paths, so they meet at the computed contact
     t_back = 2.0
     sc = two_body(e=e, robot_pos=tuple(c.robot_position - c.robot_velocity_before * t_back),
-                  robot_vel=tuple(c.robot_velocity_before), object_pos=tuple(np.array((5.0, 5.0)) - np.asarray(v_o) * t_back),
+                  robot_vel=tuple(c.robot_velocity_before),
+                  object_pos=tuple(np.array((5.0, 5.0)) - np.asarray(v_o) * t_back),
                   object_vel=v_o, control_period_s=0.01, substeps=1)
     world = World(sc)
     events = []
