@@ -6,7 +6,8 @@
 
 Each control step, for each robot:
 
-1. if one of its planned impacts is less than one grid interval away, the replanner (Eq. 29) recomputes
+1. if one of its planned impacts is less than two grid intervals away (and the robot's previous impact is
+   over), the replanner (Eq. 29) recomputes
    its pre- and post-impact segments from its current state: the object's state at the impact time is
    predicted from its observed position and velocity (free flight), the velocity the object must leave
    with is the one that takes it to where the plan needs it at its next impact (or the planned one after
@@ -40,6 +41,7 @@ from planners.replanner import replan_around_impact, replan_segment
 from planners.sr_planner import PlannerConfig, plan_spatially_robust
 
 KEEP_OFF_MARGIN_M = 0.03  # extra clearance around objects' discs away from planned impacts
+REPLAN_INTERVALS = 2  # replanning starts this many grid intervals before an impact (after the previous one)
 CONTACT_WINDOW_S = 0.5  # around a planned impact the keep-off constraint is lifted
 
 
@@ -182,8 +184,10 @@ class Expert:
         name = robot.name
         upcoming = [i for i in self.plan.impacts if i.robot == name and i.time_s > t + 1e-9]
         nxt = min(upcoming, key=lambda i: i.time_s) if upcoming else None
+        past = [i.time_s for i in self.plan.impacts if i.robot == name and i.time_s <= t + 1e-9]
+        window_start = max([nxt.time_s - REPLAN_INTERVALS * self.grid_dt] + [p + self.dt for p in past]) if nxt else 0
         current = self._replanned.get(name)
-        if nxt is not None and nxt.time_s - t <= self.grid_dt + 1e-9:
+        if nxt is not None and t >= window_start - 1e-9:
             replanned = self._replan(robot, t, state, nxt, states)
             if replanned is not None:
                 self._replanned[name] = current = replanned
