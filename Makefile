@@ -8,7 +8,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 OUT := out
 
-.PHONY: demo test test-slow bench lint clean
+.PHONY: demo test test-slow bench bench-expert lint clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -27,11 +27,14 @@ $(VENV)/.dev-installed: $(VENV)/.base-installed
 	$(BIN)/pip install --quiet -e '.[rl,dev,scip]'
 	touch $@
 
+# The main demo: plan the corridor (MILP, HiGHS), fly it with the expert (replanner + MPC) in the
+# simulator, write the plan, the video, the plots and the JSON summary.
 demo: $(VENV)/.base-installed
 	mkdir -p $(OUT)
 	$(BIN)/impact-env show corridor --out $(OUT)/corridor_setup.png
-	$(BIN)/impact-env run corridor --controller random --seed 0 --episodes 1 \
-		--video $(OUT)/corridor_random.mp4 --json $(OUT)/corridor_random.json --plot $(OUT)/corridor_random.png
+	$(BIN)/impact-env plan corridor --out $(OUT)/corridor_plan.json --plot $(OUT)/corridor_plan.png
+	$(BIN)/impact-env run corridor --controller expert --plan $(OUT)/corridor_plan.json --seed 0 \
+		--video $(OUT)/corridor_expert.mp4 --json $(OUT)/corridor_expert.json --plot $(OUT)/corridor_expert.png
 	@echo "demo outputs in $(OUT)/"
 
 test: $(VENV)/.dev-installed
@@ -39,6 +42,9 @@ test: $(VENV)/.dev-installed
 
 test-slow: $(VENV)/.dev-installed
 	$(BIN)/python -m pytest -q -n 2 -m slow
+
+bench-expert: $(VENV)/.base-installed
+	$(BIN)/python benchmarks/expert.py --episodes 50
 
 bench: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/env_throughput.py

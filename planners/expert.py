@@ -42,7 +42,8 @@ from planners.sr_planner import PlannerConfig, plan_spatially_robust
 
 KEEP_OFF_MARGIN_M = 0.03  # extra clearance around objects' discs away from planned impacts
 REPLAN_INTERVALS = 2  # replanning starts this many grid intervals before an impact (after the previous one)
-CONTACT_WINDOW_S = 0.5  # around a planned impact the keep-off constraint is lifted
+CONTACT_WINDOW_S = 0.5  # from this long before a pending impact the keep-off constraint is lifted
+LATE_GRACE_S = 0.5  # a planned impact not yet observed is still approached this long after its time
 
 
 @dataclass
@@ -94,6 +95,7 @@ class Expert:
         self.limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in self.robots])
         self.stats = ExpertStats()
         self._replanned: dict[str, _Replanned] = {}
+        self._done: set[int] = set()  # indices into plan.impacts of the impacts observed
         self._cache: tuple[int, np.ndarray] | None = None
 
     # ------------------------------------------------------------------------------------------ API
@@ -103,6 +105,7 @@ class Expert:
             mpc.reset()
         self.stats = ExpertStats()
         self._replanned = {}
+        self._done = set()
         self._cache = None
 
     def act(self, observation: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
@@ -116,6 +119,7 @@ class Expert:
         step = round((1.0 - obs[-1]) * self.horizon_steps)
         t = step * self.dt
         states = obs[:-1].reshape(len(self.names), OBS_PER_BODY)
+        self._observe_impacts((info or {}).get("impacts", []))
         actions = [self._robot_action(i, robot, t, states) for i, robot in enumerate(self.robots)]
         action = np.clip(np.concatenate(actions), -1.0, 1.0).astype(np.float32)
         self._cache = (step, action)
@@ -136,6 +140,20 @@ class Expert:
         return self._cache[1][ACTION_PER_ROBOT * idx: ACTION_PER_ROBOT * (idx + 1)]
 
     # ---------------------------------------------------------------------------------- internals
+    def _observe_impacts(self, events: list[dict]) -> None:
+        """Mark planned impacts as done when the env reports a contact of that robot and object near them."""
+        for ev in events:
+            pair = {ev["a"], ev["b"]}
+            candidates = [(abs(imp.time_s - ev["time"]), k) for k, imp in enumerate(self.plan.impacts)
+                          if k not in self._done and pair == {imp.robot, imp.object}
+                          and abs(imp.time_s - ev["time"]) <= 0.5 * self.grid_dt]
+            if candidates:
+                self._done.add(min(candidates)[1])
+
+    def _pending(self, name: str, t: float) -> list[PlannedImpact]:
+        return [imp for k, imp in enumerate(self.plan.impacts)
+                if imp.robot == name and k not in self._done and imp.time_s > t - LATE_GRACE_S]
+
     def _body_state(self, states: np.ndarray, name: str) -> np.ndarray:
         """[x, y, theta, vx, vy, omega] of a body from its observation row."""
         x, y, vx, vy, c, s, om = states[self.names.index(name)]
@@ -182,61 +200,79 @@ class Expert:
     def _robot_action(self, index: int, robot, t: float, states: np.ndarray) -> np.ndarray:
         state = self._body_state(states, robot.name)
         name = robot.name
-        upcoming = [i for i in self.plan.impacts if i.robot == name and i.time_s > t + 1e-9]
-        nxt = min(upcoming, key=lambda i: i.time_s) if upcoming else None
-        past = [i.time_s for i in self.plan.impacts if i.robot == name and i.time_s <= t + 1e-9]
+        pending = self._pending(name, t)
+        nxt = min(pending, key=lambda i: i.time_s) if pending else None
+        past = [i.time_s for i in self.plan.impacts if i.robot == name and i.time_s <= t + 1e-9 and i is not nxt]
         window_start = max([nxt.time_s - REPLAN_INTERVALS * self.grid_dt] + [p + self.dt for p in past]) if nxt else 0
         current = self._replanned.get(name)
-        if nxt is not None and t >= window_start - 1e-9:
+        approaching = nxt is not None and t >= window_start - 1e-9
+        if approaching and nxt.time_s > t + 1e-9:
             replanned = self._replan(robot, t, state, nxt, states)
             if replanned is not None:
                 self._replanned[name] = current = replanned
-        elif current is not None and current.post.t0_s < t < current.post.t1_s:
+        elif approaching:
+            pass  # late: keep the last approach, continued straight at the contact velocity (see _reference)
+        elif current is not None and t < current.post.t1_s:
             # after the impact: rejoin the plan from where the robot really is
             plan_body = self.plan.bodies[name]
             t1 = current.post.t1_s
             current.post = replan_segment(state[:2], state[3:5], plan_body.position(t1), plan_body.velocity(t1),
                                           t, t1, robot.velocity_bound_mps)
-        elif current is not None and t >= current.post.t1_s:
+        elif current is not None:
             del self._replanned[name]
             current = None
+        approaching = approaching and current is not None and current.impact is nxt
 
         n = self.mpc_config.horizon
         times = t + self.dt * np.arange(n + 1)
-        reference = self._reference(name, times, current)
+        reference = self._reference(name, times, current, approaching)
         impact_spec = None
-        if current is not None and current.pre.t1_s > t:
+        if approaching and current.pre.t1_s > t:
             k = round((current.pre.t1_s - t) / self.dt)
             if 1 <= k <= n:
                 impact_spec = ImpactSpec(step=k, position=current.pre.control_points[-1],
                                          velocity_before=current.pre.velocity(current.pre.t1_s)[0],
                                          velocity_after=current.post.velocity(current.post.t0_s)[0])
-        avoid = self._avoid(robot, t, times, states)
+        avoid = self._avoid(robot, t, times, states, nxt if approaching else None)
         result = self.mpcs[name].solve(state, reference, impact=impact_spec, avoid=avoid)
         self.stats.mpc_ms.append(result.solve_ms)
         if not result.success:
             self.stats.mpc_failures += 1
         return np.asarray(result.wrench, float) / self.limits[index]
 
-    def _reference(self, name: str, times: np.ndarray, current: _Replanned | None) -> np.ndarray:
-        """[x, y, vx, vy] at the horizon's nodes: the replanned segments where they apply, else the plan."""
+    def _reference(self, name: str, times: np.ndarray, current: _Replanned | None, approaching: bool
+                   ) -> np.ndarray:
+        """[x, y, vx, vy] at the horizon's nodes: the replanned segments where they apply, else the plan.
+
+        While an impact is still to come, the approach continues past the planned time straight at the
+        contact velocity (a late contact is met at full speed, not braked for)."""
         body = self.plan.bodies[name]
         tf = self.plan.tf_s
         tt = np.minimum(times, tf)
         ref = np.hstack([body.position(tt), body.velocity(tt)])
         ref[times > tf, 2:] = 0.0
-        if current is not None:
-            for seg in (current.pre, current.post):
-                mask = (times >= seg.t0_s - 1e-9) & (times <= seg.t1_s + 1e-9)
-                if seg is current.post:
-                    mask &= times > current.pre.t1_s + 1e-9
-                if np.any(mask):
-                    ref[mask, :2] = seg.position(times[mask])
-                    ref[mask, 2:] = seg.velocity(times[mask])
+        if current is not None and approaching:
+            pre = current.pre
+            mask = times <= pre.t1_s + 1e-9
+            ref[mask, :2] = pre.position(times[mask])
+            ref[mask, 2:] = pre.velocity(times[mask])
+            late = ~mask
+            p_c, v_c = pre.control_points[-1], pre.velocity(pre.t1_s)[0]
+            ref[late, :2] = p_c + np.outer(times[late] - pre.t1_s, v_c)
+            ref[late, 2:] = v_c
+        elif current is not None:
+            seg = current.post
+            mask = (times >= seg.t0_s - 1e-9) & (times <= seg.t1_s + 1e-9)
+            if np.any(mask):
+                ref[mask, :2] = seg.position(times[mask])
+                ref[mask, 2:] = seg.velocity(times[mask])
         return ref
 
-    def _avoid(self, robot, t: float, times: np.ndarray, states: np.ndarray) -> AvoidSpec | None:
-        """Keep off the nearest object's predicted path, except around this robot's planned impacts on it."""
+    def _avoid(self, robot, t: float, times: np.ndarray, states: np.ndarray, pending: PlannedImpact | None
+               ) -> AvoidSpec | None:
+        """Keep off the nearest object's predicted (free-flight) path, except around this robot's planned
+        impacts on it and, while an impact is pending, from shortly before it on (the object's motion after
+        the impact is the planned one, not the free flight)."""
         if not self.objects:
             return None
         me = self._body_state(states, robot.name)
@@ -247,6 +283,8 @@ class Expert:
         for imp in self.plan.impacts:
             if imp.robot == robot.name and imp.object == obj.name:
                 active &= np.abs(times - imp.time_s) > CONTACT_WINDOW_S
+        if pending is not None and pending.object == obj.name:
+            active &= times < pending.time_s - CONTACT_WINDOW_S
         return AvoidSpec(centers=centers, min_distance=robot.radius_m + obj.radius_m + KEEP_OFF_MARGIN_M,
                          active=active)
 

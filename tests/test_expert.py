@@ -95,3 +95,12 @@ def test_cli_run_with_the_expert_and_a_saved_plan(tmp_path):
     report = summary["controller_report"]
     assert report["planned_robustness"] == pytest.approx(0.4, abs=1e-3) and report["replans"] > 0
     assert fig.stat().st_size > 1000
+
+
+@pytest.mark.slow
+def test_closed_loop_obstacle_avoidance():
+    expert = Expert(load_scenario("obstacle_avoidance"))
+    info, obs, env = fly(expert)
+    assert info["is_success"], f"robustness {info['robustness']}"
+    o1 = env.core.body_names.index("O1")
+    assert expert.scenario.region_map()["goal"].signed_distance_xy(*obs[7 * o1: 7 * o1 + 2]) > 0
