@@ -1,0 +1,535 @@
+"""Impact-aware nonlinear MPC of one planar freeflyer (paper Sec. VII, Eq. 30-31).
+
+Model (Eq. 30, planar): state ``x = [px, py, theta, vx, vy, omega]`` (m, rad, m/s, rad/s), input
+``u = [Fx, Fy, tau]`` in the BODY frame (N, N m), ``p' = v``, ``v' = R(theta) F / m``, ``theta' = omega``,
+``omega' = tau / I``. One RK4 step of ``dt_s`` with the input held (what the simulator does over a control
+period); no gravity, friction or damping. :func:`rk4_step` is the same step in numpy.
+
+Optimal control problem (Eq. 31), horizon N, nodes k = 0..N (node 0 is the measured state):
+
+- cost, nodes 1..N, node N weighted ``terminal_factor`` times: ``q_pos |p - p_ref|^2 + q_vel |v - v_ref|^2
+  + q_heading (theta - theta_ref)^2 + q_omega omega^2``; inputs 0..N-1: ``r_input |u / u_limit|^2``
+  (normalised by the body's limits); plus the slack penalties below;
+- input bounds ``|Fx| <= thrust_fraction * thrust_limit_N[0]`` etc. (thrust_fraction scales the torque too:
+  the same thrusters make both);
+- planned impact at node s (:class:`ImpactSpec`, 0 <= s <= N). (a) Pre-impact state: ``[p_s, v_s]`` equals
+  the planned ``[position, velocity_before]``, written as a hard constraint with an L1 slack
+  (``-sigma <= [p_s, v_s] - target <= sigma``, cost ``impact_penalty * sum(sigma)``): an exact penalty, so
+  the constraint holds exactly whenever it can be met, and the problem stays feasible when it cannot.
+  (b) Velocity jump: the model does not simulate the collision, so the step from node s to s+1 starts from
+  ``[p_s, theta_s, velocity_after, omega_s]`` instead of ``x_s``; ``predicted[s]`` shows the pre-impact
+  velocity and ``predicted[s+1:]`` continue from ``velocity_after``. The impact step is a parameter, not a
+  rebuild: every node carries a 0/1 parameter that switches (b) on, and the rows of (a) are switched on by
+  their bounds (+-inf when off), so one compiled solver serves every impact step and "no impact". At s = 0
+  (impact due at the start of the coming period, not yet measured) only (b) applies.
+- keep-off (:class:`AvoidSpec`): where active, ``|p_k - c_k|^2 - d^2 >= -sigma_k`` (squared, hence smooth
+  everywhere), cost ``avoid_penalty * (sigma_k + sigma_k^2)``. We use the plain distance constraint rather
+  than a discrete CBF ``h_(k+1) >= (1 - gamma) h_k``: the 1 s horizon already spans the robot's reaction
+  (the object ahead enters the horizon ~1 s before contact, enough to deflect or brake at 0.2-0.3 m/s), the
+  CBF's extra conservatism would slow the approach to a planned impact once the expert re-activates the
+  constraint, and it adds a tuning constant gamma. Node 0 is the measured state and is never constrained.
+
+Solvers (``MPCConfig.solver``), all built ONCE in ``__init__`` with every per-step quantity a parameter:
+``"sqp"`` = CasADi sqpmethod + qrqp (active set) on the exact Hessian; ``"fatrop"`` (stage-wise structure
+given explicitly); ``"ipopt"``. Never CasADi's ``highs`` plugin (its libhighs clashes with highspy in the
+same process). Warm start: the previous solution and multipliers shifted by one step. If the primary solver
+reports failure (``stats()["success"]`` is checked, some solvers return numbers while failing), the
+``fallback_solver`` retries from the same guess; if that fails too the result has ``success=False`` and a
+wrench clipped to the bounds (never NaN), and ``failures`` is incremented. Timings: ``benchmarks/mpc.py``.
+
+Variables are ordered stage by stage (u_0, [x_k, u_k, sigma_k] for k = 1..N-1, [x_N, sigma_N]) and the
+constraints as (dynamics_k, path_k) pairs: fatrop's OCP layout, harmless for the other solvers.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import casadi as ca
+import numpy as np
+
+from impact_env.scenario import Body
+from planners.errors import PlannerError
+
+SOLVERS = ("sqp", "fatrop", "ipopt")
+NX, NU = 6, 3  # state [px, py, theta, vx, vy, omega], input [Fx, Fy, tau]
+_NSI, _NSA = 8, 1  # slacks per node: impact (p, v) positive and negative parts, keep-off
+_WEIGHTS = ("q_pos", "q_vel", "q_heading", "q_omega", "r_input", "terminal_factor")
+
+
+class MPCInputError(PlannerError, ValueError):
+    """A configuration value or a solve() input has the wrong shape, range or is not finite."""
+
+
+# ----------------------------------------------------------------------------------------- model
+def _xdot(x, u, mass_kg: float, inertia_kgm2: float, cos, sin):
+    """Right-hand side of Eq. (30) for numpy or CasADi arguments; returns a 6-tuple."""
+    c, s = cos(x[2]), sin(x[2])
+    return (x[3], x[4], x[5], (c * u[0] - s * u[1]) / mass_kg, (s * u[0] + c * u[1]) / mass_kg, u[2] / inertia_kgm2)
+
+
+def state_from_sim(row: tuple[float, ...] | np.ndarray) -> np.ndarray:
+    """MPC state [px, py, theta, vx, vy, omega] (6,) from a simulator row (x, y, vx, vy, heading, omega).
+
+    ``World.read_state()`` and the observations order a body's velocity BEFORE its heading; the MPC state
+    (and :func:`rk4_step`) put the heading third, as in Eq. (30).
+    """
+    x, y, vx, vy, heading, omega = _vector(row, (NX,), "simulator state row")
+    return np.array([x, y, heading, vx, vy, omega])
+
+
+def rk4_step(state: np.ndarray, wrench: np.ndarray, robot: Body, dt: float) -> np.ndarray:
+    """One RK4 step (dt in s) of Eq. (30) with the body-frame wrench (3,) [N, N, N m] held: state (6,) -> (6,)."""
+    x = np.asarray(state, dtype=float)
+    u = np.asarray(wrench, dtype=float)
+    if x.shape != (NX,) or u.shape != (NU,):
+        raise MPCInputError(f"rk4_step needs state (6,) and wrench (3,), got {x.shape} and {u.shape}")
+
+    def f(z: np.ndarray) -> np.ndarray:
+        return np.array(_xdot(z, u, robot.mass_kg, robot.inertia_kgm2, math.cos, math.sin))
+
+    k1 = f(x)
+    k2 = f(x + 0.5 * dt * k1)
+    k3 = f(x + 0.5 * dt * k2)
+    k4 = f(x + dt * k3)
+    return x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def _rk4_sx(x: ca.SX, u: ca.SX, robot: Body, dt: float) -> ca.SX:
+    def f(z: ca.SX) -> ca.SX:
+        return ca.vertcat(*_xdot(z, u, robot.mass_kg, robot.inertia_kgm2, ca.cos, ca.sin))
+
+    k1 = f(x)
+    k2 = f(x + 0.5 * dt * k1)
+    k3 = f(x + 0.5 * dt * k2)
+    k4 = f(x + dt * k3)
+    return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+# ----------------------------------------------------------------------------------------- inputs / outputs
+@dataclass
+class MPCConfig:
+    """Structure (horizon, dt, solver) is fixed at construction; weights can change via ``update_weights``.
+
+    Weights: q_pos in 1/m^2, q_vel in s^2/m^2, q_heading in 1/rad^2, q_omega in s^2/rad^2, r_input per
+    (input / limit)^2; penalties per m or m/s of impact-state violation and per m^2 of keep-off violation.
+    """
+
+    horizon: int = 10
+    dt_s: float = 0.1
+    q_pos: float = 100.0
+    q_vel: float = 10.0
+    q_heading: float = 100.0
+    q_omega: float = 10.0
+    r_input: float = 0.1
+    terminal_factor: float = 10.0
+    thrust_fraction: float = 1.0
+    impact_penalty: float = 1e4
+    avoid_penalty: float = 1e4
+    keep_off: str = "linearized"
+    solver: str = "sqp"
+    fallback_solver: str | None = "ipopt"
+    max_iter: int = 50
+
+    def __post_init__(self) -> None:
+        if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 2:
+            raise MPCInputError(f"horizon must be an integer >= 2, got {self.horizon!r}")
+        for name in ("dt_s", "impact_penalty", "avoid_penalty") + _WEIGHTS:
+            _check_weight(name, getattr(self, name), positive=name in ("dt_s", "impact_penalty", "avoid_penalty"))
+        if not (isinstance(self.thrust_fraction, (int, float)) and 0.0 < self.thrust_fraction <= 1.0):
+            raise MPCInputError(f"thrust_fraction must be in (0, 1], got {self.thrust_fraction!r}")
+        if self.keep_off not in ("linearized", "exact"):
+            raise MPCInputError(f"keep_off must be 'linearized' or 'exact', got {self.keep_off!r}")
+        if self.solver not in SOLVERS:
+            raise MPCInputError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+        if self.fallback_solver is not None and self.fallback_solver not in SOLVERS:
+            raise MPCInputError(f"fallback_solver must be None or one of {', '.join(SOLVERS)}, "
+                                f"got {self.fallback_solver!r}")
+        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
+            raise MPCInputError(f"max_iter must be an integer >= 1, got {self.max_iter!r}")
+
+
+def _check_weight(name: str, value: object, positive: bool = False) -> None:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or value < 0 or (positive and value == 0):
+        raise MPCInputError(f"{name} must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
+
+
+def _vector(value: object, shape: tuple[int, ...], name: str) -> np.ndarray:
+    """``value`` as a finite float array of ``shape``, or MPCInputError naming ``name``."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise MPCInputError(f"{name} must be numbers of shape {shape}, got {value!r}") from None
+    if arr.shape != shape:
+        raise MPCInputError(f"{name} must have shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise MPCInputError(f"{name} contains NaN or infinite values: {arr.tolist()}")
+    return arr
+
+
+@dataclass
+class ImpactSpec:
+    """A planned impact at horizon node ``step`` (0..N, i.e. at t + step * dt_s).
+
+    ``position`` (2,) m and ``velocity_before`` (2,) m/s: the robot's planned pre-impact state, enforced at
+    that node; ``velocity_after`` (2,) m/s: its planned post-impact velocity, from which the prediction
+    continues after the node. ``step = 0`` means "the impact happens at the start of the coming control
+    period" (contact due now, not yet in the measured state): node 0 is the measurement, so nothing is
+    enforced there and only the velocity jump applies; the wrench is then chosen for the post-impact motion.
+    """
+
+    step: int
+    position: np.ndarray
+    velocity_before: np.ndarray
+    velocity_after: np.ndarray
+
+    def __post_init__(self) -> None:
+        if isinstance(self.step, bool) or not isinstance(self.step, (int, np.integer)):
+            raise MPCInputError(f"ImpactSpec.step must be an integer node index, got {self.step!r}")
+        self.step = int(self.step)
+        for name in ("position", "velocity_before", "velocity_after"):
+            setattr(self, name, _vector(getattr(self, name), (2,), f"ImpactSpec.{name}"))
+
+
+@dataclass
+class AvoidSpec:
+    """Keep-off constraint: ``|p_k - centers[k]| >= min_distance`` (m) at the nodes where ``active[k]``.
+
+    ``centers`` (N+1, 2) m: predicted centre of the body to avoid at each node; ``active`` (N+1,) bool.
+    Node 0 (the measured state) is never constrained.
+    """
+
+    centers: np.ndarray
+    min_distance: float
+    active: np.ndarray
+
+    def __post_init__(self) -> None:
+        d = self.min_distance
+        if not (isinstance(d, (int, float, np.floating)) and math.isfinite(d) and d > 0):
+            raise MPCInputError(f"AvoidSpec.min_distance must be a finite number > 0 (m), got {d!r}")
+        self.min_distance = float(d)
+        self.active = np.asarray(self.active, dtype=bool)
+
+
+@dataclass
+class MPCResult:
+    """One solve. ``wrench`` (3,): body-frame [Fx, Fy, tau] (N, N m) to apply now, within bounds, never NaN.
+
+    ``predicted`` (N+1, 6): predicted states at nodes 0..N (node 0 = measured state); ``inputs`` (N, 3):
+    the planned wrenches; ``impact_error``: max |predicted - planned| pre-impact [p, v] at the impact node
+    (m or m/s; 0 without impact or at step 0); ``min_clearance_m``: min over active keep-off nodes of distance minus
+    min_distance (inf without); ``solver``: which solver produced the result.
+    """
+
+    wrench: np.ndarray
+    success: bool
+    solve_ms: float
+    predicted: np.ndarray
+    inputs: np.ndarray = field(default_factory=lambda: np.zeros((0, NU)))
+    status: str = ""
+    iterations: int = 0
+    solver: str = ""
+    impact_error: float = 0.0
+    min_clearance_m: float = math.inf
+
+
+# ----------------------------------------------------------------------------------------- controller
+class FreeflyerMPC:
+    """Nonlinear MPC of one freeflyer robot; build once, then call :meth:`solve` every control period.
+
+    Args:
+        robot: the robot's :class:`~impact_env.scenario.Body` (mass, inertia, thrust and torque limits).
+        config: horizon, dt, weights, solver; default :class:`MPCConfig`.
+        heading_ref: heading (rad) the robot is held at, e.g. its initial heading; measured headings that
+            wrapped around (theta + 2 pi k) are tracked to the nearest equivalent of it.
+
+    Attributes:
+        failures: solves that returned ``success=False``; ``fallbacks``: solves rescued by the fallback
+        solver; ``solves``: all solves.
+    """
+
+    def __init__(self, robot: Body, config: MPCConfig | None = None, heading_ref: float = 0.0) -> None:
+        if not robot.is_robot:
+            raise MPCInputError(f"body {robot.name!r} has no thrust limits: it is not a robot")
+        if not math.isfinite(heading_ref):
+            raise MPCInputError(f"heading_ref must be finite, got {heading_ref!r}")
+        self.robot = robot
+        self.config = cfg = config if config is not None else MPCConfig()
+        self.heading_ref = float(heading_ref)
+        self.horizon = n = cfg.horizon
+        self.limits = np.array([*robot.thrust_limit_N, robot.torque_limit_Nm], dtype=float)
+        self.bounds = cfg.thrust_fraction * self.limits
+        self.failures = self.fallbacks = self.solves = 0
+        self._build(robot, cfg)
+        self._p = np.zeros(self._np)
+        self._write_weights()
+        self._p[self._pslice["dist"]] = 1.0
+        self._solvers = {cfg.solver: self._make_solver(cfg.solver)}
+        if cfg.fallback_solver is not None and cfg.fallback_solver != cfg.solver:
+            self._solvers[cfg.fallback_solver] = self._make_solver(cfg.fallback_solver)
+        self._guess: np.ndarray | None = None
+        self._lam_x = np.zeros(self._nw)
+        self._lam_g = np.zeros(self._ng)
+        self._last_inputs = np.zeros((n, NU))
+
+    # ------------------------------------------------------------------------------------- building
+    def _build(self, robot: Body, cfg: MPCConfig) -> None:
+        n = cfg.horizon
+        sizes = {"x0": NX, "ref": 4 * (n + 1), "heading": 1, "select": n + 1, "v_after": 2,
+                 "centers": 2 * (n + 1), "normals": 2 * (n + 1), "dist": 1, "weights": len(_WEIGHTS)}
+        self._pslice, start = {}, 0
+        for name, size in sizes.items():
+            self._pslice[name] = slice(start, start + size)
+            start += size
+        self._np = start
+        P = ca.SX.sym("p", start)
+        par = {name: P[s] for name, s in self._pslice.items()}
+        ref = ca.reshape(par["ref"], 4, n + 1)  # column k = [x, y, vx, vy] at node k
+        centers = ca.reshape(par["centers"], 2, n + 1)
+        normals = ca.reshape(par["normals"], 2, n + 1)
+        sel = par["select"]
+        q_pos, q_vel, q_head, q_omega, r_in, term = (par["weights"][i] for i in range(len(_WEIGHTS)))
+        scale = 1.0 / self.limits
+
+        w, lbw, ubw, g, lbg, ubg = [], [], [], [], [], []
+        self._vblocks: dict[tuple[str, int], slice] = {}
+        self._gblocks: dict[tuple[str, int], slice] = {}
+        counts = {"w": 0, "g": 0}
+
+        def add_var(name: str, k: int, size: int, lo: list[float], hi: list[float]) -> ca.SX:
+            v = ca.SX.sym(f"{name}{k}", size)
+            self._vblocks[(name, k)] = slice(counts["w"], counts["w"] + size)
+            counts["w"] += size
+            w.append(v)
+            lbw.extend(lo)
+            ubw.extend(hi)
+            return v
+
+        def add_con(name: str, k: int, expr: ca.SX, lo: list[float], hi: list[float]) -> None:
+            self._gblocks[(name, k)] = slice(counts["g"], counts["g"] + expr.shape[0])
+            counts["g"] += expr.shape[0]
+            g.append(expr)
+            lbg.extend(lo)
+            ubg.extend(hi)
+
+        inf = math.inf
+        xs = [par["x0"]] + [None] * n
+        us: list[ca.SX] = [None] * n
+        slacks: list[ca.SX] = [None] * (n + 1)
+        cost = 0
+        for k in range(n + 1):  # stage k: [x_k], [u_k], [slacks_k]
+            if k > 0:
+                xs[k] = add_var("x", k, NX, [-inf] * NX, [inf] * NX)
+            if k < n:
+                us[k] = add_var("u", k, NU, list(-self.bounds), list(self.bounds))
+            if k > 0:
+                slacks[k] = add_var("s", k, _NSI + _NSA, [0.0] * (_NSI + _NSA), [inf] * (_NSI + _NSA))
+        for k in range(n + 1):  # constraints of stage k: dynamics k -> k+1, then the path constraints of node k
+            x = xs[k]
+            if k < n:
+                # Impact at node k: the step to k+1 starts from the planned post-impact velocity.
+                v_start = (1 - sel[k]) * x[3:5] + sel[k] * par["v_after"]
+                x_start = ca.vertcat(x[0:3], v_start, x[5])
+                add_con("dyn", k, xs[k + 1] - _rk4_sx(x_start, us[k], robot, cfg.dt_s), [0.0] * NX, [0.0] * NX)
+                cost += r_in * ca.sumsqr(us[k] * scale)
+            if k > 0:
+                # Switched on and off through their bounds (+-inf when off), see _set_bounds: a row
+                # multiplied by a 0/1 parameter would leave duplicate "sigma >= 0" rows that stall qrqp.
+                # The impact row is an equality z - sigma+ + sigma- = target, sigma+- >= 0: unlike
+                # -sigma <= z - target <= sigma it stays non-degenerate when met exactly (sigma = 0).
+                s_imp, s_av = slacks[k][0:_NSI], slacks[k][_NSI]
+                z = ca.vertcat(x[0:2], x[3:5])
+                if cfg.keep_off == "exact":
+                    gap = ca.sumsqr(x[0:2] - centers[:, k]) - par["dist"] ** 2  # m^2
+                else:  # half-plane tangent to the keep-off disc, normal from the previous plan (m)
+                    gap = ca.dot(normals[:, k], x[0:2] - centers[:, k]) - par["dist"]
+                add_con("path", k, ca.vertcat(z - s_imp[0:4] + s_imp[4:8], gap + s_av), [-inf] * 5, [inf] * 5)
+                wk = term if k == n else 1.0
+                node = (q_pos * ca.sumsqr(x[0:2] - ref[0:2, k]) + q_vel * ca.sumsqr(x[3:5] - ref[2:4, k])
+                        + q_head * (x[2] - par["heading"]) ** 2 + q_omega * x[5] ** 2)
+                cost += wk * node
+                cost += cfg.impact_penalty * (ca.sum1(s_imp) + 1e-3 * ca.sumsqr(s_imp))
+                cost += cfg.avoid_penalty * (s_av + s_av ** 2)
+        self._nlp = {"x": ca.vertcat(*w), "p": P, "f": cost, "g": ca.vertcat(*g)}
+        self._nw, self._ng = counts["w"], counts["g"]
+        self._lbx, self._ubx = np.array(lbw), np.array(ubw)
+        self._lbg, self._ubg = np.array(lbg), np.array(ubg)
+        self._stage_sizes = (
+            [0] + [NX] * n,  # nx: x_0 is a parameter, not a variable
+            [NU] + [NU + _NSI + _NSA] * (n - 1) + [_NSI + _NSA],  # nu
+            [0] + [5] * n,  # ng: path constraints per stage (impact 4, keep-off 1)
+        )
+        # index maps: shifting the warm start by one stage, reading states and inputs
+        self._shift_w = self._shift_map(self._vblocks, self._nw)
+        self._shift_g = self._shift_map(self._gblocks, self._ng)
+        self._x_idx = np.array([np.arange(self._nw)[self._vblocks[("x", k)]] for k in range(1, n + 1)])
+        self._avoid_rows = np.array([self._gblocks[("path", k)].start + 4 for k in range(1, n + 1)])
+        self._slack_idx = np.concatenate([np.arange(self._nw)[self._vblocks[("s", k)]] for k in range(1, n + 1)])
+        self._slack_lam = -np.tile([cfg.impact_penalty] * _NSI + [cfg.avoid_penalty] * _NSA, n)
+        self._u_idx = np.array([np.arange(self._nw)[self._vblocks[("u", k)]] for k in range(n)])
+
+    @staticmethod
+    def _shift_map(blocks: dict[tuple[str, int], slice], size: int) -> np.ndarray:
+        """Index array: block (name, k) takes the values of (name, k+1), the last block keeps its own."""
+        idx = np.arange(size)
+        for (name, k), s in blocks.items():
+            src = blocks.get((name, k + 1), s)
+            idx[s] = np.arange(size)[src]
+        return idx
+
+    def _make_solver(self, name: str) -> ca.Function:
+        cfg = self.config
+        if name == "sqp":
+            # Exact Hessian with eigen-clip: it is indefinite in (theta, F) once large multipliers (impact
+            # node, keep-off) flow into the dynamics; clipping the eigenvalues of its small diagonal blocks
+            # keeps every QP convex for qrqp. tol_du is in cost units per variable unit (costs are 1e0-1e3).
+            opts = {"qpsol": "qrqp", "max_iter": cfg.max_iter, "tol_pr": 1e-6, "tol_du": 1e-4,
+                    "convexify_strategy": "eigen-clip", "second_order_corrections": True,
+                    "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False,
+                                      "error_on_fail": False},
+                    "print_header": False, "print_iteration": False, "print_status": False, "print_time": False}
+            return ca.nlpsol("mpc_sqp", "sqpmethod", self._nlp, opts)
+        if name == "fatrop":
+            nx, nu, ng = self._stage_sizes
+            opts = {"structure_detection": "manual", "N": self.horizon, "nx": nx, "nu": nu, "ng": ng,
+                    "expand": True, "print_time": False,
+                    "fatrop": {"print_level": 0, "max_iter": max(cfg.max_iter, 100), "tol": 1e-6}}
+            return ca.nlpsol("mpc_fatrop", "fatrop", self._nlp, opts)
+        opts = {"print_time": False,
+                "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-6, "max_iter": max(cfg.max_iter, 100),
+                          "warm_start_init_point": "yes", "warm_start_bound_push": 1e-6,
+                          "warm_start_mult_bound_push": 1e-6, "mu_init": 1e-3}}
+        return ca.nlpsol("mpc_ipopt", "ipopt", self._nlp, opts)
+
+    # ------------------------------------------------------------------------------------- interface
+    def reset(self) -> None:
+        """Forget the warm start (call at the start of an episode or after a large state jump)."""
+        self._guess = None
+        self._lam_x[:] = 0.0
+        self._lam_g[:] = 0.0
+        self._last_inputs[:] = 0.0
+
+    def update_weights(self, **weights: float) -> None:
+        """Change cost weights (names of :class:`MPCConfig` weight fields) without rebuilding the solver."""
+        unknown = sorted(set(weights) - set(_WEIGHTS))
+        if unknown:
+            raise MPCInputError(f"unknown weight(s) {unknown}; weights are {', '.join(_WEIGHTS)}")
+        for name, value in weights.items():
+            _check_weight(name, value)
+        self.config = replace(self.config, **weights)
+        self._write_weights()
+
+    def _write_weights(self) -> None:
+        self._p[self._pslice["weights"]] = [getattr(self.config, name) for name in _WEIGHTS]
+
+    def solve(self, state: np.ndarray, reference: np.ndarray, impact: ImpactSpec | None = None,
+              avoid: AvoidSpec | None = None) -> MPCResult:
+        """Solve the MPC problem from the measured ``state`` (6,) tracking ``reference`` (N+1, 4).
+
+        ``reference[k] = [x, y, vx, vy]`` (m, m/s) at time t + k * dt_s (row 0 is not penalised).
+        Raises MPCInputError (a ValueError) on wrong shapes, NaN/inf values or an impact step outside 1..N.
+        """
+        start = time.perf_counter()
+        n = self.horizon
+        x0 = _vector(state, (NX,), "state")
+        ref = _vector(reference, (n + 1, 4), "reference")
+        p, ps = self._p, self._pslice
+        p[ps["x0"]] = x0
+        p[ps["ref"]] = ref.ravel()
+        two_pi = 2.0 * math.pi
+        p[ps["heading"]] = self.heading_ref + two_pi * round((x0[2] - self.heading_ref) / two_pi)
+        p[ps["select"]] = 0.0
+        p[ps["v_after"]] = 0.0
+        lbg, ubg = self._lbg.copy(), self._ubg.copy()  # all path rows off (+-inf)
+        if impact is not None:
+            if not isinstance(impact, ImpactSpec):
+                raise MPCInputError(f"impact must be an ImpactSpec or None, got {type(impact).__name__}")
+            if not 0 <= impact.step <= n:
+                raise MPCInputError(f"ImpactSpec.step must be in 0..{n} (horizon nodes), got {impact.step}")
+            p[ps["select"].start + impact.step] = 1.0
+            p[ps["v_after"]] = impact.velocity_after
+            if impact.step > 0:  # node 0 is measured: only the velocity jump applies there
+                row = self._gblocks[("path", impact.step)].start
+                lbg[row:row + 4] = ubg[row:row + 4] = np.r_[impact.position, impact.velocity_before]
+        if avoid is not None:
+            if not isinstance(avoid, AvoidSpec):
+                raise MPCInputError(f"avoid must be an AvoidSpec or None, got {type(avoid).__name__}")
+            centers = _vector(avoid.centers, (n + 1, 2), "AvoidSpec.centers")
+            if avoid.active.shape != (n + 1,):
+                raise MPCInputError(f"AvoidSpec.active must have shape {(n + 1,)}, got {avoid.active.shape}")
+            p[ps["centers"]] = centers.ravel()
+            p[ps["dist"]] = avoid.min_distance
+            lbg[self._avoid_rows[avoid.active[1:]]] = 0.0  # |p - c|^2 - d^2 + sigma >= 0
+
+        if self._guess is None:
+            guess = self._initial_guess(x0, ref)
+            # Slack bounds start active with their exact multipliers (minus the penalty gradient): qrqp
+            # takes its initial active set from them, and sqpmethod's first dual residual is then zero.
+            self._lam_x[self._slack_idx] = self._slack_lam
+        else:
+            guess = self._guess
+        if avoid is not None:
+            p[ps["normals"]] = self._normals(guess, x0, ref, centers).ravel()
+        names = [self.config.solver] + [s for s in self._solvers if s != self.config.solver]
+        for name in names:
+            solver = self._solvers[name]
+            sol = solver(x0=guess, p=p, lbx=self._lbx, ubx=self._ubx, lbg=lbg, ubg=ubg,
+                         lam_x0=self._lam_x, lam_g0=self._lam_g)
+            stats = solver.stats()
+            w = sol["x"].full().ravel()
+            ok = bool(stats["success"]) and bool(np.all(np.isfinite(w)))
+            if ok:
+                break
+        self.solves += 1
+        if ok:
+            self.fallbacks += name != self.config.solver
+            self._lam_x = sol["lam_x"].full().ravel()[self._shift_w]
+            self._lam_g = sol["lam_g"].full().ravel()[self._shift_g]
+        else:
+            self.failures += 1
+            if not np.all(np.isfinite(w)):
+                w = guess  # a NaN iterate is useless: keep the previous plan
+            self._lam_x[:] = 0.0
+            self._lam_g[:] = 0.0
+        self._guess = w[self._shift_w]
+        inputs = np.clip(w[self._u_idx], -self.bounds, self.bounds)
+        predicted = np.vstack([x0, w[self._x_idx]])
+        result = MPCResult(
+            wrench=inputs[0].copy(), success=ok, solve_ms=0.0, predicted=predicted, inputs=inputs,
+            status=str(stats.get("return_status", "")), iterations=int(stats.get("iter_count", 0)), solver=name,
+        )
+        if impact is not None and impact.step > 0:
+            node = predicted[impact.step]
+            result.impact_error = float(np.max(np.abs(np.r_[node[0:2] - impact.position,
+                                                            node[3:5] - impact.velocity_before])))
+        if avoid is not None and np.any(avoid.active[1:]):
+            dist = np.hypot(*(predicted[:, 0:2] - avoid.centers).T)
+            result.min_clearance_m = float(np.min(dist[1:][avoid.active[1:]]) - avoid.min_distance)
+        result.solve_ms = (time.perf_counter() - start) * 1e3
+        return result
+
+    def _normals(self, guess: np.ndarray, x0: np.ndarray, ref: np.ndarray, centers: np.ndarray) -> np.ndarray:
+        """Unit normals (N+1, 2) of the keep-off half-planes: from each centre towards the planned position
+        (previous solution shifted), else the current position, else the reference."""
+        planned = np.vstack([x0[0:2], guess[self._x_idx[:, 0:2]]])
+        out = np.empty_like(centers)
+        for k in range(self.horizon + 1):
+            for point in (planned[k], x0[0:2], ref[k, 0:2]):
+                v = point - centers[k]
+                norm = math.hypot(v[0], v[1])
+                if norm > 1e-9:
+                    out[k] = v / norm
+                    break
+            else:
+                out[k] = (1.0, 0.0)
+        return out
+
+    def _initial_guess(self, x0: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        """Cold start: states on the reference, heading and yaw rate as measured, zero inputs and slacks."""
+        w = np.zeros(self._nw)
+        for k in range(1, self.horizon + 1):
+            w[self._vblocks[("x", k)]] = [ref[k, 0], ref[k, 1], x0[2], ref[k, 2], ref[k, 3], 0.0]
+        return w
