@@ -67,13 +67,15 @@ def available_controllers() -> list[str]:
 
 
 def make_controller(spec: str, scenario: Any, **options: Any) -> Controller:
-    """Build a controller from its name (``zero``, ``random`` or a registered one).
+    """Build a controller from its name (``zero``, ``random`` or a registered one) or a ``model.zip`` path.
 
     Registered factories are called as ``factory(scenario, **options)``; options that are None are left
     out (e.g. ``plan=None`` when ``--plan`` was not given).
     """
     if spec in BUILTIN:
         return BUILTIN[spec]()  # they take no options
+    if spec.endswith(".zip"):  # a saved stable-baselines3 model: the "sb3" controller of baselines/
+        spec, options = "sb3", {**options, "model": spec}
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         if ep.name == spec:
             return ep.load()(scenario, **{k: v for k, v in options.items() if v is not None})

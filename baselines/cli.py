@@ -1,0 +1,46 @@
+"""``impact-env train ALGO SCENARIO``: train a stable-baselines3 baseline (see baselines/train.py)."""
+
+from __future__ import annotations
+
+import argparse
+
+from baselines.train import ALGOS, TrainConfig
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("train", help="train a PPO or SAC baseline on a scenario (stable-baselines3)")
+    p.add_argument("algo", choices=ALGOS)
+    p.add_argument("scenario", help="shipped name or path to a .toml file")
+    p.add_argument("--timesteps", type=int, default=None, help="default: n_timesteps of the hyperparameter file")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--n-envs", type=int, default=None, help="parallel envs (subprocesses); default from the file")
+    p.add_argument("--out", default="runs", help="runs/<algo>_<scenario>_s<seed>/ gets model.zip, logs, checkpoints")
+    p.add_argument("--hyperparams", default=None, help="an rl-zoo style YAML file (default baselines/hyperparams)")
+    p.add_argument("--multiagent", action="store_true",
+                   help="one shared policy for every robot on the PettingZoo env (parameter sharing)")
+    p.add_argument("--eval-freq", type=int, default=20_000, help="env steps between evaluations")
+    p.add_argument("--reward", choices=["dense", "sparse"], default="dense")
+    p.add_argument("--fuel-penalty", type=float, default=0.0)
+    p.add_argument("--restitution", type=float, default=None)
+    p.add_argument("--thrust-noise", type=float, default=0.0)
+    p.add_argument("--init-noise", type=float, default=0.0)
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--verbose", type=int, default=0)
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from baselines.train import train
+
+    options = {"reward_mode": args.reward, "fuel_penalty": args.fuel_penalty, "thrust_noise": args.thrust_noise,
+               "initial_position_noise_m": args.init_noise}
+    if args.restitution is not None:
+        options["restitution"] = args.restitution
+    config = TrainConfig(algo=args.algo, scenario=args.scenario, timesteps=args.timesteps, seed=args.seed,
+                         n_envs=args.n_envs, out=args.out, env_options=options, eval_freq=args.eval_freq,
+                         multiagent=args.multiagent, progress_bar=not args.no_progress,
+                         hyperparams_file=args.hyperparams, verbose=args.verbose)
+    run_dir = train(config)
+    print(f"saved {run_dir / 'model.zip'}; fly it with: impact-env run {args.scenario} "
+          f"--controller {run_dir / 'model.zip'}")
+    return 0

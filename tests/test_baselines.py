@@ -1,0 +1,62 @@
+"""RL baselines: hyperparameter files, a short PPO run that saves, loads and flies through `impact-env run`,
+and the PettingZoo parameter-sharing route."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("supersuit")
+
+from baselines import hyperparams  # noqa: E402
+from baselines.train import TrainConfig, train  # noqa: E402
+from impact_env.cli import main  # noqa: E402
+
+
+def test_hyperparameter_files_parse_without_eval():
+    for algo in ("ppo", "sac"):
+        for env_id in ("impact_env/Corridor-v0", "impact_env/ObstacleAvoidance-v0", "impact_env/ThrowAndCatchExp-v0"):
+            entry = hyperparams.load(algo, env_id)
+            assert entry["policy"] == "MlpPolicy" and entry["n_timesteps"] > 0
+            assert isinstance(entry["policy_kwargs"], dict)
+    lr = hyperparams.load("ppo", "impact_env/Corridor-v0")["learning_rate"]
+    assert lr(1.0) == pytest.approx(3e-4) and lr(0.5) == pytest.approx(1.5e-4)
+    with pytest.raises(hyperparams.HyperparameterError, match="not a literal"):
+        hyperparams.parse_policy_kwargs("dict(net_arch=__import__('os').system('true'))")
+    with pytest.raises(hyperparams.HyperparameterError, match="dict"):
+        hyperparams.parse_policy_kwargs("[1, 2]")
+
+
+def test_ppo_smoke_train_save_load_and_run(tmp_path):
+    run_dir = train(TrainConfig(algo="ppo", scenario="corridor", timesteps=2048, n_envs=2, out=str(tmp_path),
+                                eval_freq=1024, eval_episodes=1, progress_bar=False))
+    assert (run_dir / "model.zip").is_file() and (run_dir / "vecnormalize.pkl").is_file()
+    assert list((run_dir / "tb").iterdir())  # TensorBoard logs
+    assert json.loads((run_dir / "train.json").read_text())["timesteps"] == 2048
+    out = tmp_path / "run.json"
+    assert main(["run", "corridor", "--controller", str(run_dir / "model.zip"), "--json", str(out)]) == 0
+    summary = json.loads(out.read_text())
+    assert isinstance(summary["robustness"], float) and summary["episodes"][0]["steps"] == 1000
+
+
+def test_pettingzoo_parameter_sharing_route(tmp_path):
+    run_dir = train(TrainConfig(algo="ppo", scenario="throw_and_catch_exp", timesteps=1024, n_envs=1,
+                                out=str(tmp_path), multiagent=True, progress_bar=False))
+    assert json.loads((run_dir / "train.json").read_text())["multiagent"] is True
+    from baselines.policy import SB3Controller
+    from impact_env.envs.transport import TransportEnv
+
+    env = TransportEnv("throw_and_catch_exp")
+    controller = SB3Controller(env.scenario, run_dir / "model.zip")
+    obs, info = env.reset(seed=0)
+    controller.reset(env, 0)
+    action = controller.act(obs, info)
+    assert action.shape == (6,) and np.all(np.abs(action) <= 1.0 + 1e-6)
+
+
+def test_missing_model_is_a_clear_error(tmp_path, capsys):
+    assert main(["run", "corridor", "--controller", str(tmp_path / "nope.zip")]) == 2
+    assert "does not exist" in capsys.readouterr().err
