@@ -66,14 +66,16 @@ def rows(scenario_name: str, episodes: int, workers: int) -> list[str]:
     out = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
         for mismatch in (False, True):
-            results = list(pool.map(_episode, [(scenario_name, plan.to_dict(), s, mismatch) for s in range(episodes)]))
+            jobs = [(scenario_name, plan.to_dict(), s, mismatch) for s in range(episodes)]
+            results = list(pool.map(_episode, jobs))
             ms = np.concatenate([r["mpc_ms"] for r in results])
             rho = [r["robustness"] for r in results]
             label = "e +-0.1, 5 cm, 5 % thrust" if mismatch else "nominal"
             out.append(
                 f"| {scenario_name} | {label} | {episodes} | {100 * np.mean([r['success'] for r in results]):.0f}% | "
                 f"{np.mean(rho):.3f} ({min(rho):+.3f}) | {statistics.mean(r['impacts'] for r in results):.1f} | "
-                f"{statistics.mean(r['fuel'] for r in results):.1f} | {np.median(ms):.2f} / {np.percentile(ms, 99):.2f} | "
+                f"{statistics.mean(r['fuel'] for r in results):.1f} | "
+                f"{np.median(ms):.2f} / {np.percentile(ms, 99):.2f} | "
                 f"{statistics.mean(r['replans'] for r in results):.0f} | "
                 f"{statistics.median(r['realtime'] for r in results):.0f}x |")
             print(out[-1], flush=True)
