@@ -13,29 +13,41 @@ Optimal control problem (Eq. 31), horizon N, nodes k = 0..N (node 0 is the measu
 - input bounds ``|Fx| <= thrust_fraction * thrust_limit_N[0]`` etc. (thrust_fraction scales the torque too:
   the same thrusters make both);
 - planned impact at node s (:class:`ImpactSpec`, 0 <= s <= N). (a) Pre-impact state: ``[p_s, v_s]`` equals
-  the planned ``[position, velocity_before]``, written as a hard constraint with an L1 slack
-  (``-sigma <= [p_s, v_s] - target <= sigma``, cost ``impact_penalty * sum(sigma)``): an exact penalty, so
-  the constraint holds exactly whenever it can be met, and the problem stays feasible when it cannot.
-  (b) Velocity jump: the model does not simulate the collision, so the step from node s to s+1 starts from
-  ``[p_s, theta_s, velocity_after, omega_s]`` instead of ``x_s``; ``predicted[s]`` shows the pre-impact
-  velocity and ``predicted[s+1:]`` continue from ``velocity_after``. The impact step is a parameter, not a
-  rebuild: every node carries a 0/1 parameter that switches (b) on, and the rows of (a) are switched on by
-  their bounds (+-inf when off), so one compiled solver serves every impact step and "no impact". At s = 0
-  (impact due at the start of the coming period, not yet measured) only (b) applies.
-- keep-off (:class:`AvoidSpec`): where active, ``|p_k - c_k|^2 - d^2 >= -sigma_k`` (squared, hence smooth
-  everywhere), cost ``avoid_penalty * (sigma_k + sigma_k^2)``. We use the plain distance constraint rather
-  than a discrete CBF ``h_(k+1) >= (1 - gamma) h_k``: the 1 s horizon already spans the robot's reaction
-  (the object ahead enters the horizon ~1 s before contact, enough to deflect or brake at 0.2-0.3 m/s), the
-  CBF's extra conservatism would slow the approach to a planned impact once the expert re-activates the
-  constraint, and it adds a tuning constant gamma. Node 0 is the measured state and is never constrained.
+  the planned ``[position, velocity_before]``: a hard constraint with L1 slacks,
+  ``[p_s, v_s] - sigma+ + sigma- = target``, ``sigma+- >= 0``, cost ``impact_penalty * sum(sigma+-)``. An
+  exact penalty: the constraint holds exactly whenever it can be met (the penalty exceeds its multiplier),
+  and the problem stays feasible when it cannot (then the robot gets as close as it can). The split slack
+  keeps the active set non-degenerate when the constraint is met (``-sigma <= z - target <= sigma`` stalls
+  qrqp there). (b) Velocity jump: the model does not simulate the collision, so the step from node s to s+1
+  starts from ``[p_s, theta_s, velocity_after, omega_s]`` instead of ``x_s``; ``predicted[s]`` shows the
+  pre-impact velocity and ``predicted[s+1:]`` continue from ``velocity_after``. The impact step is a
+  parameter, not a rebuild: every node carries a 0/1 parameter that switches (b) on, and the rows of (a)
+  are switched on by their bounds (+-inf when off), so one compiled solver serves every impact step and
+  "no impact". At s = 0 (impact due at the start of the coming period, not yet measured) only (b) applies.
+- keep-off (:class:`AvoidSpec`): where active, ``n_k . (p_k - c_k) >= d - sigma_k``, the half-plane tangent
+  to the disc ``|p - c_k| >= d`` with the unit normal ``n_k`` from c_k towards the previous plan's p_k
+  (re-linearised every solve, as the horizon recedes), cost ``avoid_penalty * (sigma_k + sigma_k^2)``. The
+  half-plane lies outside the disc, so meeting it implies ``|p_k - c_k| >= d``. Why not the exact
+  ``|p - c|^2 >= d^2``: it is non-convex. Measured over 150-step closed loops past a disc 0-10 cm off the
+  reference line (N = 10 and 20), sqpmethod failed in up to 6 % of the solves with it and fatrop in up to
+  half; with the half-plane fatrop and ipopt never failed, and sqpmethod only in the head-on stress case
+  (reference through the centre, robot blocked for seconds), where the fallback took 7 of 150 solves. Why
+  not a discrete CBF ``h_(k+1) >= (1 - gamma) h_k``: the 1 s horizon already spans the reaction (an object
+  ahead enters it about 1 s before contact, enough to deflect or brake at 0.2-0.3 m/s), and the CBF would
+  also slow the approach to a planned impact once the expert deactivates the constraint. Node 0 is never
+  constrained. A reference running straight at the centre gives a symmetric problem: the robot then holds
+  its distance in front rather than picking a side (what the expert wants before an impact; offset the
+  reference to pass).
 
 Solvers (``MPCConfig.solver``), all built ONCE in ``__init__`` with every per-step quantity a parameter:
-``"sqp"`` = CasADi sqpmethod + qrqp (active set) on the exact Hessian; ``"fatrop"`` (stage-wise structure
-given explicitly); ``"ipopt"``. Never CasADi's ``highs`` plugin (its libhighs clashes with highspy in the
-same process). Warm start: the previous solution and multipliers shifted by one step. If the primary solver
-reports failure (``stats()["success"]`` is checked, some solvers return numbers while failing), the
-``fallback_solver`` retries from the same guess; if that fails too the result has ``success=False`` and a
-wrench clipped to the bounds (never NaN), and ``failures`` is incremented. Timings: ``benchmarks/mpc.py``.
+``"sqp"`` (default) = CasADi sqpmethod + qrqp, Gauss-Newton Hessian (the cost's) and full steps (see
+``_make_solver``); ``"fatrop"`` (stage-wise structure given explicitly); ``"ipopt"``. Never CasADi's
+``highs`` plugin (its libhighs clashes with highspy in the same process). Warm start: the previous
+solution and multipliers shifted by one step; a cold start puts the states on the reference and the slack
+bounds active. If the primary solver reports failure (``stats()["success"]`` is checked: some solvers
+return numbers while failing), the ``fallback_solver`` (default ipopt) retries from the same guess; if that
+fails too the result has ``success=False`` and a wrench clipped to the bounds (never NaN), and
+``failures`` is incremented. Timings per solver, horizon and case: ``benchmarks/mpc.py``.
 
 Variables are ordered stage by stage (u_0, [x_k, u_k, sigma_k] for k = 1..N-1, [x_N, sigma_N]) and the
 constraints as (dynamics_k, path_k) pairs: fatrop's OCP layout, harmless for the other solvers.
@@ -114,7 +126,10 @@ class MPCConfig:
     """Structure (horizon, dt, solver) is fixed at construction; weights can change via ``update_weights``.
 
     Weights: q_pos in 1/m^2, q_vel in s^2/m^2, q_heading in 1/rad^2, q_omega in s^2/rad^2, r_input per
-    (input / limit)^2; penalties per m or m/s of impact-state violation and per m^2 of keep-off violation.
+    (input / limit)^2; penalties per m or m/s of impact-state violation and per m of keep-off violation.
+    ``fallback_solver`` (None: none) retries a solve the primary ``solver`` failed; ``sqp_max_iter`` caps the
+    iterations of the ``"sqp"`` solver (converged solves take <= 27 in ``benchmarks/mpc.py`` and the keep-off
+    stress cases, so a solve that needs more is handed to the fallback early); fatrop and ipopt get 100.
     """
 
     horizon: int = 10
@@ -126,12 +141,11 @@ class MPCConfig:
     r_input: float = 0.1
     terminal_factor: float = 10.0
     thrust_fraction: float = 1.0
-    impact_penalty: float = 1e4
-    avoid_penalty: float = 1e4
-    keep_off: str = "linearized"
+    impact_penalty: float = 3e3
+    avoid_penalty: float = 3e3
     solver: str = "sqp"
     fallback_solver: str | None = "ipopt"
-    max_iter: int = 50
+    sqp_max_iter: int = 30
 
     def __post_init__(self) -> None:
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 2:
@@ -140,15 +154,13 @@ class MPCConfig:
             _check_weight(name, getattr(self, name), positive=name in ("dt_s", "impact_penalty", "avoid_penalty"))
         if not (isinstance(self.thrust_fraction, (int, float)) and 0.0 < self.thrust_fraction <= 1.0):
             raise MPCInputError(f"thrust_fraction must be in (0, 1], got {self.thrust_fraction!r}")
-        if self.keep_off not in ("linearized", "exact"):
-            raise MPCInputError(f"keep_off must be 'linearized' or 'exact', got {self.keep_off!r}")
         if self.solver not in SOLVERS:
             raise MPCInputError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
         if self.fallback_solver is not None and self.fallback_solver not in SOLVERS:
             raise MPCInputError(f"fallback_solver must be None or one of {', '.join(SOLVERS)}, "
                                 f"got {self.fallback_solver!r}")
-        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
-            raise MPCInputError(f"max_iter must be an integer >= 1, got {self.max_iter!r}")
+        if isinstance(self.sqp_max_iter, bool) or not isinstance(self.sqp_max_iter, int) or self.sqp_max_iter < 1:
+            raise MPCInputError(f"sqp_max_iter must be an integer >= 1, got {self.sqp_max_iter!r}")
 
 
 def _check_weight(name: str, value: object, positive: bool = False) -> None:
@@ -198,8 +210,10 @@ class ImpactSpec:
 class AvoidSpec:
     """Keep-off constraint: ``|p_k - centers[k]| >= min_distance`` (m) at the nodes where ``active[k]``.
 
-    ``centers`` (N+1, 2) m: predicted centre of the body to avoid at each node; ``active`` (N+1,) bool.
-    Node 0 (the measured state) is never constrained.
+    ``centers`` (N+1, 2) m: predicted centre of the body to avoid at each node; ``active`` (N+1,) bool;
+    ``min_distance``: centre to centre, so the two radii plus a margin. Node 0 (the measured state) is never
+    constrained. Deactivate the nodes around a planned impact with the same body: there the impact position
+    (radii apart) contradicts the keep-off distance and the two soft constraints would meet half-way.
     """
 
     centers: np.ndarray
@@ -259,7 +273,7 @@ class FreeflyerMPC:
         self.robot = robot
         self.config = cfg = config if config is not None else MPCConfig()
         self.heading_ref = float(heading_ref)
-        self.horizon = n = cfg.horizon
+        self.horizon = cfg.horizon
         self.limits = np.array([*robot.thrust_limit_N, robot.torque_limit_Nm], dtype=float)
         self.bounds = cfg.thrust_fraction * self.limits
         self.failures = self.fallbacks = self.solves = 0
@@ -273,7 +287,7 @@ class FreeflyerMPC:
         self._guess: np.ndarray | None = None
         self._lam_x = np.zeros(self._nw)
         self._lam_g = np.zeros(self._ng)
-        self._last_inputs = np.zeros((n, NU))
+        self._cold_multipliers()
 
     # ------------------------------------------------------------------------------------- building
     def _build(self, robot: Body, cfg: MPCConfig) -> None:
@@ -336,21 +350,18 @@ class FreeflyerMPC:
                 add_con("dyn", k, xs[k + 1] - _rk4_sx(x_start, us[k], robot, cfg.dt_s), [0.0] * NX, [0.0] * NX)
                 cost += r_in * ca.sumsqr(us[k] * scale)
             if k > 0:
-                # Switched on and off through their bounds (+-inf when off), see _set_bounds: a row
+                # Path rows are switched on and off through their bounds in solve() (+-inf when off): rows
                 # multiplied by a 0/1 parameter would leave duplicate "sigma >= 0" rows that stall qrqp.
-                # The impact row is an equality z - sigma+ + sigma- = target, sigma+- >= 0: unlike
-                # -sigma <= z - target <= sigma it stays non-degenerate when met exactly (sigma = 0).
                 s_imp, s_av = slacks[k][0:_NSI], slacks[k][_NSI]
                 z = ca.vertcat(x[0:2], x[3:5])
-                if cfg.keep_off == "exact":
-                    gap = ca.sumsqr(x[0:2] - centers[:, k]) - par["dist"] ** 2  # m^2
-                else:  # half-plane tangent to the keep-off disc, normal from the previous plan (m)
-                    gap = ca.dot(normals[:, k], x[0:2] - centers[:, k]) - par["dist"]
+                # keep-off: half-plane tangent to the disc, normal from the previous plan (m)
+                gap = ca.dot(normals[:, k], x[0:2] - centers[:, k]) - par["dist"]
                 add_con("path", k, ca.vertcat(z - s_imp[0:4] + s_imp[4:8], gap + s_av), [-inf] * 5, [inf] * 5)
                 wk = term if k == n else 1.0
                 node = (q_pos * ca.sumsqr(x[0:2] - ref[0:2, k]) + q_vel * ca.sumsqr(x[3:5] - ref[2:4, k])
                         + q_head * (x[2] - par["heading"]) ** 2 + q_omega * x[5] ** 2)
                 cost += wk * node
+                # the small quadratic terms keep the slack block of the Hessian positive definite
                 cost += cfg.impact_penalty * (ca.sum1(s_imp) + 1e-3 * ca.sumsqr(s_imp))
                 cost += cfg.avoid_penalty * (s_av + s_av ** 2)
         self._nlp = {"x": ca.vertcat(*w), "p": P, "f": cost, "g": ca.vertcat(*g)}
@@ -383,11 +394,19 @@ class FreeflyerMPC:
     def _make_solver(self, name: str) -> ca.Function:
         cfg = self.config
         if name == "sqp":
-            # Exact Hessian with eigen-clip: it is indefinite in (theta, F) once large multipliers (impact
-            # node, keep-off) flow into the dynamics; clipping the eigenvalues of its small diagonal blocks
-            # keeps every QP convex for qrqp. tol_du is in cost units per variable unit (costs are 1e0-1e3).
-            opts = {"qpsol": "qrqp", "max_iter": cfg.max_iter, "tol_pr": 1e-6, "tol_du": 1e-4,
-                    "convexify_strategy": "eigen-clip", "second_order_corrections": True,
+            # Gauss-Newton Hessian (the cost's, constant and positive definite) and full steps, as in
+            # real-time MPC. The exact Hessian is indefinite in (theta, F) once large multipliers (impact
+            # node, keep-off) flow into the dynamics; eigen-clipped it made sqpmethod cycle (9 failures in
+            # 12 000 closed-loop solves of benchmarks/mpc.py). With the line search on, Gauss-Newton steps
+            # were rejected for up to 36 iterations while sliding along a keep-off disc (N = 20); full steps
+            # converge in <= 13 there, with no failure. tol_du is in cost units per variable unit (costs
+            # are 1e0-1e3).
+            nlp = self._nlp
+            lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", nlp["g"].shape[0])
+            hess = ca.triu(lam_f * ca.hessian(nlp["f"], nlp["x"])[0])
+            opts = {"qpsol": "qrqp", "max_iter": cfg.sqp_max_iter, "tol_pr": 1e-6, "tol_du": 1e-4, "max_iter_ls": 0,
+                    "hess_lag": ca.Function("nlp_hess_l", [nlp["x"], nlp["p"], lam_f, lam_g], [hess],
+                                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
                     "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False,
                                       "error_on_fail": False},
                     "print_header": False, "print_iteration": False, "print_status": False, "print_time": False}
@@ -396,10 +415,10 @@ class FreeflyerMPC:
             nx, nu, ng = self._stage_sizes
             opts = {"structure_detection": "manual", "N": self.horizon, "nx": nx, "nu": nu, "ng": ng,
                     "expand": True, "print_time": False,
-                    "fatrop": {"print_level": 0, "max_iter": max(cfg.max_iter, 100), "tol": 1e-6}}
+                    "fatrop": {"print_level": 0, "max_iter": 100, "tol": 1e-6}}
             return ca.nlpsol("mpc_fatrop", "fatrop", self._nlp, opts)
         opts = {"print_time": False,
-                "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-6, "max_iter": max(cfg.max_iter, 100),
+                "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-6, "max_iter": 100,
                           "warm_start_init_point": "yes", "warm_start_bound_push": 1e-6,
                           "warm_start_mult_bound_push": 1e-6, "mu_init": 1e-3}}
         return ca.nlpsol("mpc_ipopt", "ipopt", self._nlp, opts)
@@ -408,9 +427,14 @@ class FreeflyerMPC:
     def reset(self) -> None:
         """Forget the warm start (call at the start of an episode or after a large state jump)."""
         self._guess = None
+        self._cold_multipliers()
+
+    def _cold_multipliers(self) -> None:
+        """Zero multipliers, except the slack bounds: active, with their exact multipliers (minus the penalty
+        gradient). qrqp takes its initial active set from them, and sqpmethod's first dual residual is 0."""
         self._lam_x[:] = 0.0
         self._lam_g[:] = 0.0
-        self._last_inputs[:] = 0.0
+        self._lam_x[self._slack_idx] = self._slack_lam
 
     def update_weights(self, **weights: float) -> None:
         """Change cost weights (names of :class:`MPCConfig` weight fields) without rebuilding the solver."""
@@ -430,7 +454,7 @@ class FreeflyerMPC:
         """Solve the MPC problem from the measured ``state`` (6,) tracking ``reference`` (N+1, 4).
 
         ``reference[k] = [x, y, vx, vy]`` (m, m/s) at time t + k * dt_s (row 0 is not penalised).
-        Raises MPCInputError (a ValueError) on wrong shapes, NaN/inf values or an impact step outside 1..N.
+        Raises MPCInputError (a ValueError) on wrong shapes, NaN/inf values or an impact step outside 0..N.
         """
         start = time.perf_counter()
         n = self.horizon
@@ -462,15 +486,9 @@ class FreeflyerMPC:
                 raise MPCInputError(f"AvoidSpec.active must have shape {(n + 1,)}, got {avoid.active.shape}")
             p[ps["centers"]] = centers.ravel()
             p[ps["dist"]] = avoid.min_distance
-            lbg[self._avoid_rows[avoid.active[1:]]] = 0.0  # |p - c|^2 - d^2 + sigma >= 0
+            lbg[self._avoid_rows[avoid.active[1:]]] = 0.0  # n . (p - c) - d + sigma >= 0
 
-        if self._guess is None:
-            guess = self._initial_guess(x0, ref)
-            # Slack bounds start active with their exact multipliers (minus the penalty gradient): qrqp
-            # takes its initial active set from them, and sqpmethod's first dual residual is then zero.
-            self._lam_x[self._slack_idx] = self._slack_lam
-        else:
-            guess = self._guess
+        guess = self._initial_guess(x0, ref) if self._guess is None else self._guess
         if avoid is not None:
             p[ps["normals"]] = self._normals(guess, x0, ref, centers).ravel()
         names = [self.config.solver] + [s for s in self._solvers if s != self.config.solver]
@@ -492,8 +510,7 @@ class FreeflyerMPC:
             self.failures += 1
             if not np.all(np.isfinite(w)):
                 w = guess  # a NaN iterate is useless: keep the previous plan
-            self._lam_x[:] = 0.0
-            self._lam_g[:] = 0.0
+            self._cold_multipliers()
         self._guess = w[self._shift_w]
         inputs = np.clip(w[self._u_idx], -self.bounds, self.bounds)
         predicted = np.vstack([x0, w[self._x_idx]])
