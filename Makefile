@@ -49,6 +49,7 @@ bench-expert: $(VENV)/.base-installed
 bench: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/env_throughput.py
 	$(BIN)/python benchmarks/planner.py
+	$(BIN)/python benchmarks/mpc.py
 
 lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check impact_env planners baselines tests benchmarks

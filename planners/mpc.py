@@ -57,200 +57,33 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import casadi as ca
 import numpy as np
 
 from impact_env.scenario import Body
-from planners.errors import PlannerError
+from planners.freeflyer import _rk4_sx, rk4_step, state_from_sim
+from planners.mpc_specs import (
+    _NSA,
+    _NSI,
+    _WEIGHTS,
+    NU,
+    NX,
+    SOLVERS,
+    AvoidSpec,
+    ImpactSpec,
+    MPCConfig,
+    MPCInputError,
+    MPCResult,
+    _check_weight,
+    _vector,
+)
 
-SOLVERS = ("sqp", "fatrop", "ipopt")
-NX, NU = 6, 3  # state [px, py, theta, vx, vy, omega], input [Fx, Fy, tau]
-_NSI, _NSA = 8, 1  # slacks per node: impact (p, v) positive and negative parts, keep-off
-_WEIGHTS = ("q_pos", "q_vel", "q_heading", "q_omega", "r_input", "terminal_factor")
-
-
-class MPCInputError(PlannerError, ValueError):
-    """A configuration value or a solve() input has the wrong shape, range or is not finite."""
-
-
-# ----------------------------------------------------------------------------------------- model
-def _xdot(x, u, mass_kg: float, inertia_kgm2: float, cos, sin):
-    """Right-hand side of Eq. (30) for numpy or CasADi arguments; returns a 6-tuple."""
-    c, s = cos(x[2]), sin(x[2])
-    return (x[3], x[4], x[5], (c * u[0] - s * u[1]) / mass_kg, (s * u[0] + c * u[1]) / mass_kg, u[2] / inertia_kgm2)
-
-
-def state_from_sim(row: tuple[float, ...] | np.ndarray) -> np.ndarray:
-    """MPC state [px, py, theta, vx, vy, omega] (6,) from a simulator row (x, y, vx, vy, heading, omega).
-
-    ``World.read_state()`` and the observations order a body's velocity BEFORE its heading; the MPC state
-    (and :func:`rk4_step`) put the heading third, as in Eq. (30).
-    """
-    x, y, vx, vy, heading, omega = _vector(row, (NX,), "simulator state row")
-    return np.array([x, y, heading, vx, vy, omega])
+__all__ = ["SOLVERS", "AvoidSpec", "FreeflyerMPC", "ImpactSpec", "MPCConfig", "MPCInputError", "MPCResult",
+           "rk4_step", "state_from_sim"]
 
 
-def rk4_step(state: np.ndarray, wrench: np.ndarray, robot: Body, dt: float) -> np.ndarray:
-    """One RK4 step (dt in s) of Eq. (30) with the body-frame wrench (3,) [N, N, N m] held: state (6,) -> (6,)."""
-    x = np.asarray(state, dtype=float)
-    u = np.asarray(wrench, dtype=float)
-    if x.shape != (NX,) or u.shape != (NU,):
-        raise MPCInputError(f"rk4_step needs state (6,) and wrench (3,), got {x.shape} and {u.shape}")
-
-    def f(z: np.ndarray) -> np.ndarray:
-        return np.array(_xdot(z, u, robot.mass_kg, robot.inertia_kgm2, math.cos, math.sin))
-
-    k1 = f(x)
-    k2 = f(x + 0.5 * dt * k1)
-    k3 = f(x + 0.5 * dt * k2)
-    k4 = f(x + dt * k3)
-    return x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-
-def _rk4_sx(x: ca.SX, u: ca.SX, robot: Body, dt: float) -> ca.SX:
-    def f(z: ca.SX) -> ca.SX:
-        return ca.vertcat(*_xdot(z, u, robot.mass_kg, robot.inertia_kgm2, ca.cos, ca.sin))
-
-    k1 = f(x)
-    k2 = f(x + 0.5 * dt * k1)
-    k3 = f(x + 0.5 * dt * k2)
-    k4 = f(x + dt * k3)
-    return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-
-
-# ----------------------------------------------------------------------------------------- inputs / outputs
-@dataclass
-class MPCConfig:
-    """Structure (horizon, dt, solver) is fixed at construction; weights can change via ``update_weights``.
-
-    Weights: q_pos in 1/m^2, q_vel in s^2/m^2, q_heading in 1/rad^2, q_omega in s^2/rad^2, r_input per
-    (input / limit)^2; penalties per m or m/s of impact-state violation and per m of keep-off violation.
-    ``fallback_solver`` (None: none) retries a solve the primary ``solver`` failed; ``sqp_max_iter`` caps the
-    iterations of the ``"sqp"`` solver (converged solves take <= 27 in ``benchmarks/mpc.py`` and the keep-off
-    stress cases, so a solve that needs more is handed to the fallback early); fatrop and ipopt get 100.
-    """
-
-    horizon: int = 10
-    dt_s: float = 0.1
-    q_pos: float = 100.0
-    q_vel: float = 10.0
-    q_heading: float = 100.0
-    q_omega: float = 10.0
-    r_input: float = 0.1
-    terminal_factor: float = 10.0
-    thrust_fraction: float = 1.0
-    impact_penalty: float = 3e3
-    avoid_penalty: float = 3e3
-    solver: str = "sqp"
-    fallback_solver: str | None = "ipopt"
-    sqp_max_iter: int = 30
-
-    def __post_init__(self) -> None:
-        if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 2:
-            raise MPCInputError(f"horizon must be an integer >= 2, got {self.horizon!r}")
-        for name in ("dt_s", "impact_penalty", "avoid_penalty") + _WEIGHTS:
-            _check_weight(name, getattr(self, name), positive=name in ("dt_s", "impact_penalty", "avoid_penalty"))
-        if not (isinstance(self.thrust_fraction, (int, float)) and 0.0 < self.thrust_fraction <= 1.0):
-            raise MPCInputError(f"thrust_fraction must be in (0, 1], got {self.thrust_fraction!r}")
-        if self.solver not in SOLVERS:
-            raise MPCInputError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
-        if self.fallback_solver is not None and self.fallback_solver not in SOLVERS:
-            raise MPCInputError(f"fallback_solver must be None or one of {', '.join(SOLVERS)}, "
-                                f"got {self.fallback_solver!r}")
-        if isinstance(self.sqp_max_iter, bool) or not isinstance(self.sqp_max_iter, int) or self.sqp_max_iter < 1:
-            raise MPCInputError(f"sqp_max_iter must be an integer >= 1, got {self.sqp_max_iter!r}")
-
-
-def _check_weight(name: str, value: object, positive: bool = False) -> None:
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if not ok or value < 0 or (positive and value == 0):
-        raise MPCInputError(f"{name} must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
-
-
-def _vector(value: object, shape: tuple[int, ...], name: str) -> np.ndarray:
-    """``value`` as a finite float array of ``shape``, or MPCInputError naming ``name``."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise MPCInputError(f"{name} must be numbers of shape {shape}, got {value!r}") from None
-    if arr.shape != shape:
-        raise MPCInputError(f"{name} must have shape {shape}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise MPCInputError(f"{name} contains NaN or infinite values: {arr.tolist()}")
-    return arr
-
-
-@dataclass
-class ImpactSpec:
-    """A planned impact at horizon node ``step`` (0..N, i.e. at t + step * dt_s).
-
-    ``position`` (2,) m and ``velocity_before`` (2,) m/s: the robot's planned pre-impact state, enforced at
-    that node; ``velocity_after`` (2,) m/s: its planned post-impact velocity, from which the prediction
-    continues after the node. ``step = 0`` means "the impact happens at the start of the coming control
-    period" (contact due now, not yet in the measured state): node 0 is the measurement, so nothing is
-    enforced there and only the velocity jump applies; the wrench is then chosen for the post-impact motion.
-    """
-
-    step: int
-    position: np.ndarray
-    velocity_before: np.ndarray
-    velocity_after: np.ndarray
-
-    def __post_init__(self) -> None:
-        if isinstance(self.step, bool) or not isinstance(self.step, (int, np.integer)):
-            raise MPCInputError(f"ImpactSpec.step must be an integer node index, got {self.step!r}")
-        self.step = int(self.step)
-        for name in ("position", "velocity_before", "velocity_after"):
-            setattr(self, name, _vector(getattr(self, name), (2,), f"ImpactSpec.{name}"))
-
-
-@dataclass
-class AvoidSpec:
-    """Keep-off constraint: ``|p_k - centers[k]| >= min_distance`` (m) at the nodes where ``active[k]``.
-
-    ``centers`` (N+1, 2) m: predicted centre of the body to avoid at each node; ``active`` (N+1,) bool;
-    ``min_distance``: centre to centre, so the two radii plus a margin. Node 0 (the measured state) is never
-    constrained. Deactivate the nodes around a planned impact with the same body: there the impact position
-    (radii apart) contradicts the keep-off distance and the two soft constraints would meet half-way.
-    """
-
-    centers: np.ndarray
-    min_distance: float
-    active: np.ndarray
-
-    def __post_init__(self) -> None:
-        d = self.min_distance
-        if not (isinstance(d, (int, float, np.floating)) and math.isfinite(d) and d > 0):
-            raise MPCInputError(f"AvoidSpec.min_distance must be a finite number > 0 (m), got {d!r}")
-        self.min_distance = float(d)
-        self.active = np.asarray(self.active, dtype=bool)
-
-
-@dataclass
-class MPCResult:
-    """One solve. ``wrench`` (3,): body-frame [Fx, Fy, tau] (N, N m) to apply now, within bounds, never NaN.
-
-    ``predicted`` (N+1, 6): predicted states at nodes 0..N (node 0 = measured state); ``inputs`` (N, 3):
-    the planned wrenches; ``impact_error``: max |predicted - planned| pre-impact [p, v] at the impact node
-    (m or m/s; 0 without impact or at step 0); ``min_clearance_m``: min over active keep-off nodes of distance minus
-    min_distance (inf without); ``solver``: which solver produced the result.
-    """
-
-    wrench: np.ndarray
-    success: bool
-    solve_ms: float
-    predicted: np.ndarray
-    inputs: np.ndarray = field(default_factory=lambda: np.zeros((0, NU)))
-    status: str = ""
-    iterations: int = 0
-    solver: str = ""
-    impact_error: float = 0.0
-    min_clearance_m: float = math.inf
-
-
-# ----------------------------------------------------------------------------------------- controller
 class FreeflyerMPC:
     """Nonlinear MPC of one freeflyer robot; build once, then call :meth:`solve` every control period.
 
