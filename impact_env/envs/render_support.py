@@ -39,3 +39,20 @@ def make_frame(core: TransportCore):
         robot_forces_world=core.robot_forces_world(),
         impacts=impact_flashes(core, recent),
     )
+
+
+def render(env) -> object:
+    """Shared ``render()`` of both environments: builds the pygame renderer on first use, draws a frame."""
+    if env._renderer is None:
+        from impact_env.rendering import Renderer
+
+        env._renderer = Renderer(env.scenario, env.render_mode, width_px=env.render_width_px,
+                                 fps=env.metadata["render_fps"])
+    return env._renderer.render(make_frame(env.core))
+
+
+def close(env) -> None:
+    """Shared ``close()``: releases the renderer (and its window in human mode)."""
+    if env._renderer is not None:
+        env._renderer.close()
+        env._renderer = None

@@ -9,8 +9,8 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import EzPickle
 
+from impact_env.envs import render_support
 from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
-from impact_env.envs.render_support import make_frame
 from impact_env.scenario import Scenario
 
 
@@ -110,14 +110,7 @@ class TransportEnv(gym.Env, EzPickle):
             return None
         if self.core.world is None:
             raise gym.error.ResetNeeded("call reset() before render()")
-        if self._renderer is None:
-            from impact_env.rendering import Renderer
-
-            self._renderer = Renderer(self.scenario, self.render_mode, width_px=self.render_width_px,
-                                      fps=self.metadata["render_fps"])
-        return self._renderer.render(make_frame(self.core))
+        return render_support.render(self)
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        render_support.close(self)

@@ -15,8 +15,8 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
+from impact_env.envs import render_support
 from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
-from impact_env.envs.render_support import make_frame
 from impact_env.scenario import Scenario
 
 
@@ -117,17 +117,10 @@ class TransportParallelEnv(ParallelEnv, EzPickle):
             return None
         if self.core.world is None:
             raise RuntimeError("call reset() before render()")
-        if self._renderer is None:
-            from impact_env.rendering import Renderer
-
-            self._renderer = Renderer(self.scenario, self.render_mode, width_px=self.render_width_px,
-                                      fps=self.metadata["render_fps"])
-        return self._renderer.render(make_frame(self.core))
+        return render_support.render(self)
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        render_support.close(self)
 
 
 def parallel_env(**kwargs) -> TransportParallelEnv:
