@@ -1,4 +1,4 @@
-"""``impact-env train ALGO SCENARIO``: train a stable-baselines3 baseline (see baselines/train.py)."""
+"""``impact-env train ALGO SCENARIO`` (baselines/train.py) and ``impact-env bench`` (baselines/bench.py)."""
 
 from __future__ import annotations
 
@@ -27,6 +27,31 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--verbose", type=int, default=0)
     p.set_defaults(func=_run)
+
+    p = subparsers.add_parser("bench", help="the same seeded episodes for several controllers: table and figure")
+    p.add_argument("scenarios", nargs="?", default="corridor,obstacle_avoidance,throw_and_catch_exp",
+                   help="comma-separated scenario names (default: all three)")
+    p.add_argument("--controllers", default="expert,random,zero",
+                   help="comma-separated: expert, random, zero, label:path/to/model.zip")
+    p.add_argument("--episodes", type=int, default=10)
+    p.add_argument("--workers", type=int, default=None, help="parallel processes (default: CPU count)")
+    p.add_argument("--out", default="bench", help="output folder (tables, CSV, figure)")
+    p.set_defaults(func=_bench)
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from baselines.bench import markdown_table, parse_controllers, run_bench
+    from impact_env.errors import ImpactEnvError
+
+    if args.episodes < 1:
+        raise ImpactEnvError(f"--episodes must be >= 1, got {args.episodes}")
+    summary = run_bench(args.scenarios.split(","), parse_controllers(args.controllers), args.episodes,
+                        Path(args.out), args.workers)
+    print(markdown_table(summary))
+    print(f"wrote {args.out}/summary.md, summary.csv, episodes.csv, bench.png")
+    return 0
 
 
 def _run(args: argparse.Namespace) -> int:

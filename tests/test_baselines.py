@@ -60,3 +60,20 @@ def test_pettingzoo_parameter_sharing_route(tmp_path):
 def test_missing_model_is_a_clear_error(tmp_path, capsys):
     assert main(["run", "corridor", "--controller", str(tmp_path / "nope.zip")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_bench_writes_tables_and_figure(tmp_path):
+    out = tmp_path / "bench"
+    code = main(["bench", "throw_and_catch_exp", "--controllers", "expert,zero", "--episodes", "1",
+                 "--workers", "1", "--out", str(out)])
+    assert code == 0
+    rows = {r["controller"]: r for r in __import__("csv").DictReader(open(out / "summary.csv"))}
+    assert float(rows["expert"]["success_rate"]) == 1.0 and float(rows["zero"]["success_rate"]) == 0.0
+    assert float(rows["zero"]["robustness_mean"]) == pytest.approx(-0.6, abs=1e-6)
+    assert "| throw_and_catch_exp | expert |" in (out / "summary.md").read_text()
+    assert (out / "bench.png").stat().st_size > 1000 and (out / "episodes.csv").is_file()
+
+
+def test_bench_rejects_a_missing_model(tmp_path, capsys):
+    assert main(["bench", "corridor", "--controllers", f"ppo:{tmp_path / 'none.zip'}", "--out", str(tmp_path)]) == 2
+    assert "does not exist" in capsys.readouterr().err
