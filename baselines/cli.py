@@ -1,4 +1,4 @@
-"""``impact-env train ALGO SCENARIO`` (baselines/train.py) and ``impact-env bench`` (baselines/bench.py)."""
+"""``impact-env train`` (baselines/train.py), ``bench`` (baselines/bench.py), ``record`` (baselines/record.py)."""
 
 from __future__ import annotations
 
@@ -37,6 +37,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=None, help="parallel processes (default: CPU count)")
     p.add_argument("--out", default="bench", help="output folder (tables, CSV, figure)")
     p.set_defaults(func=_bench)
+
+    p = subparsers.add_parser("record", help="record expert episodes as a Minari dataset")
+    p.add_argument("scenario", help="shipped name or path to a .toml file")
+    p.add_argument("--episodes", type=int, default=20)
+    p.add_argument("--out", default="datasets", help="Minari datasets folder (MINARI_DATASETS_PATH)")
+    p.add_argument("--plan", default=None, help="a saved plan; planned with the MILP if omitted")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--thrust-noise", type=float, default=0.0)
+    p.add_argument("--init-noise", type=float, default=0.0)
+    p.set_defaults(func=_record)
+
+
+def _record(args: argparse.Namespace) -> int:
+    from baselines.record import dataset_id, mean_return, record
+
+    options = {"thrust_noise": args.thrust_noise, "initial_position_noise_m": args.init_noise}
+    ds = record(args.scenario, args.episodes, args.out, args.plan, options, args.seed)
+    print(f"wrote Minari dataset {dataset_id(ds.spec.dataset_id.split('/')[1])} in {args.out}/: "
+          f"{ds.total_episodes} episodes, {ds.total_steps} steps, mean return {mean_return(ds):+.3f}")
+    return 0
 
 
 def _bench(args: argparse.Namespace) -> int:

@@ -77,3 +77,17 @@ def test_bench_writes_tables_and_figure(tmp_path):
 def test_bench_rejects_a_missing_model(tmp_path, capsys):
     assert main(["bench", "corridor", "--controllers", f"ppo:{tmp_path / 'none.zip'}", "--out", str(tmp_path)]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_record_writes_a_minari_dataset(tmp_path):
+    pytest.importorskip("minari")
+    out = tmp_path / "datasets"
+    assert main(["record", "throw_and_catch_exp", "--episodes", "2", "--out", str(out)]) == 0
+    import minari
+
+    ds = minari.load_dataset("impact_env/throw_and_catch_exp/expert-v0")
+    assert ds.total_episodes == 2 and ds.total_steps == 400
+    assert ds.spec.env_spec is not None and ds.spec.env_spec.id == "impact_env/ThrowAndCatchExp-v0"
+    for ep in ds.iterate_episodes():
+        assert ep.observations.shape == (201, 22) and ep.actions.shape == (200, 6)
+        assert ep.rewards.sum() == pytest.approx(0.4, abs=0.02)  # dense rewards sum to the final robustness
