@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from baselines.train import ALGOS, TrainConfig
+# Nothing from the [rl] extra is imported here: `impact-env` loads this module at start-up, also in a base
+# install (make demo), so stable-baselines3, yaml and minari are imported only by the command handlers.
+ALGOS = ("ppo", "sac")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -75,7 +77,7 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from baselines.train import train
+    from baselines.train import TrainConfig, train
 
     options = {"reward_mode": args.reward, "fuel_penalty": args.fuel_penalty, "thrust_noise": args.thrust_noise,
                "initial_position_noise_m": args.init_noise}

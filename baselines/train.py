@@ -17,11 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from baselines import hyperparams
+from baselines.cli import ALGOS  # the one list (cli.py must stay importable without the [rl] extra)
 from impact_env import GYM_IDS
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario
-
-ALGOS = ("ppo", "sac")
 
 
 @dataclass

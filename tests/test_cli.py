@@ -67,3 +67,21 @@ def test_errors_are_one_line_messages(argv, message, capsys):
 def test_console_script_is_installed():
     result = subprocess.run([sys.executable, "-m", "impact_env.cli", "scenarios"], capture_output=True, text=True)
     assert result.returncode == 0 and "corridor" in result.stdout
+
+
+def test_cli_starts_without_the_rl_extra():
+    """`make demo` installs only the base package: building the CLI (which loads every subcommand plug-in)
+    must not import stable-baselines3, yaml, minari or torch."""
+    code = (
+        "import sys, importlib.abc\n"
+        "class Block(importlib.abc.MetaPathFinder):\n"
+        "    def find_spec(self, name, path, target=None):\n"
+        "        if name.split('.')[0] in {'yaml', 'stable_baselines3', 'minari', 'torch', 'supersuit'}:\n"
+        "            raise ImportError('blocked ' + name)\n"
+        "sys.meta_path.insert(0, Block())\n"
+        "from impact_env.cli import build_parser\n"
+        "build_parser().parse_args(['scenarios'])\n"
+        "print('ok')\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0 and "ok" in result.stdout, result.stderr
