@@ -54,7 +54,7 @@ def parse_controllers(text: str) -> list[ControllerSpec]:
 def _episode(job: tuple[str, ControllerSpec, int, str | None]) -> dict[str, Any]:
     from impact_env.controllers import make_controller
     from impact_env.envs.transport import TransportEnv
-    from impact_env.rollout import run_episode
+    from impact_env.rollout import robot_object_impacts, run_episode
 
     scenario_name, spec, seed, plan_path = job
     key = (scenario_name, spec.name)
@@ -64,8 +64,7 @@ def _episode(job: tuple[str, ControllerSpec, int, str | None]) -> dict[str, Any]
     controller = _CACHE[key]
     env = TransportEnv(scenario)
     res = run_episode(env, controller, seed=seed)
-    robots, objects = {r.name for r in scenario.robots}, {o.name for o in scenario.objects}
-    hits = sum(1 for i in res.impacts if {i["a"], i["b"]} & robots and {i["a"], i["b"]} & objects)
+    hits = len(robot_object_impacts(scenario, res.impacts))
     return {"scenario": scenario_name, "controller": spec.label, "seed": seed, "success": res.success,
             "robustness": res.robustness, "fuel_Ns": res.fuel_Ns, "impacts": hits,
             "controller_ms": float(np.mean(res.controller_ms)), "positions": res.positions if seed == 0 else None}

@@ -19,12 +19,12 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
 from impact_env.envs.transport import TransportEnv
+from impact_env.rollout import robot_object_impacts, run_episode
 from impact_env.scenario import load_scenario, scenario_names
 from planners.plan import Plan
 from planners.sr_planner import plan_spatially_robust
@@ -45,19 +45,11 @@ def _episode(args: tuple[str, dict, int, bool]) -> dict:
         options = {"restitution": float(np.clip(scenario.restitution + (0.1 if seed % 2 else -0.1), 0, 1)),
                    "initial_position_noise_m": 0.05, "thrust_noise": 0.05}
     env = TransportEnv(scenario, **options)
-    obs, info = env.reset(seed=seed)
-    expert.reset()
-    start = time.perf_counter()
-    done, impacts = False, 0
-    while not done:
-        obs, _, terminated, truncated, info = env.step(expert.act(obs, info))
-        impacts += sum(1 for i in info["impacts"] if {i["a"], i["b"]} & {o.name for o in scenario.objects}
-                       and {i["a"], i["b"]} & {r.name for r in scenario.robots})
-        done = terminated or truncated
-    wall = time.perf_counter() - start
-    return {"success": bool(info["is_success"]), "robustness": float(info["robustness"]), "impacts": impacts,
-            "fuel": float(info["fuel_Ns"]), "mpc_ms": expert.stats.mpc_ms, "replans": expert.stats.replans,
-            "realtime": env.core.time_s / wall, "failures": expert.stats.mpc_failures}
+    res = run_episode(env, expert, seed=seed)
+    return {"success": res.success, "robustness": res.robustness,
+            "impacts": len(robot_object_impacts(scenario, res.impacts)), "fuel": res.fuel_Ns,
+            "mpc_ms": expert.stats.mpc_ms, "replans": expert.stats.replans,
+            "realtime": env.core.time_s / res.wall_time_s, "failures": expert.stats.mpc_failures}
 
 
 def rows(scenario_name: str, episodes: int, workers: int) -> list[str]:

@@ -42,6 +42,12 @@ class EpisodeResult:
         }
 
 
+def robot_object_impacts(scenario, impacts: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The impacts (dicts with ``a`` and ``b``) between a robot and an object, not with walls or each other."""
+    robots, objects = {r.name for r in scenario.robots}, {o.name for o in scenario.objects}
+    return [i for i in impacts if {i["a"], i["b"]} & robots and {i["a"], i["b"]} & objects]
+
+
 def run_episode(env: TransportEnv, controller: Controller, seed: int | None = None,
                 record_frames: bool = False) -> EpisodeResult:
     """Reset with ``seed``, let the controller act until the episode ends, return its summary."""

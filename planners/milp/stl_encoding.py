@@ -211,18 +211,22 @@ class STLEncoder:
                 self.model.add(r <= b - (p[0] * float(n[0]) + p[1] * float(n[1])), group=self.group)
         return r
 
-    def _outside(self, body: str, region: str, k: int, first_point_only: bool, margin: LinExpr | None = None
-                 ) -> LinExpr:
+    def _outside(self, body: str, region: str, k: int, first_point_only: bool) -> LinExpr:
         """r <= distance outside one face of the region, for every control point (Eq. 22)."""
-        r = margin if margin is not None else self._var(f"!in({body},{region})@{k}",
-                                                        self.predicate_upper_bound(body, region, inside=False))
-        for face, w in self.face_choice(body, region, k if not first_point_only else -1, self.group):
+        r = self._var(f"!in({body},{region})@{k}", self.predicate_upper_bound(body, region, inside=False))
+        self._beyond_one_face(body, region, k if not first_point_only else -1,
+                              self._pts(body, max(k, 0), first_point_only), r, self.group)
+        return r
+
+    def _beyond_one_face(self, body: str, region: str, key_k: int, points: list[Point], lower: LinExpr | float,
+                         group: str) -> None:
+        """Every point at least ``lower`` beyond the same face of the region, the face picked by binaries."""
+        for face, w in self.face_choice(body, region, key_k, group):
             n, b = self.regions[region].normals[face], self.regions[region].offsets[face]
-            for p in self._pts(body, max(k, 0), first_point_only):
+            for p in points:
                 dist = p[0] * float(n[0]) + p[1] * float(n[1]) - float(b)
                 slack = (1 - w) * self.big_m if w is not None else 0.0
-                self.model.add(r <= dist + slack, group=self.group)
-        return r
+                self.model.add(dist + slack >= lower, group=group)
 
     def face_choice(self, body: str, region: str, k: int, group: str) -> list[tuple[int, LinExpr | None]]:
         """The faces the body may be beyond on interval k, each with its binary (None if it is the only one).
@@ -251,12 +255,7 @@ class STLEncoder:
 
     def clearance(self, body: str, region: str, k: int, margin_m: float, group: str) -> None:
         """Keep the body's whole interval k at least ``margin_m`` outside the region (solid obstacles)."""
-        for face, w in self.face_choice(body, region, k, group):
-            n, b = self.regions[region].normals[face], self.regions[region].offsets[face]
-            for p in self.points(body, k):
-                dist = p[0] * float(n[0]) + p[1] * float(n[1]) - float(b)
-                slack = (1 - w) * self.big_m if w is not None else 0.0
-                self.model.add(dist + slack >= margin_m, group=group)
+        self._beyond_one_face(body, region, k, self.points(body, k), margin_m, group)
 
     # ------------------------------------------------------------------------------- min / max
     def _combine(self, f: Formula, rs: list[LinExpr], tag: str) -> LinExpr:
