@@ -1,10 +1,15 @@
 """Expert-versus-learned benchmark: the same seeded episodes for every controller on every scenario.
 
-    impact-env bench corridor,throw_and_catch_exp --controllers expert,ppo:runs/ppo/model.zip,random,zero
+    impact-env bench corridor,throw_and_catch_exp --controllers expert,ppo:runs/ppo_{scenario}_s0/model.zip,zero \
+        --thrust-noise 0.05 --init-noise 0.05
 
 Controllers: ``expert``, ``random``, ``zero``, or a saved stable-baselines3 model as ``label:path.zip``
-(or just ``path.zip``). The expert's plan is computed once per scenario and shared. Episodes run in
-parallel worker processes. Writes ``episodes.csv`` (one row per episode), ``summary.csv`` and
+(or just ``path.zip``); ``{scenario}`` in a path is replaced by each scenario's name, since a policy is
+trained per scenario. The expert's plan is computed once per scenario and shared. Episodes run in
+parallel worker processes. The nominal environment is deterministic, so every seed would replay the same
+episode: pass noise options (thrust noise, initial position noise, restitution) to make the seeds differ.
+
+Writes ``episodes.csv`` (one row per episode), ``summary.csv`` and
 ``summary.md`` (per scenario and controller: success rate, mean and std of the final STL robustness, fuel,
 impacts, controller time per step) and ``bench.png`` (bars per scenario, and the first seed's trajectories
 side by side).
@@ -35,15 +40,23 @@ class ControllerSpec:
     options: tuple[tuple[str, str], ...] = ()
 
 
-def parse_controllers(text: str) -> list[ControllerSpec]:
+def model_path(spec: ControllerSpec, scenario: str) -> str:
+    """The model file of ``spec`` for ``scenario`` (``{scenario}`` in the path is the scenario's name)."""
+    return spec.name.replace("{scenario}", scenario)
+
+
+def parse_controllers(text: str, scenarios: list[str] | None = None) -> list[ControllerSpec]:
+    """``expert,random,zero,label:path.zip`` -> specs; model files must exist for every scenario."""
     specs = []
     for item in filter(None, (s.strip() for s in text.split(","))):
         label, _, path = item.partition(":") if ":" in item else ("", "", item)
         target = path or item
         if target.endswith(".zip"):
-            if not Path(target).is_file():
-                raise ImpactEnvError(f"controller {item!r}: model file {target!r} does not exist")
-            specs.append(ControllerSpec(label or Path(target).parent.name, target))
+            spec = ControllerSpec(label or Path(target).parent.name, target)
+            for name in (scenarios or [""]) if "{scenario}" in target else [""]:
+                if not Path(model_path(spec, name)).is_file():
+                    raise ImpactEnvError(f"controller {item!r}: model file {model_path(spec, name)!r} does not exist")
+            specs.append(spec)
         else:
             specs.append(ControllerSpec(label or target, target))
     if not specs:
@@ -51,18 +64,19 @@ def parse_controllers(text: str) -> list[ControllerSpec]:
     return specs
 
 
-def _episode(job: tuple[str, ControllerSpec, int, str | None]) -> dict[str, Any]:
+def _episode(job: tuple[str, ControllerSpec, int, str | None, dict[str, Any]]) -> dict[str, Any]:
     from impact_env.controllers import make_controller
     from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import robot_object_impacts, run_episode
 
-    scenario_name, spec, seed, plan_path = job
+    scenario_name, spec, seed, plan_path, env_options = job
     key = (scenario_name, spec.name)
     scenario = load_scenario(scenario_name)
     if key not in _CACHE:  # one controller per worker process (the expert compiles its MPCs once)
-        _CACHE[key] = make_controller(spec.name, scenario, plan=plan_path if spec.name == "expert" else None)
+        _CACHE[key] = make_controller(model_path(spec, scenario_name), scenario,
+                                      plan=plan_path if spec.name == "expert" else None)
     controller = _CACHE[key]
-    env = TransportEnv(scenario)
+    env = TransportEnv(scenario, **env_options)
     res = run_episode(env, controller, seed=seed)
     hits = len(robot_object_impacts(scenario, res.impacts))
     return {"scenario": scenario_name, "controller": spec.label, "seed": seed, "success": res.success,
@@ -71,8 +85,17 @@ def _episode(job: tuple[str, ControllerSpec, int, str | None]) -> dict[str, Any]
 
 
 def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes: int, out: Path,
-              workers: int | None = None) -> list[dict[str, Any]]:
-    """Run every (scenario, controller, seed) and write the outputs; returns the summary rows."""
+              workers: int | None = None, env_options: dict[str, Any] | None = None) -> list[dict[str, Any]]:
+    """Run every (scenario, controller, seed) and write the outputs; returns the summary rows.
+
+    ``env_options`` (TransportEnv keywords such as ``thrust_noise``) apply to every episode; they are
+    checked once here, so a bad value is one clear error rather than one per worker.
+    """
+    from impact_env.envs.core import TransportCore
+
+    env_options = dict(env_options or {})
+    for name in scenarios:
+        TransportCore(name, **env_options)
     out.mkdir(parents=True, exist_ok=True)
     plan_paths: dict[str, str | None] = {}
     for name in scenarios:
@@ -81,7 +104,8 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
             from planners.sr_planner import plan_spatially_robust
 
             plan_paths[name] = str(plan_spatially_robust(load_scenario(name)).save(out / "plans" / f"{name}.json"))
-    jobs = [(s, c, seed, plan_paths[s]) for s in scenarios for c in controllers for seed in range(episodes)]
+    jobs = [(s, c, seed, plan_paths[s], env_options)
+            for s in scenarios for c in controllers for seed in range(episodes)]
     workers = workers or min(len(jobs), os.cpu_count() or 1)
     with ProcessPoolExecutor(max_workers=workers) as pool:
         results = []
@@ -98,7 +122,9 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
         writer = csv.DictWriter(f, fieldnames=list(summary[0]))
         writer.writeheader()
         writer.writerows(summary)
-    (out / "summary.md").write_text(markdown_table(summary) + "\n")
+    options = ", ".join(f"{k}={v}" for k, v in env_options.items()) or "nominal (no noise)"
+    (out / "summary.md").write_text(f"{episodes} seeded episodes per controller; environment options: {options}\n\n"
+                                    + markdown_table(summary) + "\n")
     _figure(results, summary, scenarios, controllers, out / "bench.png")
     return summary
 

@@ -1,4 +1,5 @@
-"""``impact-env train`` (baselines/train.py), ``bench`` (baselines/bench.py), ``record`` (baselines/record.py)."""
+"""``impact-env train`` (baselines/train.py), ``bench`` (baselines/bench.py), ``record`` (baselines/record.py),
+``bc`` (baselines/bc.py)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--timesteps", type=int, default=None, help="default: n_timesteps of the hyperparameter file")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--n-envs", type=int, default=None, help="parallel envs (subprocesses); default from the file")
+    p.add_argument("--max-minutes", type=float, default=None,
+                   help="wall-clock budget: stop before --timesteps when it runs out")
     p.add_argument("--out", default="runs", help="runs/<algo>_<scenario>_s<seed>/ gets model.zip, logs, checkpoints")
     p.add_argument("--hyperparams", default=None, help="an rl-zoo style YAML file (default baselines/hyperparams)")
     p.add_argument("--multiagent", action="store_true",
@@ -34,10 +37,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("scenarios", nargs="?", default="corridor,obstacle_avoidance,throw_and_catch_exp",
                    help="comma-separated scenario names (default: all three)")
     p.add_argument("--controllers", default="expert,random,zero",
-                   help="comma-separated: expert, random, zero, label:path/to/model.zip")
+                   help="comma-separated: expert, random, zero, label:path/to/model.zip "
+                        "({scenario} in a path becomes each scenario's name)")
     p.add_argument("--episodes", type=int, default=10)
     p.add_argument("--workers", type=int, default=None, help="parallel processes (default: CPU count)")
     p.add_argument("--out", default="bench", help="output folder (tables, CSV, figure)")
+    p.add_argument("--thrust-noise", type=float, default=0.0, help="std of multiplicative thrust noise (0.05 = 5%%)")
+    p.add_argument("--init-noise", type=float, default=0.0, help="objects start within this radius (m)")
+    p.add_argument("--restitution", type=float, default=None, help="simulate with this restitution")
     p.set_defaults(func=_bench)
 
     p = subparsers.add_parser("record", help="record expert episodes as a Minari dataset")
@@ -49,6 +56,27 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--thrust-noise", type=float, default=0.0)
     p.add_argument("--init-noise", type=float, default=0.0)
     p.set_defaults(func=_record)
+
+    p = subparsers.add_parser("bc", help="behaviour cloning from a recorded expert dataset (see `record`)")
+    p.add_argument("scenario", help="shipped name or path to a .toml file")
+    p.add_argument("--dataset", default="datasets", help="the folder `impact-env record --out` wrote")
+    p.add_argument("--epochs", type=int, default=30)
+    p.add_argument("--batch-size", type=int, default=256)
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="runs", help="runs/bc_<scenario>_s<seed>/ gets model.zip")
+    p.set_defaults(func=_bc)
+
+
+def _bc(args: argparse.Namespace) -> int:
+    from baselines.bc import BCConfig, behaviour_clone
+
+    run_dir = behaviour_clone(BCConfig(scenario=args.scenario, dataset_dir=args.dataset, epochs=args.epochs,
+                                       batch_size=args.batch_size, learning_rate=args.lr, seed=args.seed,
+                                       out=args.out))
+    print(f"saved {run_dir / 'model.zip'}; fly it with: impact-env run {args.scenario} "
+          f"--controller {run_dir / 'model.zip'}")
+    return 0
 
 
 def _record(args: argparse.Namespace) -> int:
@@ -69,8 +97,12 @@ def _bench(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise ImpactEnvError(f"--episodes must be >= 1, got {args.episodes}")
-    summary = run_bench(args.scenarios.split(","), parse_controllers(args.controllers), args.episodes,
-                        Path(args.out), args.workers)
+    scenarios = args.scenarios.split(",")
+    options = {"thrust_noise": args.thrust_noise, "initial_position_noise_m": args.init_noise}
+    if args.restitution is not None:
+        options["restitution"] = args.restitution
+    summary = run_bench(scenarios, parse_controllers(args.controllers, scenarios), args.episodes, Path(args.out),
+                        args.workers, options)
     print(markdown_table(summary))
     print(f"wrote {args.out}/summary.md, summary.csv, episodes.csv, bench.png")
     return 0
@@ -86,7 +118,8 @@ def _run(args: argparse.Namespace) -> int:
     config = TrainConfig(algo=args.algo, scenario=args.scenario, timesteps=args.timesteps, seed=args.seed,
                          n_envs=args.n_envs, out=args.out, env_options=options, eval_freq=args.eval_freq,
                          multiagent=args.multiagent, progress_bar=not args.no_progress,
-                         hyperparams_file=args.hyperparams, verbose=args.verbose)
+                         hyperparams_file=args.hyperparams, verbose=args.verbose,
+                         max_minutes=args.max_minutes)
     run_dir = train(config)
     print(f"saved {run_dir / 'model.zip'}; fly it with: impact-env run {args.scenario} "
           f"--controller {run_dir / 'model.zip'}")

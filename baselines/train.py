@@ -39,6 +39,7 @@ class TrainConfig:
     progress_bar: bool = True
     hyperparams_file: str | None = None
     verbose: int = 0
+    max_minutes: float | None = None  # wall-clock budget: stop early (train.json records the steps reached)
 
 
 def env_id_for(scenario: str) -> str:
@@ -61,6 +62,8 @@ def train(config: TrainConfig) -> Path:
 
     if config.algo not in ALGOS:
         raise ImpactEnvError(f"algorithm must be one of {ALGOS}, got {config.algo!r}")
+    if config.max_minutes is not None and not config.max_minutes > 0:
+        raise ImpactEnvError(f"max_minutes must be > 0, got {config.max_minutes!r}")
     scenario = load_scenario(config.scenario)
     env_id = env_id_for(config.scenario)
     entry = hyperparams.load(config.algo, env_id, config.hyperparams_file)
@@ -92,6 +95,8 @@ def train(config: TrainConfig) -> Path:
                                               eval_freq=max(1, config.eval_freq // n_envs),
                                               best_model_save_path=str(run_dir / "best"),
                                               log_path=str(run_dir / "eval"), deterministic=True))
+    if config.max_minutes is not None:
+        callbacks.append(_wall_clock_budget(config.max_minutes * 60.0))
     start = time.perf_counter()
     model.learn(total_timesteps=timesteps, callback=CallbackList(callbacks), progress_bar=config.progress_bar)
     model.save(run_dir / "model.zip")
@@ -99,11 +104,26 @@ def train(config: TrainConfig) -> Path:
         venv.save(str(run_dir / "vecnormalize.pkl"))
     (run_dir / "train.json").write_text(json.dumps({
         "algo": config.algo, "scenario": scenario.name, "env_id": env_id, "timesteps": timesteps,
+        "timesteps_trained": int(model.num_timesteps), "max_minutes": config.max_minutes,
         "n_envs": n_envs, "seed": config.seed, "multiagent": config.multiagent, "env_options": config.env_options,
         "wall_time_s": time.perf_counter() - start}, indent=2))
     venv.close()
     eval_env.close()
     return run_dir
+
+
+def _wall_clock_budget(seconds: float):
+    """A callback that ends training once ``seconds`` of wall clock have passed (a compute budget)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class WallClockBudget(BaseCallback):
+        def _on_training_start(self) -> None:
+            self._deadline = time.perf_counter() + seconds
+
+        def _on_step(self) -> bool:
+            return time.perf_counter() < self._deadline
+
+    return WallClockBudget()
 
 
 def _pettingzoo_vec_env(env_kwargs: dict[str, Any], n_envs: int):
