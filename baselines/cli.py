@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from impact_env.envs.core import REWARD_MODES
+
 # Nothing from the [rl] extra is imported here: `impact-env` loads this module at start-up, also in a base
 # install (make demo), so stable-baselines3, yaml and minari are imported only by the command handlers.
 ALGOS = ("ppo", "sac")
@@ -24,7 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--multiagent", action="store_true",
                    help="one shared policy for every robot on the PettingZoo env (parameter sharing)")
     p.add_argument("--eval-freq", type=int, default=20_000, help="env steps between evaluations")
-    p.add_argument("--reward", choices=["dense", "sparse"], default="dense")
+    p.add_argument("--reward", choices=REWARD_MODES, default="dense", help="see impact_env.envs.core")
     p.add_argument("--fuel-penalty", type=float, default=0.0)
     p.add_argument("--restitution", type=float, default=None)
     p.add_argument("--thrust-noise", type=float, default=0.0)

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from impact_env.envs.core import REWARD_MODES
 from impact_env.errors import ImpactEnvError
 
 COMMANDS_GROUP = "impact_env.commands"
@@ -128,7 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", help="JSON summary (success, robustness, impacts, fuel_Ns, per-episode details)")
     p.add_argument("--plot", help="PNG of the first episode's trajectories and impacts")
     p.add_argument("--plan", help="a saved plan (impact-env plan ... --out plan.json) for controllers that use one")
-    p.add_argument("--reward", choices=["dense", "sparse"], default="dense")
+    p.add_argument("--reward", choices=REWARD_MODES, default="dense", help="see impact_env.envs.core")
     p.add_argument("--fuel-penalty", type=float, default=0.0)
     p.add_argument("--restitution", type=float, default=None, help="simulate with this e (model mismatch)")
     p.add_argument("--thrust-noise", type=float, default=0.0, help="std of multiplicative thrust noise")

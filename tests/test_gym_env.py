@@ -93,6 +93,30 @@ def test_dense_rewards_sum_to_final_robustness_and_match_offline():
     assert info["is_success"] == (offline > 0)
 
 
+def test_conjuncts_reward_credits_a_wall_graze_at_once():
+    """R1 thrusts into wall W1 while the object sits still. Under "dense" the task's robustness is pinned at
+    -5.25 by "F in(O1, goal)", so the graze earns nothing; under "conjuncts" it costs at once, and the
+    rewards sum to the mean final robustness of the conjuncts. The reported robustness is the task's."""
+    from impact_env.stl import conjuncts
+
+    action = np.zeros(6, dtype=np.float32)
+    action[0] = -1.0  # R1 full thrust in -x (body frame = world frame at heading 0)
+    totals, infos = {}, {}
+    for mode in ("dense", "conjuncts"):
+        env = TransportEnv("corridor", reward_mode=mode)
+        env.reset(seed=0)
+        rewards = [env.step(action)[1] for _ in range(300)]  # bounces die out by ~25 s (e = 0.75)
+        totals[mode], infos[mode] = sum(rewards[1:]), env.core.log.robustness
+        if mode == "conjuncts":
+            positions = env.core._positions()
+            parts = [m.value for m in env.core.conjunct_monitors]
+            assert len(parts) == len(conjuncts(env.scenario.formula)) == 7
+            assert sum(rewards) == pytest.approx(np.mean(parts), abs=1e-9)
+            assert positions["R1"][0] == pytest.approx(0.2, abs=0.02)  # resting against the wall
+    assert totals["dense"] == 0.0 and infos["dense"] == infos["conjuncts"] == pytest.approx(-5.25)
+    assert totals["conjuncts"] == pytest.approx(-0.8 / 7, abs=0.01)  # R1's clearance 1.0 -> 0.2, one of seven
+
+
 def test_sparse_reward_and_fuel_penalty():
     env = TransportEnv("throw_and_catch_exp", reward_mode="sparse", fuel_penalty=0.5)
     env.reset(seed=0)

@@ -22,6 +22,7 @@ from impact_env.stl import (
     Or,
     TrueFormula,
     Until,
+    conjuncts,
     horizon_steps,
     parse,
     robustness,
@@ -175,6 +176,19 @@ def test_robustness_signal_matches_brute_force(seed: int) -> None:
         got = robustness_signal(f, trace, regions, dt)
         want = brute_force_signal(f, trace, regions, dt)
         np.testing.assert_allclose(got, want, atol=1e-9, rtol=0, err_msg=str(f))
+
+
+def test_conjuncts_split_the_formula_exactly() -> None:
+    f = parse("F[0,3] in(A, r1) & G[0,2] (!in(A, r0) & (!in(B, r0) & !in(B, r2))) & (in(A, r2) | in(B, r1))")
+    parts = conjuncts(f)
+    assert [str(p) for p in parts] == [str(parse(t)) for t in (
+        "F[0,3] in(A, r1)", "G[0,2] !in(A, r0)", "G[0,2] !in(B, r0)", "G[0,2] !in(B, r2)", "in(A, r2) | in(B, r1)")]
+    assert conjuncts(parse("F[0,1] in(A, r1)")) == (parse("F[0,1] in(A, r1)"),)
+    rng, nrng = random.Random(7), np.random.default_rng(7)
+    for _ in range(30):  # rho(f) = min over the parts, on random traces and regions
+        regions, trace = random_regions(rng), random_trace(nrng, rng.randint(1, 12))
+        want = robustness(f, trace, regions, 0.5)
+        assert min(robustness(p, trace, regions, 0.5) for p in parts) == pytest.approx(want, abs=1e-12)
 
 
 # --------------------------------------------------------------------------------------------------- monitor

@@ -12,6 +12,13 @@ Reward (both environments):
   an episode therefore sum to its final robustness: this is potential-based shaping, which never changes
   which behaviour is optimal (undiscounted).
 - ``"sparse"``: 0 on every step but the last, which gives the final robustness.
+- ``"conjuncts"``: the per-step increment of the MEAN of the online estimates of the task's conjuncts
+  (:func:`impact_env.stl.conjuncts`: nested And flattened, G distributed over And), so the rewards sum to that
+  mean at the end. The task's robustness is their MIN, and a min only moves with its smallest part: in the
+  corridor the wall-clearance conjuncts (about 1 m) sit far above "F in(O1, goal)" (-5.25 m) until the object
+  nears the goal, so under ``"dense"`` a robot that grazes a wall early is charged only when the object
+  arrives, tens of seconds later. Here every conjunct is credited when it changes. This is shaping that
+  changes the objective (a mean is not a min): ``info["robustness"]`` and ``is_success`` stay the task's.
 - both: minus ``fuel_penalty`` times the step's fuel, sum over robots of |F| * control period (N s).
 """
 
@@ -26,9 +33,9 @@ import numpy as np
 from impact_env.errors import ActionError, ImpactEnvError
 from impact_env.physics import ImpactEvent, World
 from impact_env.scenario import Scenario, load_scenario
-from impact_env.stl import OnlineMonitor
+from impact_env.stl import OnlineMonitor, conjuncts
 
-REWARD_MODES = ("dense", "sparse")
+REWARD_MODES = ("dense", "sparse", "conjuncts")
 OBS_PER_BODY = 7  # x, y, vx, vy, cos(heading), sin(heading), angular velocity
 ACTION_PER_ROBOT = 3  # body-frame Fx, Fy, torque, each in [-1, 1]
 
@@ -70,7 +77,7 @@ class TransportCore:
 
     Args:
         scenario: a Scenario, a shipped scenario name or a path to a TOML file.
-        reward_mode: ``"dense"`` (default) or ``"sparse"``; see the module docstring.
+        reward_mode: ``"dense"`` (default), ``"sparse"`` or ``"conjuncts"``; see the module docstring.
         fuel_penalty: reward cost per N s of fuel (>= 0).
         restitution: simulate with this restitution instead of the scenario's (model mismatch studies).
         thrust_noise: standard deviation of multiplicative thrust noise (0.05 = 5 %), re-clipped to limits.
@@ -102,6 +109,8 @@ class TransportCore:
         self.dt_s = sc.control_period_s
         self.monitor = OnlineMonitor(sc.formula, sc.region_map(), self.dt_s)
         self.horizon_steps = self.monitor.horizon_steps
+        self.conjunct_monitors = ([OnlineMonitor(part, sc.region_map(), self.dt_s) for part in conjuncts(sc.formula)]
+                                  if reward_mode == "conjuncts" else [])
         self.wrench_limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in sc.robots], dtype=float)
         self._limits_py = [tuple(float(x) for x in row) for row in self.wrench_limits]
 
@@ -143,6 +152,9 @@ class TransportCore:
         self.monitor.reset()
         self._state = self.world.read_state()
         self.log.robustness = self.monitor.update(self._positions())
+        for part in self.conjunct_monitors:
+            part.reset()
+            part.update(self._positions())
         self._prev_estimate = 0.0
 
     def _positions(self) -> dict[str, tuple[float, float]]:
@@ -200,9 +212,14 @@ class TransportCore:
         log.robustness = estimate
         if self.reward_mode == "dense":
             reward = estimate - self._prev_estimate
+            self._prev_estimate = estimate
+        elif self.reward_mode == "conjuncts":
+            positions = self._positions()
+            potential = sum(part.update(positions) for part in self.conjunct_monitors) / len(self.conjunct_monitors)
+            reward = potential - self._prev_estimate
+            self._prev_estimate = potential
         else:
             reward = estimate if terminated else 0.0
-        self._prev_estimate = estimate
         reward -= self.fuel_penalty * fuel
         info = {
             "robustness": estimate,

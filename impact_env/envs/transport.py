@@ -38,7 +38,9 @@ class TransportEnv(gym.Env, EzPickle):
     ## Rewards
     ``reward_mode="dense"`` (default): the per-step increment of the online STL robustness estimate
     (the trace so far with its last sample held), so an episode's rewards sum to its final robustness.
-    ``reward_mode="sparse"``: the final robustness on the last step, 0 before. Both subtract
+    ``reward_mode="sparse"``: the final robustness on the last step, 0 before.
+    ``reward_mode="conjuncts"``: the per-step increment of the mean robustness of the task's conjuncts, so
+    each conjunct (e.g. each wall clearance) is credited when it changes (see impact_env.envs.core). All subtract
     ``fuel_penalty * sum_robots |F| * dt`` (N s) if ``fuel_penalty > 0``.
 
     ## Starting state

@@ -19,6 +19,7 @@ from impact_env.stl.formula import (
     Or,
     TrueFormula,
     Until,
+    conjuncts,
     horizon_steps,
     interval_steps,
 )
@@ -28,5 +29,5 @@ from impact_env.stl.robustness import robustness, robustness_signal
 
 __all__ = [
     "Always", "And", "Eventually", "FalseFormula", "Formula", "InRegion", "Not", "OnlineMonitor", "Or",
-    "TrueFormula", "Until", "horizon_steps", "interval_steps", "parse", "robustness", "robustness_signal",
+    "TrueFormula", "Until", "conjuncts", "horizon_steps", "interval_steps", "parse", "robustness", "robustness_signal",
 ]

@@ -296,6 +296,20 @@ class Until(Formula):
         return f"{_wrap(self.left, _PREFIX)} U[{_fmt(self.a_s)}, {_fmt(self.b_s)}] {_wrap(self.right, _PREFIX)}"
 
 
+def conjuncts(formula: Formula) -> tuple[Formula, ...]:
+    """The formula as a conjunction of as many parts as possible: rho(formula) = min over the parts.
+
+    Flattens nested And and distributes Always over And, G[a, b] (p & q) = G[a, b] p & G[a, b] q, an identity
+    of robustness too (min over the window commutes with min over the children). A formula that is not a
+    conjunction is its own single part.
+    """
+    if isinstance(formula, And):
+        return tuple(part for child in formula.children for part in conjuncts(child))
+    if isinstance(formula, Always) and isinstance(formula.child, And):
+        return tuple(Always(formula.a_s, formula.b_s, part) for part in conjuncts(formula.child))
+    return (formula,)
+
+
 def check_dt(dt: float) -> float:
     """Validate a sampling period dt (s) and return it as a float."""
     try:
