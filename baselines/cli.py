@@ -1,9 +1,11 @@
 """``impact-env train`` (baselines/train.py), ``bench`` (baselines/bench.py), ``record`` (baselines/record.py),
-``bc`` (baselines/bc.py)."""
+``bc`` (baselines/bc.py), ``curves`` (baselines/curves.py)."""
 
 from __future__ import annotations
 
 import argparse
+
+import numpy as np
 
 from impact_env.envs.core import REWARD_MODES
 
@@ -68,6 +70,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="runs", help="runs/bc_<scenario>_s<seed>/ gets model.zip")
     p.set_defaults(func=_bc)
+
+    p = subparsers.add_parser("curves", help="plot the evaluation curves of training runs")
+    p.add_argument("runs", nargs="+", help="run folders written by `impact-env train`")
+    p.add_argument("--out", default="curves.png")
+    p.add_argument("--title", default="")
+    p.set_defaults(func=_curves)
+
+
+def _curves(args: argparse.Namespace) -> int:
+    from baselines.curves import load_curve, plot_curves
+
+    curves = [load_curve(r) for r in args.runs]
+    plot_curves(curves, args.out, args.title)
+    for c in curves:
+        best = int(np.argmax(c.robustness.mean(axis=1)))
+        print(f"{c.label}: {len(c.timesteps)} evaluations up to {c.timesteps[-1]} steps; last robustness "
+              f"{c.robustness[-1].mean():+.3f}, best {c.robustness[best].mean():+.3f} at {c.timesteps[best]} steps")
+    print(f"wrote {args.out}")
+    return 0
 
 
 def _bc(args: argparse.Namespace) -> int:

@@ -1,7 +1,8 @@
 """Train stable-baselines3 policies on the environments: ``impact-env train ALGO SCENARIO``.
 
 Single agent (central control of all robots): the Gymnasium env in ``n_envs`` subprocesses, optional
-``VecNormalize`` (observations and rewards), periodic evaluation on a separate env (best model kept),
+``VecNormalize`` (observations and rewards), periodic evaluation on a separate env (best model kept; its
+returns are the task's final STL robustness whatever the training reward; ``eval/evaluations.npz``),
 checkpoints, TensorBoard logs, a progress bar; the model is saved in SB3's format (``model.zip``, plus
 ``vecnormalize.pkl`` when normalising). Multi-agent (``multiagent=True``): the PettingZoo parallel env
 through SuperSuit's vector-env route, so ONE policy acts for every robot on its own observation (parameter
@@ -80,7 +81,10 @@ def train(config: TrainConfig) -> Path:
     else:
         venv = make_vec_env(TransportEnv, n_envs=n_envs, seed=config.seed, env_kwargs=env_kwargs,
                             vec_env_cls=SubprocVecEnv if n_envs > 1 else None)
-    eval_env = make_vec_env(TransportEnv, n_envs=1, seed=config.seed + 10_000, env_kwargs=env_kwargs)
+    # evaluation scores the task itself: under "dense" with no fuel penalty an episode's return is its final
+    # STL robustness, whatever shaping the training env uses
+    eval_kwargs = {**env_kwargs, "reward_mode": "dense", "fuel_penalty": 0.0}
+    eval_env = make_vec_env(TransportEnv, n_envs=1, seed=config.seed + 10_000, env_kwargs=eval_kwargs)
     if entry.get("normalize"):
         venv = VecNormalize(venv, gamma=float(entry.get("gamma", 0.99)))
         eval_env = VecNormalize(eval_env, training=False, norm_reward=False, gamma=float(entry.get("gamma", 0.99)))

@@ -40,6 +40,15 @@ def test_ppo_smoke_train_save_load_and_run(tmp_path):
     assert main(["run", "corridor", "--controller", str(run_dir / "model.zip"), "--json", str(out)]) == 0
     summary = json.loads(out.read_text())
     assert isinstance(summary["robustness"], float) and summary["episodes"][0]["steps"] == 1000
+    # learning curves from the periodic evaluations (returns = the task's robustness)
+    from baselines.curves import load_curve
+
+    curve = load_curve(run_dir)
+    assert curve.timesteps.tolist() == [1024, 2048] and curve.robustness.shape == (2, 1)
+    assert -5.25 - 1e-6 <= curve.robustness.min() <= curve.robustness.max() <= 0.75 + 1e-6  # robustness bounds
+    assert main(["curves", str(run_dir), "--out", str(tmp_path / "curves.png")]) == 0
+    assert (tmp_path / "curves.png").stat().st_size > 1000
+    assert main(["curves", str(tmp_path)]) == 2  # not a run folder: a clear error
 
 
 def test_pettingzoo_parameter_sharing_route(tmp_path):

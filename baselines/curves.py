@@ -1,0 +1,55 @@
+"""Learning curves of training runs: ``impact-env curves RUN_DIR [RUN_DIR ...] --out curves.png``.
+
+Reads each run's periodic evaluations (``eval/evaluations.npz``, written by ``impact-env train``; their
+returns are the task's final STL robustness) and its ``train.json``, and plots mean +- std robustness and
+the success rate against environment steps, one line per run.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from impact_env.errors import ImpactEnvError
+
+
+@dataclass
+class Curve:
+    label: str
+    timesteps: np.ndarray  # (n,)
+    robustness: np.ndarray  # (n, episodes per evaluation)
+    success: np.ndarray  # (n,) share of evaluation episodes with robustness > 0
+
+
+def load_curve(run_dir: str | Path) -> Curve:
+    run = Path(run_dir)
+    path = run / "eval" / "evaluations.npz"
+    if not path.is_file():
+        raise ImpactEnvError(f"{run} has no evaluations ({path} is missing): is it an `impact-env train` run "
+                             "that reached its first evaluation?")
+    data = np.load(path)
+    meta = json.loads((run / "train.json").read_text()) if (run / "train.json").is_file() else {}
+    mode = meta.get("env_options", {}).get("reward_mode", "dense")
+    label = f"{meta.get('algo', run.name)} ({mode})" if meta else run.name
+    rho = np.asarray(data["results"], dtype=float)
+    return Curve(label, np.asarray(data["timesteps"]), rho, (rho > 0).mean(axis=1))
+
+
+def plot_curves(curves: list[Curve], path: str | Path, title: str = "") -> None:
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, 3.6), layout="constrained")
+    ax_rho, ax_ok = fig.subplots(1, 2)
+    for c in curves:
+        mean, std = c.robustness.mean(axis=1), c.robustness.std(axis=1)
+        (line,) = ax_rho.plot(c.timesteps, mean, marker="o", ms=3, label=c.label)
+        ax_rho.fill_between(c.timesteps, mean - std, mean + std, color=line.get_color(), alpha=0.2)
+        ax_ok.plot(c.timesteps, 100 * c.success, marker="o", ms=3, color=line.get_color(), label=c.label)
+    ax_rho.axhline(0.0, color="k", lw=0.8)
+    ax_rho.set(xlabel="environment steps", ylabel="evaluation robustness (m)", title=title or "robustness")
+    ax_ok.set(xlabel="environment steps", ylabel="success (%)", ylim=(-5, 105), title="success rate")
+    ax_rho.legend(fontsize=8)
+    fig.savefig(path, dpi=100)
