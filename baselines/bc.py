@@ -3,9 +3,9 @@
 The third learned baseline: a stable-baselines3 PPO ``MlpPolicy`` (the architecture of ``ppo.yml``) is fitted
 to the expert's (observation, action) pairs by maximising the log-likelihood of the expert's actions under
 the policy's Gaussian, with a small entropy bonus, minibatch Adam, and a held-out share of episodes to
-report validation error. The result is saved like any trained model (``model.zip``, ``vecnormalize.pkl``
-with the dataset's observation statistics, ``train.json``), so ``impact-env run --controller`` and
-``impact-env bench`` fly it unchanged.
+report validation error and keep the epoch that imitates the held-out episodes best. The result is saved
+like any trained model (``model.zip``, ``vecnormalize.pkl`` with the dataset's observation statistics,
+``train.json``), so ``impact-env run --controller`` and ``impact-env bench`` fly it unchanged.
 
 Why a loop of our own instead of the ``imitation`` library's BC: ``pip install imitation`` (1.0.1) would
 replace this package's gymnasium 1.x with 0.29.1 and stable-baselines3 with 2.2.1. The loop below is the
@@ -14,6 +14,7 @@ same objective (negative log-likelihood plus entropy weight) in a few dozen line
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import time
@@ -96,7 +97,7 @@ def behaviour_clone(config: BCConfig) -> Path:
     val = tensors(np.concatenate([o for o, _ in val_eps]), np.concatenate([a for _, a in val_eps])) if val_eps else None
     rng = np.random.default_rng(config.seed)
     start = time.perf_counter()
-    history = []
+    history, best = [], (float("inf"), None, 0)  # (validation error, weights, epoch): early stopping
     for epoch in range(1, config.epochs + 1):
         order = torch.as_tensor(rng.permutation(len(obs_t)))
         total = 0.0
@@ -111,9 +112,14 @@ def behaviour_clone(config: BCConfig) -> Path:
         row = {"epoch": epoch, "nll": total / len(order), "train_mse": _action_mse(policy, obs_t, act_t)}
         if val is not None:
             row["val_mse"] = _action_mse(policy, *val)
+            if row["val_mse"] < best[0]:
+                best = (row["val_mse"], copy.deepcopy(policy.state_dict()), epoch)
         history.append(row)
-        print(f"  epoch {epoch}/{config.epochs}: " + ", ".join(f"{k} {v:.4f}" for k, v in row.items() if k != "epoch"),
+        print(f"  epoch {epoch}/{config.epochs}: " + ", ".join(f"{k} {v:.3g}" for k, v in row.items() if k != "epoch"),
               flush=True)
+    if best[1] is not None:  # keep the weights that imitated the held-out episodes best
+        policy.load_state_dict(best[1])
+        print(f"  kept epoch {best[2]} (lowest validation error {best[0]:.3g})")
 
     run_dir = Path(config.out) / f"bc_{scenario.name}_s{config.seed}"
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -125,7 +131,8 @@ def behaviour_clone(config: BCConfig) -> Path:
         "dataset": dataset_id(scenario.name), "episodes_train": len(train_eps), "episodes_validation": len(val_eps),
         "samples": len(obs), "epochs": config.epochs, "batch_size": config.batch_size,
         "learning_rate": config.learning_rate, "ent_weight": config.ent_weight, "seed": config.seed,
-        "multiagent": False, "zero_action_mse": float((act ** 2).mean()), "history": history,
+        "multiagent": False, "kept_epoch": best[2] or config.epochs, "zero_action_mse": float((act ** 2).mean()),
+        "history": history,
         "wall_time_s": time.perf_counter() - start}, indent=2))
     venv.close()
     return run_dir

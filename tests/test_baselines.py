@@ -116,6 +116,7 @@ def test_behaviour_cloning_fits_the_expert_and_flies(demonstrations, tmp_path):
                  "--out", str(runs)]) == 0
     meta = json.loads((runs / "bc_throw_and_catch_exp_s0" / "train.json").read_text())
     assert meta["episodes_train"] == 2 and meta["episodes_validation"] == 1 and meta["samples"] == 400
+    assert 1 <= meta["kept_epoch"] <= 40
     first, last = meta["history"][0], meta["history"][-1]
     assert last["nll"] < first["nll"]
     # the fitted policy reproduces the expert's actions far better than doing nothing would
@@ -134,6 +135,15 @@ def test_behaviour_cloning_fits_the_expert_and_flies(demonstrations, tmp_path):
     assert [r["controller"] for r in rows] == ["bc"] * 3 + ["zero"] * 3
     assert len({r["robustness"] for r in rows if r["controller"] == "zero"}) == 3  # objects start apart
     assert "thrust_noise=0.05" in (bench / "summary.md").read_text()
+
+
+def test_behaviour_cloning_is_deterministic(demonstrations, tmp_path):
+    from baselines.bc import BCConfig, behaviour_clone
+
+    histories = [json.loads((behaviour_clone(BCConfig("throw_and_catch_exp", str(demonstrations), epochs=3,
+                                                      out=str(tmp_path / str(k)))) / "train.json").read_text())
+                 ["history"] for k in range(2)]
+    assert histories[0] == histories[1]
 
 
 def test_behaviour_cloning_without_a_dataset_is_a_clear_error(tmp_path, capsys):
