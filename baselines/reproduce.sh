@@ -1,0 +1,75 @@
+#!/usr/bin/env bash
+# Reproduces baselines/results/ (the expert-vs-learned benchmark) from scratch: about 2.5 h on the project's
+# 2-core machine. Run from the repository root after `make test` (which installs the [rl] extra):
+#     bash baselines/reproduce.sh            # all stages, in order
+#     bash baselines/reproduce.sh bench      # one stage: corridor | others | record | bc | publish | bench
+# Every learned policy trains with the benchmark's noise (5 % thrust noise, objects start within 5 cm),
+# seed 0 and the hyperparameters in baselines/hyperparams/. Training runs are bounded both by --timesteps
+# and by a wall-clock budget (--max-minutes), two side by side (one per core); each run's train.json
+# records the steps it reached. QUICK=1 rehearses the chain in ~10 minutes with tiny budgets, writing to
+# runs-quick/ instead of baselines/results/ (its numbers are meaningless).
+set -euo pipefail
+BIN=${BIN:-.venv/bin}
+NOISE="--thrust-noise 0.05 --init-noise 0.05"
+SCENARIOS="corridor obstacle_avoidance throw_and_catch_exp"
+export OMP_NUM_THREADS=1   # one core per training run
+if [[ "${QUICK:-0}" == 1 ]]; then
+    LONG=1; SHORT=0.5; EPISODES=2; DEMOS=2; RUNS=runs-quick; RESULTS=runs-quick/results; DATASETS=runs-quick/datasets
+else
+    LONG=58; SHORT=14; EPISODES=20; DEMOS=30; RUNS=runs; RESULTS=baselines/results; DATASETS=datasets
+fi
+train() { "$BIN/impact-env" train "$@" $NOISE --out "$RUNS" --no-progress; }
+
+corridor() {  # the full runs: PPO and SAC for up to LONG minutes each, side by side
+    train ppo corridor --timesteps 2000000 --n-envs 2 --max-minutes $LONG --eval-freq 50000 &
+    train sac corridor --timesteps 300000 --max-minutes $LONG --eval-freq 20000 &
+    wait
+}
+
+others() {  # the other two scenarios: up to SHORT minutes each
+    for s in obstacle_avoidance throw_and_catch_exp; do
+        train ppo $s --timesteps 1000000 --n-envs 2 --max-minutes $SHORT --eval-freq 50000 &
+        train sac $s --timesteps 300000 --max-minutes $SHORT --eval-freq 20000 &
+        wait
+    done
+}
+
+record() {  # expert demonstrations as Minari datasets
+    for s in $SCENARIOS; do
+        "$BIN/impact-env" record $s --episodes $DEMOS $NOISE --out "$DATASETS"
+    done
+}
+
+bc() {  # behaviour cloning from them
+    for s in $SCENARIOS; do
+        "$BIN/impact-env" bc $s --dataset "$DATASETS" --out "$RUNS"
+    done
+}
+
+publish() {  # the trained models (no checkpoints) and the learning curves
+    for a in ppo sac bc; do
+        for s in $SCENARIOS; do
+            mkdir -p "$RESULTS/models/${a}_$s"
+            cp "$RUNS/${a}_${s}_s0"/{model.zip,vecnormalize.pkl,train.json} "$RESULTS/models/${a}_$s/"
+        done
+    done
+    for s in $SCENARIOS; do
+        "$BIN/impact-env" curves "$RUNS/ppo_${s}_s0" "$RUNS/sac_${s}_s0" --title "$s" --out "$RESULTS/curves_$s.png"
+    done
+}
+
+bench() {
+    local m="$RESULTS/models"
+    "$BIN/impact-env" bench corridor,obstacle_avoidance,throw_and_catch_exp --episodes $EPISODES $NOISE --workers 2 \
+        --controllers "expert,ppo:$m/ppo_{scenario}/model.zip,sac:$m/sac_{scenario}/model.zip,bc:$m/bc_{scenario}/model.zip,random,zero" \
+        --out "$RESULTS"
+}
+
+stages=("$@")
+[[ ${#stages[@]} -eq 0 ]] && stages=(corridor others record bc publish bench)
+for stage in "${stages[@]}"; do
+    case $stage in
+        corridor|others|record|bc|publish|bench) echo "== $stage"; $stage ;;
+        *) echo "unknown stage '$stage' (corridor, others, record, bc, publish, bench)" >&2; exit 2 ;;
+    esac
+done
