@@ -1,14 +1,15 @@
 # Two entry points from a fresh clone (only Python 3.11 needed):
 #   make demo   - create .venv, install the package, run the main demo (video + JSON + plots in out/)
 #   make test   - create .venv, install with the [rl,dev] extras, run the default (fast) test suite
-# Further targets: make test-slow (long checks), make bench (benchmarks), make lint.
+# Further targets: make test-slow (long checks), make bench (benchmarks), make lint,
+#   make results (retrain the RL baselines and rerun the expert-vs-learned benchmark: ~2.5 h).
 
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 OUT := out
 
-.PHONY: demo test test-slow bench bench-expert lint clean
+.PHONY: demo test test-slow bench bench-expert results lint clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -50,6 +51,10 @@ bench: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/env_throughput.py
 	$(BIN)/python benchmarks/planner.py
 	$(BIN)/python benchmarks/mpc.py
+
+# baselines/results/: PPO, SAC and behaviour cloning against the expert on all three scenarios
+results: $(VENV)/.dev-installed
+	bash baselines/reproduce.sh
 
 lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check impact_env planners baselines tests benchmarks
