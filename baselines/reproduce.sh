@@ -14,22 +14,22 @@ NOISE="--thrust-noise 0.05 --init-noise 0.05"
 SCENARIOS="corridor obstacle_avoidance throw_and_catch_exp"
 export OMP_NUM_THREADS=1   # one core per training run
 if [[ "${QUICK:-0}" == 1 ]]; then
-    LONG=1; SHORT=0.5; EPISODES=2; DEMOS=2; RUNS=runs-quick; RESULTS=runs-quick/results; DATASETS=runs-quick/datasets
+    LONG=1; SHORT=0.5; EPISODES=2; DEMOS=2; EVAL_PPO=2000; EVAL_SAC=1000; RUNS=runs-quick; RESULTS=runs-quick/results; DATASETS=runs-quick/datasets
 else
-    LONG=58; SHORT=14; EPISODES=20; DEMOS=30; RUNS=runs; RESULTS=baselines/results; DATASETS=datasets
+    LONG=58; SHORT=14; EPISODES=20; DEMOS=30; EVAL_PPO=50000; EVAL_SAC=20000; RUNS=runs; RESULTS=baselines/results; DATASETS=datasets
 fi
 train() { "$BIN/impact-env" train "$@" $NOISE --out "$RUNS" --no-progress; }
 
 corridor() {  # the full runs: PPO and SAC for up to LONG minutes each, side by side
-    train ppo corridor --timesteps 2000000 --n-envs 2 --max-minutes $LONG --eval-freq 50000 &
-    train sac corridor --timesteps 300000 --max-minutes $LONG --eval-freq 20000 &
+    train ppo corridor --timesteps 2000000 --n-envs 2 --max-minutes $LONG --eval-freq $EVAL_PPO &
+    train sac corridor --timesteps 300000 --max-minutes $LONG --eval-freq $EVAL_SAC &
     wait
 }
 
 others() {  # the other two scenarios: up to SHORT minutes each
     for s in obstacle_avoidance throw_and_catch_exp; do
-        train ppo $s --timesteps 1000000 --n-envs 2 --max-minutes $SHORT --eval-freq 50000 &
-        train sac $s --timesteps 300000 --max-minutes $SHORT --eval-freq 20000 &
+        train ppo $s --timesteps 1000000 --n-envs 2 --max-minutes $SHORT --eval-freq $EVAL_PPO &
+        train sac $s --timesteps 300000 --max-minutes $SHORT --eval-freq $EVAL_SAC &
         wait
     done
 }
