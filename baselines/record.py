@@ -10,6 +10,7 @@ Datasets go to ``<out>/`` (Minari's ``MINARI_DATASETS_PATH``) under the id
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -65,10 +66,12 @@ def record(scenario: str, episodes: int, out: str | Path, plan_path: str | None 
     name = dataset_id(sc.name)
     if name in minari.list_local_datasets():
         minari.delete_dataset(name)
-    dataset = minari.create_dataset_from_buffers(
-        dataset_id=name, buffer=buffers, env=env, algorithm_name="impact_env expert (MILP plan + replanner + MPC)",
-        author="impact_env", description=f"Expert demonstrations on {sc.name}: {sc.description}",
-        data_format="hdf5")
+    with warnings.catch_warnings():  # Minari nags about metadata this package has no value for
+        warnings.filterwarnings("ignore", message=r"`(code_permalink|author_email|eval_env)` is set to None")
+        dataset = minari.create_dataset_from_buffers(
+            dataset_id=name, buffer=buffers, env=env, algorithm_name="impact_env expert (MILP plan + replanner + MPC)",
+            author="impact_env", description=f"Expert demonstrations on {sc.name}: {sc.description}",
+            data_format="hdf5")
     env.close()
     return dataset
 
