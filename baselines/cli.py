@@ -75,13 +75,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("runs", nargs="+", help="run folders written by `impact-env train`")
     p.add_argument("--out", default="curves.png")
     p.add_argument("--title", default="")
+    p.add_argument("--labels", default=None, help="comma-separated legend labels, one per run")
     p.set_defaults(func=_curves)
 
 
 def _curves(args: argparse.Namespace) -> int:
     from baselines.curves import load_curve, plot_curves
+    from impact_env.errors import ImpactEnvError
 
     curves = [load_curve(r) for r in args.runs]
+    if args.labels is not None:
+        labels = args.labels.split(",")
+        if len(labels) != len(curves):
+            raise ImpactEnvError(f"--labels has {len(labels)} labels for {len(curves)} runs")
+        for c, label in zip(curves, labels):
+            c.label = label
     plot_curves(curves, args.out, args.title)
     for c in curves:
         best = int(np.argmax(c.robustness.mean(axis=1)))

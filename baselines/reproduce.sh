@@ -6,7 +6,7 @@
 # Every learned policy trains with the benchmark's noise (5 % thrust noise, objects start within 5 cm),
 # seed 0 and the hyperparameters in baselines/hyperparams/. Training runs are bounded both by --timesteps
 # and by a wall-clock budget (--max-minutes), two side by side (one per core); each run's train.json
-# records the steps it reached. QUICK=1 rehearses the chain in ~10 minutes with tiny budgets, writing to
+# records the steps it reached. QUICK=1 rehearses the chain in ~10 minutes with a few thousand steps, writing to
 # runs-quick/ instead of baselines/results/ (its numbers are meaningless).
 set -euo pipefail
 BIN=${BIN:-.venv/bin}
@@ -14,23 +14,28 @@ NOISE="--thrust-noise 0.05 --init-noise 0.05"
 SCENARIOS="corridor obstacle_avoidance throw_and_catch_exp"
 export OMP_NUM_THREADS=1   # one core per training run
 if [[ "${QUICK:-0}" == 1 ]]; then
-    LONG=1; SHORT=0.5; EPISODES=2; DEMOS=2; EVAL_PPO=2000; EVAL_SAC=1000; RUNS=runs-quick; RESULTS=runs-quick/results; DATASETS=runs-quick/datasets
+    PPO_LONG=2048; PPO_SHORT=2048; SAC_STEPS=1500; LONG=5; SHORT=5; EPISODES=2; DEMOS=2; EVAL_PPO=1024; EVAL_SAC=500
+    RUNS=runs-quick; RESULTS=runs-quick/results; DATASETS=runs-quick/datasets
 else
-    LONG=58; SHORT=14; EPISODES=20; DEMOS=30; EVAL_PPO=50000; EVAL_SAC=20000; RUNS=runs; RESULTS=baselines/results; DATASETS=datasets
+    PPO_LONG=2000000; PPO_SHORT=1000000; SAC_STEPS=300000; LONG=58; SHORT=14; EPISODES=20; DEMOS=30
+    EVAL_PPO=50000; EVAL_SAC=20000; RUNS=runs; RESULTS=baselines/results; DATASETS=datasets
 fi
 train() { "$BIN/impact-env" train "$@" $NOISE --out "$RUNS" --no-progress; }
+side_by_side() {  # the two training commands given as strings, one per core; fails if either fails
+    $1 & local a=$!
+    $2 & local b=$!
+    wait $a; wait $b
+}
 
 corridor() {  # the full runs: PPO and SAC for up to LONG minutes each, side by side
-    train ppo corridor --timesteps 2000000 --n-envs 2 --max-minutes $LONG --eval-freq $EVAL_PPO &
-    train sac corridor --timesteps 300000 --max-minutes $LONG --eval-freq $EVAL_SAC &
-    wait
+    side_by_side "train ppo corridor --timesteps $PPO_LONG --n-envs 2 --max-minutes $LONG --eval-freq $EVAL_PPO" \
+                 "train sac corridor --timesteps $SAC_STEPS --max-minutes $LONG --eval-freq $EVAL_SAC"
 }
 
 others() {  # the other two scenarios: up to SHORT minutes each
     for s in obstacle_avoidance throw_and_catch_exp; do
-        train ppo $s --timesteps 1000000 --n-envs 2 --max-minutes $SHORT --eval-freq $EVAL_PPO &
-        train sac $s --timesteps 300000 --max-minutes $SHORT --eval-freq $EVAL_SAC &
-        wait
+        side_by_side "train ppo $s --timesteps $PPO_SHORT --n-envs 2 --max-minutes $SHORT --eval-freq $EVAL_PPO" \
+                     "train sac $s --timesteps $SAC_STEPS --max-minutes $SHORT --eval-freq $EVAL_SAC"
     done
 }
 

@@ -49,6 +49,7 @@ def test_ppo_smoke_train_save_load_and_run(tmp_path):
     assert main(["curves", str(run_dir), "--out", str(tmp_path / "curves.png")]) == 0
     assert (tmp_path / "curves.png").stat().st_size > 1000
     assert main(["curves", str(tmp_path)]) == 2  # not a run folder: a clear error
+    assert main(["curves", str(run_dir), "--labels", "a,b", "--out", str(tmp_path / "c.png")]) == 2
 
 
 def test_pettingzoo_parameter_sharing_route(tmp_path):
