@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 
@@ -76,11 +77,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="curves.png")
     p.add_argument("--title", default="")
     p.add_argument("--labels", default=None, help="comma-separated legend labels, one per run")
+    p.add_argument("--table", default=None, help="also write a markdown table of the runs to this file")
     p.set_defaults(func=_curves)
 
 
 def _curves(args: argparse.Namespace) -> int:
-    from baselines.curves import load_curve, plot_curves
+    from baselines.curves import load_curve, plot_curves, training_table
     from impact_env.errors import ImpactEnvError
 
     curves = [load_curve(r) for r in args.runs]
@@ -95,6 +97,9 @@ def _curves(args: argparse.Namespace) -> int:
         best = int(np.argmax(c.robustness.mean(axis=1)))
         print(f"{c.label}: {len(c.timesteps)} evaluations up to {c.timesteps[-1]} steps; last robustness "
               f"{c.robustness[-1].mean():+.3f}, best {c.robustness[best].mean():+.3f} at {c.timesteps[best]} steps")
+    if args.table:
+        Path(args.table).write_text(training_table(curves) + "\n")
+        print(f"wrote {args.table}")
     print(f"wrote {args.out}")
     return 0
 

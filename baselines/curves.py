@@ -19,6 +19,7 @@ from impact_env.errors import ImpactEnvError
 @dataclass
 class Curve:
     label: str
+    meta: dict  # the run's train.json
     timesteps: np.ndarray  # (n,)
     robustness: np.ndarray  # (n, episodes per evaluation)
     success: np.ndarray  # (n,) share of evaluation episodes with robustness > 0
@@ -35,7 +36,22 @@ def load_curve(run_dir: str | Path) -> Curve:
     mode = meta.get("env_options", {}).get("reward_mode", "dense")
     label = f"{meta.get('algo', run.name)} ({mode})" if meta else run.name
     rho = np.asarray(data["results"], dtype=float)
-    return Curve(label, np.asarray(data["timesteps"]), rho, (rho > 0).mean(axis=1))
+    return Curve(label, meta, np.asarray(data["timesteps"]), rho, (rho > 0).mean(axis=1))
+
+
+def training_table(curves: list[Curve]) -> str:
+    """Markdown: per run, the steps trained, the wall clock, and the first, last and best evaluations."""
+    lines = ["| run | scenario | steps trained | wall clock (min) | first success at (steps) | last evaluation (m) | "
+             "best evaluation (m) |", "|---|---|---:|---:|---:|---:|---:|"]
+    for c in curves:
+        mean = c.robustness.mean(axis=1)
+        ok = np.flatnonzero(c.success > 0)
+        steps = c.meta.get("timesteps_trained", c.timesteps[-1])
+        wall = c.meta.get("wall_time_s")
+        lines.append(f"| {c.label} | {c.meta.get('scenario', '?')} | {steps:,} | "
+                     f"{'?' if wall is None else f'{wall / 60:.0f}'} | "
+                     f"{f'{c.timesteps[ok[0]]:,}' if len(ok) else 'never'} | {mean[-1]:+.3f} | {mean.max():+.3f} |")
+    return "\n".join(lines)
 
 
 def plot_curves(curves: list[Curve], path: str | Path, title: str = "") -> None:

@@ -59,7 +59,8 @@ publish() {  # the trained models (no checkpoints) and the learning curves
         done
     done
     for s in $SCENARIOS; do
-        "$BIN/impact-env" curves "$RUNS/ppo_${s}_s0" "$RUNS/sac_${s}_s0" --title "$s" --out "$RESULTS/curves_$s.png"
+        "$BIN/impact-env" curves "$RUNS/ppo_${s}_s0" "$RUNS/sac_${s}_s0" --title "$s" --out "$RESULTS/curves_$s.png" \
+            --table "$RESULTS/training_$s.md"
     done
 }
 

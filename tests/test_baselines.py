@@ -46,7 +46,8 @@ def test_ppo_smoke_train_save_load_and_run(tmp_path):
     curve = load_curve(run_dir)
     assert curve.timesteps.tolist() == [1024, 2048] and curve.robustness.shape == (2, 1)
     assert -5.25 - 1e-6 <= curve.robustness.min() <= curve.robustness.max() <= 0.75 + 1e-6  # robustness bounds
-    assert main(["curves", str(run_dir), "--out", str(tmp_path / "curves.png")]) == 0
+    assert main(["curves", str(run_dir), "--out", str(tmp_path / "curves.png"), "--table", str(tmp_path / "t.md")]) == 0
+    assert "| ppo (dense) | corridor | 2,048 |" in (tmp_path / "t.md").read_text()
     assert (tmp_path / "curves.png").stat().st_size > 1000
     assert main(["curves", str(tmp_path)]) == 2  # not a run folder: a clear error
     assert main(["curves", str(run_dir), "--labels", "a,b", "--out", str(tmp_path / "c.png")]) == 2
