@@ -2,7 +2,7 @@
 #   make demo   - create .venv, install the package, run the main demo (video + JSON + plots in out/)
 #   make test   - create .venv, install with the [rl,dev] extras, run the default (fast) test suite
 # Further targets: make test-slow (long checks), make bench (benchmarks), make lint,
-#   make results (retrain the RL baselines and rerun the expert-vs-learned benchmark: ~2.5 h).
+#   make results (retrain the RL baselines and rerun the expert-vs-learned benchmark: ~3 h).
 
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Reproduces baselines/results/ (the expert-vs-learned benchmark) from scratch: about 2.5 h on the project's
+# Reproduces baselines/results/ (the expert-vs-learned benchmark) from scratch: about 3 h on the project's
 # 2-core machine. Run from the repository root after `make test` (which installs the [rl] extra):
 #     bash baselines/reproduce.sh            # all stages, in order
-#     bash baselines/reproduce.sh bench      # one stage: corridor | others | record | bc | publish | bench
+#     bash baselines/reproduce.sh bench      # one stage: corridor | others | record | bc | publish | reward | bench
 # Every learned policy trains with the benchmark's noise (5 % thrust noise, objects start within 5 cm),
 # seed 0 and the hyperparameters in baselines/hyperparams/. Training runs are bounded both by --timesteps
 # and by a wall-clock budget (--max-minutes), two side by side (one per core); each run's train.json
@@ -14,13 +14,13 @@ NOISE="--thrust-noise 0.05 --init-noise 0.05"
 SCENARIOS="corridor obstacle_avoidance throw_and_catch_exp"
 export OMP_NUM_THREADS=1   # one core per training run
 if [[ "${QUICK:-0}" == 1 ]]; then
-    PPO_LONG=2048; PPO_SHORT=2048; SAC_STEPS=1500; LONG=5; SHORT=5; EPISODES=2; DEMOS=2; EVAL_PPO=1024; EVAL_SAC=500
+    PPO_LONG=2048; PPO_SHORT=2048; SAC_STEPS=1500; LONG=5; SHORT=5; EPISODES=2; DEMOS=2; EVAL_PPO=1024; EVAL_SAC=500; PPO_REWARD=2048
     RUNS=runs-quick; RESULTS=runs-quick/results; DATASETS=runs-quick/datasets
 else
     PPO_LONG=2000000; PPO_SHORT=1000000; SAC_STEPS=300000; LONG=58; SHORT=14; EPISODES=20; DEMOS=30
-    EVAL_PPO=50000; EVAL_SAC=20000; RUNS=runs; RESULTS=baselines/results; DATASETS=datasets
+    EVAL_PPO=50000; EVAL_SAC=20000; PPO_REWARD=600000; RUNS=runs; RESULTS=baselines/results; DATASETS=datasets
 fi
-train() { "$BIN/impact-env" train "$@" $NOISE --out "$RUNS" --no-progress; }
+train() { "$BIN/impact-env" train --out "$RUNS" "$@" $NOISE --no-progress; }  # a later --out wins
 side_by_side() {  # the two training commands given as strings, one per core; fails if either fails
     $1 & local a=$!
     $2 & local b=$!
@@ -64,6 +64,15 @@ publish() {  # the trained models (no checkpoints) and the learning curves
     done
 }
 
+reward() {  # the corridor reward investigation: PPO with the "conjuncts" reward, then also with quiet exploration
+    local quiet=baselines/hyperparams/experiments/ppo_quiet.yml
+    side_by_side "train ppo corridor --reward conjuncts --timesteps $PPO_REWARD --n-envs 2 --eval-freq $EVAL_PPO --out $RUNS/conjuncts" \
+                 "train ppo corridor --reward conjuncts --hyperparams $quiet --timesteps $PPO_REWARD --n-envs 2 --eval-freq $EVAL_PPO --out $RUNS/quiet"
+    "$BIN/impact-env" curves "$RUNS/ppo_corridor_s0" "$RUNS/conjuncts/ppo_corridor_s0" "$RUNS/quiet/ppo_corridor_s0" \
+        "$RUNS/sac_corridor_s0" --labels "PPO dense,PPO conjuncts,PPO conjuncts + quiet exploration,SAC dense" \
+        --title "corridor: reward investigation" --out "$RESULTS/reward_investigation.png" --table "$RESULTS/reward_investigation.md"
+}
+
 bench() {
     local m="$RESULTS/models"
     "$BIN/impact-env" bench corridor,obstacle_avoidance,throw_and_catch_exp --episodes $EPISODES $NOISE --workers 2 \
@@ -72,10 +81,10 @@ bench() {
 }
 
 stages=("$@")
-[[ ${#stages[@]} -eq 0 ]] && stages=(corridor others record bc publish bench)
+[[ ${#stages[@]} -eq 0 ]] && stages=(corridor others record bc publish reward bench)
 for stage in "${stages[@]}"; do
     case $stage in
-        corridor|others|record|bc|publish|bench) echo "== $stage"; $stage ;;
-        *) echo "unknown stage '$stage' (corridor, others, record, bc, publish, bench)" >&2; exit 2 ;;
+        corridor|others|record|bc|publish|reward|bench) echo "== $stage"; $stage ;;
+        *) echo "unknown stage '$stage' (corridor, others, record, bc, publish, reward, bench)" >&2; exit 2 ;;
     esac
 done
