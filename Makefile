@@ -42,7 +42,7 @@ test: $(VENV)/.dev-installed
 	$(BIN)/python -m pytest -q -n 2
 
 test-slow: $(VENV)/.dev-installed
-	$(BIN)/python -m pytest -q -n 2 -m slow
+	$(BIN)/python -m pytest -q -n 2 -m slow --timeout 3600
 
 bench-expert: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/expert.py --episodes 50

@@ -18,6 +18,7 @@ side by side).
 from __future__ import annotations
 
 import csv
+import multiprocessing
 import os
 import statistics
 from concurrent.futures import ProcessPoolExecutor
@@ -107,7 +108,9 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
     jobs = [(s, c, seed, plan_paths[s], env_options)
             for s in scenarios for c in controllers for seed in range(episodes)]
     workers = workers or min(len(jobs), os.cpu_count() or 1)
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    # spawn, not fork: a forked worker inherits the parent's torch/OpenMP thread-pool locks (held if the parent
+    # trained or ran a policy earlier, as a test session or notebook does) and deadlocks on its first forward pass
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
         results = []
         for k, r in enumerate(pool.map(_episode, jobs), 1):
             results.append(r)
