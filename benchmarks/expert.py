@@ -17,6 +17,7 @@ time (simulated seconds per wall second). Episodes run in parallel worker proces
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import statistics
 from concurrent.futures import ProcessPoolExecutor
@@ -56,7 +57,8 @@ def rows(scenario_name: str, episodes: int, workers: int) -> list[str]:
     scenario = load_scenario(scenario_name)
     plan = plan_spatially_robust(scenario)
     out = []
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    # spawn: the parent has already run the planner's solver threads, which a forked worker must not inherit
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
         for mismatch in (False, True):
             jobs = [(scenario_name, plan.to_dict(), s, mismatch) for s in range(episodes)]
             results = list(pool.map(_episode, jobs))
