@@ -4,7 +4,7 @@ For each scenario and each available solver, builds the model once (to time the 
 and rows), then plans ``--repeats`` times with solver seeds 0, 1, ... (solve times vary ~2x with the seed,
 hence the median). "rho solve s" is the stage-1 MILP solve that proves rho optimal
 (``Plan.solve_time_s``); "total s" is the median wall time of the whole ``plan_spatially_robust`` call
-(build, stage 1, the impact-count refinement capped at 5 s, the polish LP, the plan check). Each HiGHS row
+(build, stage 1, the impact-count refinement cut at 20 nodes, the polish LP, the plan check). Each HiGHS row
 is followed, in the same run, by a baseline row: the same model without the robustness bound propagation
 (every robustness variable bounded only by the scene's diagonal, as with a global big-M), stage 1 only.
 Prints a markdown table. Usage:

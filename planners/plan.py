@@ -7,6 +7,7 @@ so real velocities are dr/dt = r'(s) / (t1 - t0) and accelerations r''(s) / (t1 
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -130,6 +131,12 @@ class Plan:
 
     def impacts_of(self, name: str) -> list[PlannedImpact]:
         return [i for i in self.impacts if name in (i.robot, i.object)]
+
+    def fingerprint(self) -> str:
+        """A short hash of the plan's curves and impacts, bit for bit (not of its timings or stats): two
+        plans with the same fingerprint fly the same."""
+        d = self.to_dict()
+        return hashlib.sha1(json.dumps([d["impacts"], d["bodies"]], sort_keys=True).encode()).hexdigest()[:12]
 
     # ------------------------------------------------------------------------------------------ JSON
     def to_dict(self) -> dict[str, Any]:

@@ -64,6 +64,7 @@ def test_plan_prints_model_size_result_and_one_line_per_impact(planned):
     assert len(impact_lines) == len(plan.impacts)
     first = plan.impacts[0]
     assert f"{first.robot} -> {first.object}" in impact_lines[0] and f"t = {first.time_s:6.2f} s" in impact_lines[0]
+    assert f"stage 2 (fewest impacts, least acceleration, rho kept): {plan.stats['refine_status']}" in stdout
 
 
 def test_plot_plan_returns_a_figure_with_three_axes(planned, tmp_path):
@@ -143,3 +144,8 @@ def test_infeasible_user_scenario_names_the_conflicting_groups(tmp_path, capsys)
     assert err.startswith("impact-env: error:")
     groups = build_model(load_scenario(path), PlannerConfig()).model.groups()
     assert [g for g in groups if g in err], f"no constraint group named in: {err}"
+
+
+def test_negative_refine_nodes_is_a_one_line_error(capsys):
+    err = _error(["plan", SCENARIO, "--refine-nodes", "-1"], capsys)
+    assert "--refine-nodes must be >= 0" in err and "\n" not in err

@@ -4,12 +4,16 @@ infeasibility diagnosis."""
 from __future__ import annotations
 
 import copy
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from impact_env.scenario import load_scenario, scenario_from_dict
-from planners.errors import InfeasiblePlanError, PlanCheckError, PlanTimeoutError, UnsupportedSpecError
+from planners.errors import (InfeasiblePlanError, PlanCheckError, PlannerError, PlanTimeoutError,
+                             UnsupportedSpecError)
 from planners.plan import Plan
 from planners.sr_planner import PlannerConfig, plan_spatially_robust
 from tests.replay import replay
@@ -191,3 +195,28 @@ def test_time_limit_raises_with_the_best_plan_or_none():
         plan_spatially_robust(load_scenario("obstacle_avoidance"), PlannerConfig(time_limit_s=0.05))
     if info.value.plan is not None:
         assert info.value.mip_gap is not None and info.value.mip_gap > 0
+
+
+def test_stage_two_is_cut_by_work_not_time_so_load_does_not_change_the_plan(plans):
+    """The corridor's stage 2 needs ~5 s unloaded; a time limit there gave a different plan on a busy machine.
+    Plan it again with every core busy: the node-limited stage 2 must give the same plan, bit for bit."""
+    first = plans["corridor"]
+    assert first.stats["refine_status"] in ("node_limit", "optimal")
+    assert first.stats["refine_objective"] == pytest.approx(2.0, abs=0.01)  # two impacts, tiny acceleration term
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(os.cpu_count() or 1)]
+    try:
+        again = plan_spatially_robust(load_scenario("corridor"))
+    finally:
+        for hog in hogs:
+            hog.kill()
+            hog.wait()
+    assert again.fingerprint() == first.fingerprint()
+    assert again.stats["refine_status"] == first.stats["refine_status"]
+
+
+def test_refine_nodes_is_checked_and_zero_skips_stage_two():
+    with pytest.raises(PlannerError, match="refine_nodes must be >= 0"):
+        plan_spatially_robust(load_scenario("corridor"), PlannerConfig(refine_nodes=-1))
+    plan = plan_spatially_robust(load_scenario("throw_and_catch_exp"), PlannerConfig(refine_nodes=0))
+    assert plan.stats["refine_status"] == "skipped"
+    assert plan.robustness == pytest.approx(OPTIMA["throw_and_catch_exp"], abs=1e-3)

@@ -13,6 +13,7 @@ class Status(Enum):
     OPTIMAL = "optimal"
     INFEASIBLE = "infeasible"
     TIME_LIMIT = "time_limit"  # stopped on the time limit; x is the incumbent if one exists
+    NODE_LIMIT = "node_limit"  # stopped on the branch-and-bound node limit; x is the incumbent if one exists
     UNBOUNDED = "unbounded"
     ERROR = "error"
 
@@ -35,6 +36,9 @@ class SolverOptions:
     the solver choose. verbose: the solver's own log on stdout. warm_start: a full solution vector (NaN for
     unknown entries) given to the solver as a starting incumbent. progress: called about once a second
     with a :class:`Progress` during MIP solves. seed: the solver's random seed (solve times vary ~2x with it).
+    node_limit: stop a MIP after this many branch-and-bound nodes (1: the root node only). Unlike a time
+    limit it is a deterministic amount of work: the same model, options and seed stop at the same incumbent
+    however loaded the machine is.
     """
 
     time_limit_s: float | None = None
@@ -44,6 +48,7 @@ class SolverOptions:
     warm_start: np.ndarray | None = None
     progress: Callable[[Progress], None] | None = None
     seed: int = 0
+    node_limit: int | None = None
 
 
 @dataclass

@@ -70,6 +70,8 @@ def _attr(m: gp.Model, name: str) -> float | None:
 def _set_options(m: gp.Model, options: SolverOptions) -> None:
     if options.time_limit_s is not None:
         m.Params.TimeLimit = max(options.time_limit_s, 0.0)
+    if options.node_limit is not None:
+        m.Params.NodeLimit = int(options.node_limit)
     m.Params.MIPGap = options.mip_gap
     m.Params.Seed = options.seed
     if options.threads is not None:
@@ -147,7 +149,7 @@ def _solve(m: gp.Model, xs: list, model: Model, options: SolverOptions, t0: floa
     x = np.array(m.getAttr("X", xs), dtype=float) if has_x else None
     objective = m.ObjVal if has_x else None
     bound = gap = None
-    if m.IsMIP and status in (GRB.OPTIMAL, GRB.TIME_LIMIT):
+    if m.IsMIP and status in (GRB.OPTIMAL, GRB.TIME_LIMIT, GRB.NODE_LIMIT):
         bound = _attr(m, "ObjBound")
         gap = _attr(m, "MIPGap") if has_x else None
     elif has_x and status == GRB.OPTIMAL:
@@ -161,4 +163,7 @@ def _solve(m: gp.Model, xs: list, model: Model, options: SolverOptions, t0: floa
     if status == GRB.TIME_LIMIT:
         return SolveResult(Status.TIME_LIMIT, x, objective, bound, gap, elapsed, NAME,
                            "time limit reached" + ("" if has_x else " before any feasible solution was found"))
+    if status == GRB.NODE_LIMIT:
+        return SolveResult(Status.NODE_LIMIT, x, objective, bound, gap, elapsed, NAME,
+                           "node limit reached" + ("" if has_x else " before any feasible solution was found"))
     return SolveResult(Status.ERROR, x, objective, bound, gap, elapsed, NAME, f"Gurobi stopped with status {status}")

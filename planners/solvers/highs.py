@@ -72,6 +72,8 @@ def _set_options(h: highspy.Highs, options: SolverOptions) -> None:
         h.setOptionValue("time_limit", float(max(options.time_limit_s, 0.0)))
     h.setOptionValue("mip_rel_gap", float(options.mip_gap))
     h.setOptionValue("random_seed", int(options.seed))
+    if options.node_limit is not None:
+        h.setOptionValue("mip_max_nodes", int(options.node_limit))
     if options.threads is not None:
         # HiGHS sizes one process-wide scheduler on first use and refuses a later, different `threads`
         # (model status kNotset) unless the scheduler is reset; do not change `threads` while another
@@ -188,6 +190,11 @@ def _result(h: highspy.Highs, model: Model, is_mip: bool, elapsed_s: float) -> S
             bound = gap = None
         return SolveResult(Status.TIME_LIMIT, x, objective, bound, gap, elapsed_s, NAME,
                            "time limit reached" + ("" if has_x else " before any feasible solution was found"))
+    if ms == S.kSolutionLimit and is_mip and h.getOptions().mip_max_nodes <= info.mip_node_count:
+        # HiGHS reports its node limit (and the leaf and improving-solution limits, which we never set) as
+        # kSolutionLimit
+        return SolveResult(Status.NODE_LIMIT, x, objective, bound, gap, elapsed_s, NAME,
+                           "node limit reached" + ("" if has_x else " before any feasible solution was found"))
     return SolveResult(Status.ERROR, x, objective, None, None, elapsed_s, NAME,
                        f"HiGHS stopped with model status {h.modelStatusToString(ms)!r}")
 

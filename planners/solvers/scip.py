@@ -75,6 +75,8 @@ def _set_options(scip: pyscipopt.Model, options: SolverOptions) -> None:
         scip.setParam("limits/time", float(max(options.time_limit_s, 0.0)))
     scip.setParam("limits/gap", float(options.mip_gap))
     scip.setParam("randomization/randomseedshift", int(options.seed))
+    if options.node_limit is not None:
+        scip.setParam("limits/nodes", int(options.node_limit))
 
 
 def _set_warm_start(scip: pyscipopt.Model, model: Model, xs: list, x0: np.ndarray) -> None:
@@ -172,5 +174,8 @@ def solve(model: Model, options: SolverOptions | None = None) -> SolveResult:
             bound = dual if abs(dual) < scip.infinity() else None
         return SolveResult(Status.TIME_LIMIT, x, objective, bound, gap, elapsed, NAME,
                            "time limit reached" + ("" if has_x else " before any feasible solution was found"))
+    if status == "nodelimit":
+        return SolveResult(Status.NODE_LIMIT, x, objective, bound, gap, elapsed, NAME,
+                           "node limit reached" + ("" if has_x else " before any feasible solution was found"))
     return SolveResult(Status.ERROR, x, objective, bound, gap, elapsed, NAME, f"SCIP stopped with status {status!r}")
 
