@@ -50,6 +50,7 @@ bench-expert: $(VENV)/.base-installed
 bench: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/env_throughput.py
 	$(BIN)/python benchmarks/planner.py
+	$(BIN)/python benchmarks/planner_stage2.py
 	$(BIN)/python benchmarks/mpc.py
 
 # baselines/results/: PPO, SAC and behaviour cloning against the expert on all three scenarios
