@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from impact_env.scenario import load_scenario, scenario_from_dict
-from planners.errors import (InfeasiblePlanError, PlanCheckError, PlannerError, PlanTimeoutError,
-                             UnsupportedSpecError)
+from planners.errors import InfeasiblePlanError, PlanCheckError, PlannerError, PlanTimeoutError, UnsupportedSpecError
 from planners.plan import Plan
 from planners.sr_planner import PlannerConfig, plan_spatially_robust
 from tests.replay import replay
