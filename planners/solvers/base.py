@@ -51,6 +51,11 @@ class SolverOptions:
     node_limit: int | None = None
 
 
+def limit_message(limit: str, has_x: bool) -> str:
+    """The message of a solve stopped by its ``limit`` ("time", "node"), with or without an incumbent."""
+    return f"{limit} limit reached" + ("" if has_x else " before any feasible solution was found")
+
+
 @dataclass
 class SolveResult:
     status: Status

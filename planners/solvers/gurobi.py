@@ -20,7 +20,7 @@ from gurobipy import GRB
 
 from planners.errors import SolverNotAvailableError
 from planners.milp.model import Model
-from planners.solvers.base import Progress, SolveResult, SolverOptions, Status
+from planners.solvers.base import Progress, SolveResult, SolverOptions, Status, limit_message
 from planners.solvers.diagnose import resolve_infeasible_or_unbounded
 
 NAME = "gurobi"
@@ -162,8 +162,8 @@ def _solve(m: gp.Model, xs: list, model: Model, options: SolverOptions, t0: floa
         return SolveResult(Status.UNBOUNDED, None, None, None, None, elapsed, NAME)
     if status == GRB.TIME_LIMIT:
         return SolveResult(Status.TIME_LIMIT, x, objective, bound, gap, elapsed, NAME,
-                           "time limit reached" + ("" if has_x else " before any feasible solution was found"))
+                           limit_message("time", has_x))
     if status == GRB.NODE_LIMIT:
         return SolveResult(Status.NODE_LIMIT, x, objective, bound, gap, elapsed, NAME,
-                           "node limit reached" + ("" if has_x else " before any feasible solution was found"))
+                           limit_message("node", has_x))
     return SolveResult(Status.ERROR, x, objective, bound, gap, elapsed, NAME, f"Gurobi stopped with status {status}")

@@ -14,7 +14,7 @@ import highspy
 import numpy as np
 
 from planners.milp.model import Model
-from planners.solvers.base import Progress, SolveResult, SolverOptions, Status
+from planners.solvers.base import Progress, SolveResult, SolverOptions, Status, limit_message
 from planners.solvers.diagnose import resolve_infeasible_or_unbounded
 
 NAME = "highs"
@@ -189,12 +189,12 @@ def _result(h: highspy.Highs, model: Model, is_mip: bool, elapsed_s: float) -> S
         if not is_mip:
             bound = gap = None
         return SolveResult(Status.TIME_LIMIT, x, objective, bound, gap, elapsed_s, NAME,
-                           "time limit reached" + ("" if has_x else " before any feasible solution was found"))
+                           limit_message("time", has_x))
     if ms == S.kSolutionLimit and is_mip and h.getOptions().mip_max_nodes <= info.mip_node_count:
         # HiGHS reports its node limit (and the leaf and improving-solution limits, which we never set) as
         # kSolutionLimit
         return SolveResult(Status.NODE_LIMIT, x, objective, bound, gap, elapsed_s, NAME,
-                           "node limit reached" + ("" if has_x else " before any feasible solution was found"))
+                           limit_message("node", has_x))
     return SolveResult(Status.ERROR, x, objective, None, None, elapsed_s, NAME,
                        f"HiGHS stopped with model status {h.modelStatusToString(ms)!r}")
 

@@ -17,7 +17,7 @@ from pyscipopt import SCIP_EVENTTYPE, Eventhdlr
 from pyscipopt.scip import Expr, ExprCons, Term
 
 from planners.milp.model import Model
-from planners.solvers.base import Progress, SolveResult, SolverOptions, Status
+from planners.solvers.base import Progress, SolveResult, SolverOptions, Status, limit_message
 from planners.solvers.diagnose import resolve_infeasible_or_unbounded
 
 NAME = "scip"
@@ -173,9 +173,9 @@ def solve(model: Model, options: SolverOptions | None = None) -> SolveResult:
             dual = scip.getDualbound()
             bound = dual if abs(dual) < scip.infinity() else None
         return SolveResult(Status.TIME_LIMIT, x, objective, bound, gap, elapsed, NAME,
-                           "time limit reached" + ("" if has_x else " before any feasible solution was found"))
+                           limit_message("time", has_x))
     if status == "nodelimit":
         return SolveResult(Status.NODE_LIMIT, x, objective, bound, gap, elapsed, NAME,
-                           "node limit reached" + ("" if has_x else " before any feasible solution was found"))
+                           limit_message("node", has_x))
     return SolveResult(Status.ERROR, x, objective, bound, gap, elapsed, NAME, f"SCIP stopped with status {status!r}")
 
