@@ -18,6 +18,9 @@ import numpy as np
 from impact_env.scenario import Scenario
 from planners import bezier
 from planners.errors import PlanCheckError
+from planners.funnels import ImpactCopies, ObjectFunnel, check_impact_robust
+
+__all__ = ["BodyPlan", "ImpactCopies", "ObjectFunnel", "Plan", "PlannedImpact", "Segment"]
 
 
 @dataclass
@@ -106,7 +109,13 @@ class PlannedImpact:
 
 @dataclass
 class Plan:
-    """Trajectories of every body and the impacts, with how the plan was obtained."""
+    """Trajectories of every body and the impacts, with how the plan was obtained.
+
+    ``planner`` is ``"sr"`` (spatially robust: ``robustness`` is the maximised rho) or ``"ir"``
+    (impact-robust: ``delta_mps`` is the maximised tolerated post-impact velocity error per axis,
+    ``funnels`` the objects' state boxes, ``copies`` the robots' contingency curves per impact, see
+    :mod:`planners.funnels`; ``robustness`` is then the nominal curves' sampled STL robustness).
+    """
 
     scenario: str
     planner: str
@@ -118,6 +127,9 @@ class Plan:
     build_time_s: float = 0.0
     mip_gap: float = 0.0
     stats: dict[str, Any] = field(default_factory=dict)
+    delta_mps: float | None = None
+    funnels: dict[str, ObjectFunnel] = field(default_factory=dict)
+    copies: list[ImpactCopies] = field(default_factory=list)
 
     @property
     def tf_s(self) -> float:
@@ -140,6 +152,14 @@ class Plan:
 
     # ------------------------------------------------------------------------------------------ JSON
     def to_dict(self) -> dict[str, Any]:
+        out = self._base_dict()
+        if self.planner == "ir":
+            out["delta_mps"] = self.delta_mps
+            out["funnels"] = {name: f.to_dict() for name, f in self.funnels.items()}
+            out["copies"] = [c.to_dict() for c in self.copies]
+        return out
+
+    def _base_dict(self) -> dict[str, Any]:
         return {
             "scenario": self.scenario, "planner": self.planner, "robustness": self.robustness,
             "solve_time_s": self.solve_time_s, "build_time_s": self.build_time_s, "mip_gap": self.mip_gap,
@@ -168,9 +188,13 @@ class Plan:
                 object_velocity_after=tuple(i["object_velocity_after"]),
                 robot_velocity_before=tuple(i["robot_velocity_before"]),
                 robot_velocity_after=tuple(i["robot_velocity_after"])) for i in data["impacts"]]
+            delta = data.get("delta_mps")
+            funnels = {name: ObjectFunnel.from_dict(name, f) for name, f in data.get("funnels", {}).items()}
+            copies = [ImpactCopies.from_dict(c) for c in data.get("copies", [])]
             return cls(data["scenario"], data["planner"], float(data["robustness"]), bodies, impacts,
                        data.get("solver", ""), float(data.get("solve_time_s", 0.0)),
-                       float(data.get("build_time_s", 0.0)), float(data.get("mip_gap", 0.0)), data.get("stats", {}))
+                       float(data.get("build_time_s", 0.0)), float(data.get("mip_gap", 0.0)), data.get("stats", {}),
+                       None if delta is None else float(delta), funnels, copies)
         except (KeyError, TypeError, ValueError) as exc:
             raise PlanCheckError([f"not a plan file: missing or malformed field {exc}"]) from None
 
@@ -198,7 +222,9 @@ class Plan:
         which bounds every point of the curve; objects move in straight lines at constant velocity between
         impacts; velocities are continuous where there is no impact; at each impact the positions coincide
         and the point-mass law (Eq. 5) holds in REAL velocities: momentum is conserved and the normal
-        relative velocity is reversed and scaled by e.
+        relative velocity is reversed and scaled by e. An impact-robust plan (``planner == "ir"``) also has
+        its funnels and copies checked (:func:`planners.funnels.check_impact_robust`): every copy's contact
+        and impact law at its box vertex, limits, sharing and affine feedback, and the box propagation.
         """
         bad: list[str] = []
         for spec in scenario.bodies:
@@ -208,6 +234,8 @@ class Plan:
             bad += _check_body(self.bodies[spec.name], spec, scenario.tf_s, self._impact_times(spec.name), tol)
         for imp in self.impacts:
             bad += _check_impact(self, imp, scenario, tol)
+        if self.planner == "ir" and not bad:
+            bad += check_impact_robust(self, scenario, tol)
         if bad:
             raise PlanCheckError(bad)
 

@@ -5,7 +5,8 @@ velocity error) and then, keeping it, prefer plans with fewer impacts and less a
 
 1. stage 1: maximise the primary quantity (with tie-breaks below the MIP gap), to proven optimality;
 2. stage 2: keep it (>= its optimum - 1e-7), minimise the number of impacts plus the L1 acceleration
-   (Eq. 28 in L1 form), warm-started from stage 1, cut after ``refine_nodes`` branch-and-bound nodes. A node
+   (Eq. 28 in L1 form; impacts only if the model says so, and acceleration is then left to stage 3),
+   warm-started from stage 1, cut after ``refine_nodes`` branch-and-bound nodes. A node
    count is the same work on every machine, so the same scenario and config give the same plan however busy
    the machine is (a time limit would not: ``benchmarks/planner_stage2.py``);
 3. polish: the binaries fixed, an LP with the stage-2 objective (or, with ``smooth``, a convex QP on squared
@@ -60,6 +61,8 @@ class StagedModel:
     acceleration_cost: LinExpr
     acceleration_scale: float
     acceleration_points: list[list[tuple[LinExpr, LinExpr]]]
+    refine_heuristics: bool = True
+    refine_acceleration: bool = True
 
 
 @dataclass
@@ -118,6 +121,8 @@ def copy_model(m: Model, name: str, integer: bool = True) -> Model:
 
 
 def _stage2_objective(staged: StagedModel) -> LinExpr:
+    if not staged.refine_acceleration:
+        return staged.impact_count
     n_terms = max(1, len(staged.acceleration_cost.terms))
     # one impact outweighs any change in total acceleration
     return staged.impact_count + staged.acceleration_cost * (0.5 / (n_terms * staged.acceleration_scale))
@@ -132,7 +137,8 @@ def refine(staged: StagedModel, x: np.ndarray, config: StageConfig) -> tuple[np.
     m.add(staged.primary >= staged.primary.value(x) - 1e-7, group=f"keep {staged.primary_name}")
     m.set_objective(_stage2_objective(staged), maximize=False)
     options = SolverOptions(time_limit_s=config.refine_time_s, node_limit=config.refine_nodes, mip_gap=1e-3,
-                            threads=config.threads, verbose=config.verbose, seed=config.seed, warm_start=x)
+                            threads=config.threads, verbose=config.verbose, seed=config.seed, warm_start=x,
+                            heuristics=staged.refine_heuristics)
     result = solve(m, config.solver, options)
     stopped = (Status.OPTIMAL, Status.NODE_LIMIT, Status.TIME_LIMIT)
     if result.x is not None and result.status in stopped and not m.check(result.x, 1e-5):

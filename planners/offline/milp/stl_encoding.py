@@ -95,13 +95,19 @@ class STLEncoder:
         regions: name -> convex polygon.
         bound_propagation: bound every robustness variable by what its predicates can reach (else only by
             the scene's diagonal; kept to measure the difference).
+        reuse_clearance: a predicate ``!in(body, region)`` on an interval where :meth:`clearance` already keeps
+            every point of the body at least m beyond a face of the region has robustness >= m: use m, a
+            constant, instead of encoding the faces again. Only for a planner that requires the task's
+            robustness >= 0 and does not maximise it (the impact-robust one): the value is a lower bound.
     """
 
     def __init__(self, model: Model, grid: Grid, points: Callable[[str, int], list[PointSet]],
                  boxes: dict[str, tuple[float, float, float, float]], regions: dict[str, ConvexPolygon],
-                 bound_propagation: bool = True) -> None:
+                 bound_propagation: bool = True, reuse_clearance: bool = False) -> None:
         self.model, self.grid, self.points, self.boxes, self.regions = model, grid, points, boxes, regions
         self.bound_propagation = bound_propagation
+        self.reuse_clearance = reuse_clearance
+        self._clearance: dict[tuple[str, str, int], float] = {}
         corners = [(b[0], b[2]) for b in boxes.values()] + [(b[1], b[3]) for b in boxes.values()]
         corners += [tuple(v) for poly in regions.values() for v in poly.vertices]
         xs, ys = [c[0] for c in corners], [c[1] for c in corners]
@@ -256,6 +262,8 @@ class STLEncoder:
 
     def _outside(self, body: str, region: str, k: int, first_point_only: bool) -> LinExpr:
         """r <= distance outside one face of the region, for every control point (Eq. 22)."""
+        if self.reuse_clearance and not first_point_only and (body, region, k) in self._clearance:
+            return LinExpr.of(self._clearance[(body, region, k)])
         r = self._var(f"!in({body},{region})@{k}", self.predicate_upper_bound(body, region, inside=False))
         self._beyond_one_face(body, region, k if not first_point_only else -1,
                               self._pts(body, max(k, 0), first_point_only), r, self.group)
@@ -299,6 +307,7 @@ class STLEncoder:
     def clearance(self, body: str, region: str, k: int, margin_m: float, group: str) -> None:
         """Keep the body's whole interval k at least ``margin_m`` outside the region (solid obstacles)."""
         self._beyond_one_face(body, region, k, self.points(body, k), margin_m, group)
+        self._clearance[(body, region, k)] = max(margin_m, self._clearance.get((body, region, k), -math.inf))
 
     # ------------------------------------------------------------------------------- min / max
     def _combine(self, f: Formula, rs: list[LinExpr], tag: str) -> LinExpr:
