@@ -259,6 +259,20 @@ def check_impact_robust(plan: Plan, scenario: Scenario, tol: float) -> list[str]
     return bad
 
 
+def box_coordinates(plan: Plan, c: ImpactCopies, position: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+    """The object's normalised pre-impact box coordinates xi = [[xi_p_x, xi_v_x], [xi_p_y, xi_v_y]] at the
+    impact of ``c`` for its state (position at the impact, velocity just before): 0 at the nominal, +-1 on
+    the box faces (a zero half-width gives 0: that coordinate is known)."""
+    funnel, obj = plan.funnels[c.object], plan.bodies[c.object]
+    k = int(round((c.time_s - funnel.t0_s) / funnel.dt_s))
+    hp, hv = funnel.position_halfwidth_m[k], funnel.velocity_halfwidth_mps[k - 1]
+    dp = np.asarray(position, dtype=float) - obj.position(c.time_s)
+    dv = np.asarray(velocity, dtype=float) - pre_velocity_of(obj, c.time_s)
+    xi_p = np.divide(dp, hp, out=np.zeros(2), where=hp > 1e-12)
+    xi_v = np.divide(dv, hv, out=np.zeros(2), where=hv > 1e-12)
+    return np.stack([xi_p, xi_v], axis=1)
+
+
 def copy_targets(c: ImpactCopies, plan: Plan, scenario: Scenario) -> np.ndarray:
     """(4, 2): the velocity each copy sends its box vertex off with, by Eq. (5) (before the noise)."""
     from planners.offline.milp.impacts import mass_fractions
