@@ -217,3 +217,36 @@ def test_a_trimming_impact_raises_delta_on_the_long_throw():
     rng = np.random.default_rng(2)
     d = plan.delta_mps
     assert all(rollout(plan, scenario, rng.uniform(-d, d, (len(plan.impacts), 2))).ok for _ in range(300))
+
+
+def test_cli_plans_with_the_ir_planner_and_plots_the_funnel(tmp_path, capsys):
+    """``impact-env plan throw_and_catch_exp --planner ir`` writes a checked IR plan and a Fig. 5 plot."""
+    from impact_env.cli import main
+    from planners.plotting import plot_plan
+
+    out, png = tmp_path / "ir.json", tmp_path / "ir.png"
+    assert main(["plan", "throw_and_catch_exp", "--planner", "ir", "--quiet", "--out", str(out),
+                 "--plot", str(png)]) == 0
+    text = capsys.readouterr().out
+    assert "delta = 0.05000 m/s" in text and "O1 ends within" in text
+    plan = Plan.load(out)
+    scenario = load_scenario("throw_and_catch_exp")
+    plan.check(scenario, tol=1e-6)
+    assert png.stat().st_size > 10_000
+    fig = plot_plan(scenario, plan)
+    ax_xy, ax_pos, ax_vel = fig.axes[:3]
+    funnel = plan.funnels["O1"]
+    boxes = sum(np.any(h > 1e-9) for h in funnel.position_halfwidth_m[1:])
+    # one swept hull per interval and one outlined box per knot with a spread, on top of the scenario's patches
+    assert len(ax_xy.patches) >= funnel.intervals + boxes
+    assert len(ax_pos.collections) >= 2 and len(ax_vel.collections) >= 2 * funnel.intervals
+    assert "delta = 0.0500 m/s" in fig._suptitle.get_text()
+
+
+def test_cli_rejects_ir_options_for_the_sr_planner(capsys):
+    from impact_env.cli import main
+
+    assert main(["plan", "throw_and_catch_exp", "--copy-intervals", "2"]) == 2
+    assert "--copy-intervals applies to the impact-robust planner only" in capsys.readouterr().err
+    assert main(["plan", "throw_and_catch_exp", "--planner", "best"]) == 2
+    assert "unknown planner 'best'; choose one of: sr, ir" in capsys.readouterr().err
