@@ -52,7 +52,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 def _env_kwargs(args: argparse.Namespace) -> dict:
     return {"reward_mode": args.reward, "fuel_penalty": args.fuel_penalty, "restitution": args.restitution,
-            "thrust_noise": args.thrust_noise, "initial_position_noise_m": args.init_noise}
+            "thrust_noise": args.thrust_noise, "initial_position_noise_m": args.init_noise,
+            "impact_velocity_noise_mps": args.impact_noise}
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -134,6 +135,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--restitution", type=float, default=None, help="simulate with this e (model mismatch)")
     p.add_argument("--thrust-noise", type=float, default=0.0, help="std of multiplicative thrust noise")
     p.add_argument("--init-noise", type=float, default=0.0, help="objects' initial position noise radius (m)")
+    p.add_argument("--impact-noise", type=float, default=0.0, metavar="M",
+                   help="uniform error in [-M, M] m/s per axis on an object's velocity after each robot impact")
     p.set_defaults(func=_cmd_run)
 
     for ep in entry_points(group=COMMANDS_GROUP):

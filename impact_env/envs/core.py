@@ -82,16 +82,19 @@ class TransportCore:
         restitution: simulate with this restitution instead of the scenario's (model mismatch studies).
         thrust_noise: standard deviation of multiplicative thrust noise (0.05 = 5 %), re-clipped to limits.
         initial_position_noise_m: objects start uniformly within this radius of their scenario position.
+        impact_velocity_noise_mps: after each robot-object impact the object's velocity gets a uniform error in
+            [-this, this] m/s per axis (drawn from the reset seed): the error an impact-robust plan tolerates.
     """
 
     def __init__(self, scenario: Scenario | str, reward_mode: str = "dense", fuel_penalty: float = 0.0,
                  restitution: float | None = None, thrust_noise: float = 0.0,
-                 initial_position_noise_m: float = 0.0) -> None:
+                 initial_position_noise_m: float = 0.0, impact_velocity_noise_mps: float = 0.0) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if reward_mode not in REWARD_MODES:
             raise EnvConfigError(f"reward_mode must be one of {REWARD_MODES}, got {reward_mode!r}")
         for name, value in (("fuel_penalty", fuel_penalty), ("thrust_noise", thrust_noise),
-                            ("initial_position_noise_m", initial_position_noise_m)):
+                            ("initial_position_noise_m", initial_position_noise_m),
+                            ("impact_velocity_noise_mps", impact_velocity_noise_mps)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise EnvConfigError(f"{name} must be a finite number >= 0, got {value!r}")
         if restitution is not None and not (isinstance(restitution, (int, float)) and 0.0 <= restitution <= 1.0):
@@ -101,6 +104,7 @@ class TransportCore:
         self.restitution = restitution
         self.thrust_noise = float(thrust_noise)
         self.initial_position_noise_m = float(initial_position_noise_m)
+        self.impact_velocity_noise_mps = float(impact_velocity_noise_mps)
 
         sc = self.scenario
         self.n_robots = len(sc.robots)
@@ -144,7 +148,8 @@ class TransportCore:
                 r = self.initial_position_noise_m * math.sqrt(rng.uniform())
                 a = rng.uniform(0.0, 2.0 * math.pi)
                 overrides[body.name] = (body.position_m[0] + r * math.cos(a), body.position_m[1] + r * math.sin(a))
-        self.world = World(self.scenario, restitution=self.restitution, initial_positions_m=overrides)
+        self.world = World(self.scenario, restitution=self.restitution, initial_positions_m=overrides,
+                           impact_velocity_noise_mps=self.impact_velocity_noise_mps, rng=rng)
         self._rng = rng
         self.step_count = 0
         self.log = EpisodeLog()

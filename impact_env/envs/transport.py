@@ -61,7 +61,9 @@ class TransportEnv(gym.Env, EzPickle):
     ``scenario`` (name, path or Scenario; default ``"corridor"``), ``reward_mode``, ``fuel_penalty``,
     ``restitution`` (simulate with another e than the scenario's), ``thrust_noise`` (std of multiplicative
     thrust noise), ``initial_position_noise_m``, ``render_mode`` (``"rgb_array"`` or ``"human"``),
-    ``render_width_px``.
+    ``render_width_px``, ``impact_velocity_noise_mps`` (after each robot-object impact, a uniform error in
+    [-this, this] m/s per axis on the object's velocity, drawn from the reset seed; 0 by default, so the
+    dynamics of v0 are unchanged).
 
     ## Version history
     * v0: initial release.
@@ -72,14 +74,15 @@ class TransportEnv(gym.Env, EzPickle):
     def __init__(self, scenario: Scenario | str = "corridor", reward_mode: str = "dense", fuel_penalty: float = 0.0,
                  restitution: float | None = None, thrust_noise: float = 0.0,
                  initial_position_noise_m: float = 0.0, render_mode: str | None = None,
-                 render_width_px: int = 600) -> None:
+                 render_width_px: int = 600, impact_velocity_noise_mps: float = 0.0) -> None:
         EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
-                          initial_position_noise_m, render_mode, render_width_px)
+                          initial_position_noise_m, render_mode, render_width_px, impact_velocity_noise_mps)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
                                   restitution=restitution, thrust_noise=thrust_noise,
-                                  initial_position_noise_m=initial_position_noise_m)
+                                  initial_position_noise_m=initial_position_noise_m,
+                                  impact_velocity_noise_mps=impact_velocity_noise_mps)
         self.scenario = self.core.scenario
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.scenario.control_period_s))
         self.render_mode = render_mode

@@ -38,16 +38,19 @@ class TransportParallelEnv(ParallelEnv, EzPickle):
     def __init__(self, scenario: Scenario | str = "corridor", reward_mode: str = "dense", fuel_penalty: float = 0.0,
                  restitution: float | None = None, thrust_noise: float = 0.0,
                  initial_position_noise_m: float = 0.0, max_cycles: int | None = None,
-                 render_mode: str | None = None, render_width_px: int = 600) -> None:
+                 render_mode: str | None = None, render_width_px: int = 600,
+                 impact_velocity_noise_mps: float = 0.0) -> None:
         EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
-                          initial_position_noise_m, max_cycles, render_mode, render_width_px)
+                          initial_position_noise_m, max_cycles, render_mode, render_width_px,
+                          impact_velocity_noise_mps)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         if max_cycles is not None and (not isinstance(max_cycles, int) or max_cycles < 1):
             raise ValueError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
         self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
                                   restitution=restitution, thrust_noise=thrust_noise,
-                                  initial_position_noise_m=initial_position_noise_m)
+                                  initial_position_noise_m=initial_position_noise_m,
+                                  impact_velocity_noise_mps=impact_velocity_noise_mps)
         self.scenario = self.core.scenario
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.scenario.control_period_s))
         self.max_cycles = max_cycles
