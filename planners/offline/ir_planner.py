@@ -81,6 +81,8 @@ class IRPlannerConfig(PlannerConfig):
         velocity_mps) half-widths for objects without a ``[final_box]`` entry. copy_intervals: grid
         intervals before and after an impact on which the robot's copies may differ (room to reach the box
         vertices within the thrust limits; default: the scenario's ``[planner] copy_intervals``, else 2).
+        disjunctive_resets: the box resets in Balas' convex-hull form (False: big-M switching, the baseline
+        of ``benchmarks/planner.py``).
     """
 
     acceleration_weight: float = 0.0
@@ -88,6 +90,7 @@ class IRPlannerConfig(PlannerConfig):
     min_delta_mps: float = 1e-3
     default_final_box: tuple[float, float] = DEFAULT_FINAL_BOX
     copy_intervals: int | None = None
+    disjunctive_resets: bool = True
 
 
 @dataclass
@@ -150,7 +153,7 @@ def build_ir_model(scenario: Scenario, config: IRPlannerConfig) -> IRModel:
         raise PlannerError(f"copy_intervals must be in 1..{n // 2} (half the grid's {n} intervals), got {window}")
     resets = add_copy_impacts(model, robots, boxes, impacts, scenario.restitution, scenario.world_box, window)
     for box in boxes:
-        box.add_propagation(model, impacts, resets[box.spec.name])
+        box.add_propagation(model, impacts, resets[box.spec.name], disjunctive=config.disjunctive_resets)
         box.add_bounds(model)
         box.add_final_box(model, *ends[box.spec.name])
     add_robot_separation(model, robots, scenario.world_box)

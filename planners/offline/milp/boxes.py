@@ -90,7 +90,8 @@ class ObjectBox:
 
     # ------------------------------------------------------------------------------------- constraints
     def add_propagation(self, model: Model, impacts: ImpactVars,
-                        resets: dict[tuple[str, int], tuple[list[LinExpr], list[LinExpr], float]]) -> None:
+                        resets: dict[tuple[str, int], tuple[list[LinExpr], list[LinExpr], float]],
+                        disjunctive: bool = True) -> None:
         """Box half-widths, free flight, and the impact resets, as the convex hull of each knot's disjunction.
 
         ``resets[(robot, k)] = (A per axis, B per axis, bound of |A| and |B|)``: the feedback that robot's
@@ -106,6 +107,8 @@ class ObjectBox:
         an impact could reset a whole spread, and the LP bound on delta never left its cap. The bounds M are
         L and V, except for the noise generator: its position part is at most delta_max t_k (it grows by at
         most delta_max per second from t = 0), which halved HiGHS's nodes on obstacle_avoidance.
+        ``disjunctive=False`` switches the generators with big-M rows instead (the baseline of
+        ``benchmarks/planner.py``; same optimum, weaker relaxation).
         """
         n, name = self.grid.intervals, self.spec.name
         L, V, d_ub = self.half_extent, self.vmax, self.delta_ub
@@ -114,6 +117,9 @@ class ObjectBox:
             hit = sum(impacts.at(obj=name, knot=k), LinExpr())
             miss = 1 - hit
             here = [(robot, fb) for (robot, knot), fb in resets.items() if knot == k]
+            if not disjunctive:
+                self._switch_big_m(model, impacts, k, hit, here)
+                continue
             d_h = model.add_var(0.0, d_ub, name=f"{name}.delta_hit[{k}]")
             model.add([d_h <= self.delta, d_h <= hit * d_ub, d_h >= self.delta - miss * d_ub], group="impact reset")
             gp_k, gv_k = [[None, None] for _ in range(GENERATORS)], [[None, None] for _ in range(GENERATORS)]
@@ -183,6 +189,32 @@ class ObjectBox:
                     model.add([w >= g, w >= -g], group=group)
                     bound = bound + w
                 model.add(self.hv[k][a] >= bound, group=group)
+
+    def _switch_big_m(self, model: Model, impacts: ImpactVars, k: int, hit: LinExpr,
+                      here: list[tuple[str, tuple[list[LinExpr], list[LinExpr], float]]]) -> None:
+        """The generators after knot k as variables switched by big-M rows: free flight unless hit, the reset
+        of the robot that hits otherwise (each M the range of the difference it relaxes)."""
+        name, L, V, d_ub = self.spec.name, self.half_extent, self.vmax, self.delta_ub
+        gp = [[model.add_var(0.0 if i == 2 else -L[a], L[a], name=f"{name}.gp[{k}][{i}]") for a in range(2)]
+              for i in range(GENERATORS)]
+        gv = [[model.add_var(0.0 if i == 2 else -V[a], d_ub if i == 2 else V[a], name=f"{name}.gv[{k}][{i}]")
+               for a in range(2)] for i in range(GENERATORS)]
+        for i in range(GENERATORS):
+            for a in range(2):
+                _equal_unless(model, gp[i][a], self.pre_gp(k, i, a), hit, 2 * L[a], "box propagation")
+                _equal_unless(model, gv[i][a], self.gv[k - 1][i][a], hit, d_ub if i == 2 else 2 * V[a],
+                              "box propagation")
+        for robot, (a_fb, b_fb, m_fb) in here:
+            miss = 1 - impacts.z[(robot, name, k)]
+            for a in range(2):
+                _equal_unless(model, gp[0][a], self.hp[k][a], miss, 2 * L[a], "impact reset")
+                _equal_unless(model, gp[1][a], LinExpr(), miss, L[a], "impact reset")
+                _equal_unless(model, gp[2][a], LinExpr(), miss, L[a], "impact reset")
+                _equal_unless(model, gv[0][a], a_fb[a], miss, V[a] + m_fb, "impact reset")
+                _equal_unless(model, gv[1][a], b_fb[a], miss, V[a] + m_fb, "impact reset")
+                _equal_unless(model, gv[2][a], self.delta, miss, d_ub, "impact reset")
+        self.gp.append(gp)
+        self.gv.append(gv)
 
     def add_bounds(self, model: Model) -> None:
         """The whole box inside the object's allowed region, and its velocities within the bounds."""
