@@ -46,7 +46,7 @@ from planners.online.identification import IdentificationConfig, ImpactIdentifie
 from planners.online.keep_off import boundary_keep_off, object_keep_off, robot_keep_off, segment_limits
 from planners.online.mission import MissionConfig, MissionPlanner
 from planners.online.mpc import FreeflyerMPC, MPCConfig
-from planners.online.reference import ContactStrategy, ReferenceSelector
+from planners.online.reference import ContactStrategy, PlanContact, ReferenceSelector
 from planners.plan import Plan, PlannedImpact
 
 
@@ -59,6 +59,10 @@ class ExpertConfig:
     mission when it leaves the tolerance (:class:`~planners.online.mission.MissionConfig`). ``safe_segments``:
     replanned segments respect the world box, obstacles and other robots, and the MPC keeps off the other
     robots and the nearest wall or obstacle face (else only the nearest object, as in the paper).
+    ``aim_final_position``: after an object's last planned impact, send it to its planned end position
+    rather than only at its planned velocity (:class:`~planners.online.reference.PlanContact`).
+    ``disc_offset``: before each approach, fly the plan shifted to where a disc (not the planner's point)
+    meets the object (:meth:`~planners.online.reference.ReferenceSelector._offset_toward`).
     Margins (m) are added to the radii. ``replan_intervals``: the local replanner starts this many grid
     intervals before an impact. ``contact_window_s``: from this long before a pending impact the keep-off on
     its object is lifted. ``late_grace_s``: a planned impact not yet observed is still approached this long
@@ -68,6 +72,8 @@ class ExpertConfig:
     identification: bool = True
     mission_replanning: bool = True
     safe_segments: bool = True
+    aim_final_position: bool = True
+    disc_offset: bool = True
     object_margin_m: float = 0.03
     robot_margin_m: float = 0.05
     wall_margin_m: float = 0.03
@@ -80,7 +86,8 @@ class ExpertConfig:
     @classmethod
     def paper(cls, **overrides: Any) -> ExpertConfig:
         """The paper's stack: local replanning at planned impacts only."""
-        return cls(**{"identification": False, "mission_replanning": False, "safe_segments": False, **overrides})
+        return cls(**{"identification": False, "mission_replanning": False, "safe_segments": False,
+                      "aim_final_position": False, "disc_offset": False, **overrides})
 
     def __post_init__(self) -> None:
         for name in ("object_margin_m", "robot_margin_m", "wall_margin_m", "contact_window_s", "late_grace_s"):
@@ -144,7 +151,9 @@ class Expert:
         self.identifier = ImpactIdentifier(sc.restitution, {b.name: b.mass_kg for b in sc.bodies},
                                            frozenset(self._robot_names), frozenset(self._object_names),
                                            cfg.identification_config)
-        self.selector = ReferenceSelector(plan, self.grid_dt, self.dt, strategy, cfg.replan_intervals)
+        strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
+        self.selector = ReferenceSelector(plan, self.grid_dt, self.dt, strategy, cfg.replan_intervals,
+                                          disc_offset=cfg.disc_offset, box=self._safe_box)
         self.mission = MissionPlanner(sc, plan, cfg.mission, planner_config) if cfg.mission_replanning else None
         self.stats = ExpertStats()
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}
@@ -216,6 +225,12 @@ class Expert:
         self._impacts_by_robot = {r.name: [(k, i) for k, i in enumerate(plan.impacts) if i.robot == r.name]
                                   for r in self.robots}
 
+    def _safe_box(self, robot: Body) -> tuple[float, float, float, float]:
+        """The box a robot's centre stays in: the world box shrunk by its radius and the wall margin."""
+        xmin, xmax, ymin, ymax = self.scenario.world_box
+        r = robot.radius_m + self.config.wall_margin_m
+        return xmin + r, xmax - r, ymin + r, ymax - r
+
     def _model(self, robot: str, obj: str) -> tuple[float, tuple[float, float]]:
         """(restitution, (m_robot, m_object)) of the pair: identified, or the scenario file's."""
         if self.config.identification:
@@ -248,9 +263,11 @@ class Expert:
         times = t + self.dt * np.arange(n + 1)
         limits = None
         if cfg.safe_segments:
-            others = [self._planned_path(o.name) for o in self.robots if o.name != name]
             speed = float(np.hypot(*(robot.velocity_bound_mps or (1.0, 1.0))))
             reach = speed * self.grid_dt * (cfg.replan_intervals + 1)
+            # only robots that either robot could reach within a replanned segment can meet it
+            others = [self._planned_path(o.name) for o in self.robots if o.name != name
+                      and np.hypot(*(states[self._index[o.name]][:2] - state[:2])) < 2 * reach + 2 * robot.radius_m]
             limits = segment_limits(self.scenario, robot, state[:2], others,
                                     2 * robot.radius_m + cfg.robot_margin_m, reach)
         ref = self.selector.robot_reference(robot, self.scenario.body, t, state, nxt, past, times,
@@ -259,13 +276,15 @@ class Expert:
         avoid = [object_keep_off(robot, self.objects, t, times, state[:2], object_states, self.plan.impacts,
                                  ref.approaching, cfg.object_margin_m, cfg.contact_window_s)]
         if cfg.safe_segments:
+            a_max = float(np.hypot(*robot.thrust_limit_N)) / robot.mass_kg
+            speed = float(np.hypot(*state[3:5]))
+            reach = speed * n * self.dt + 0.5 * a_max * (n * self.dt) ** 2  # how far it can get in the horizon
             for other in self.robots:
                 if other.name != name:
-                    avoid.append(robot_keep_off(robot, other, self._other_centers(other.name, step, states, n),
-                                                cfg.robot_margin_m))
-            v_max = float(np.hypot(*robot.thrust_limit_N)) / robot.mass_kg
-            speed = float(np.hypot(*state[3:5]))
-            reach = speed * n * self.dt + 0.5 * v_max * (n * self.dt) ** 2
+                    centers = self._other_centers(other.name, step, states, n)
+                    gap = float(np.min(np.hypot(*(centers - state[:2]).T)))
+                    if gap < 2 * reach + robot.radius_m + other.radius_m + cfg.robot_margin_m:
+                        avoid.append(robot_keep_off(robot, other, centers, cfg.robot_margin_m))
             wall = boundary_keep_off(self.scenario, robot, state[:2], n + 1, reach, cfg.wall_margin_m)
             if wall is not None:
                 avoid.append(wall)
@@ -319,7 +338,9 @@ class Expert:
             "unplanned_contacts": dict(sorted(self.book.unplanned.items())),
             "config": {"identification": self.config.identification,
                        "mission_replanning": self.config.mission_replanning,
-                       "safe_segments": self.config.safe_segments},
+                       "safe_segments": self.config.safe_segments,
+                       "aim_final_position": self.config.aim_final_position,
+                       "disc_offset": self.config.disc_offset},
         }
         if self.config.identification:
             out["identification"] = self.identifier.report()

@@ -60,20 +60,35 @@ class ContactStrategy(Protocol):
 
 
 class PlanContact:
-    """The spatially robust plan's strategy: send the object to its next planned impact (see module doc)."""
+    """The spatially robust plan's strategy: send the object to its next planned impact (see module doc).
+
+    ``aim_final_position``: after the object's LAST planned impact, also correct its position error by the
+    end of the plan (leave with the planned velocity plus the error divided by the time left), instead of
+    the paper's planned velocity alone. A stop that is exact but happens where the object really is (not
+    where the plan had it) would otherwise leave the object short of its planned rest point for good."""
+
+    def __init__(self, aim_final_position: bool = False) -> None:
+        self.aim_final_position = aim_final_position
 
     def contact(self, query: ContactQuery) -> ContactPlan | None:
-        v_des = desired_object_velocity(query.plan, query.impact, query.object_position)
+        v_des = desired_object_velocity(query.plan, query.impact, query.object_position, self.aim_final_position)
         m_r, m_o = query.masses
         return required_contact(query.object_position, query.object_velocity, v_des, m_r, query.robot.radius_m,
                                 m_o, query.obj.radius_m, query.restitution)
 
 
-def desired_object_velocity(plan: Plan, impact: PlannedImpact, position_at_impact: np.ndarray) -> np.ndarray:
-    """Leave the impact so as to be where the plan needs the object at its next impact."""
+def desired_object_velocity(plan: Plan, impact: PlannedImpact, position_at_impact: np.ndarray,
+                            aim_final_position: bool = False) -> np.ndarray:
+    """Leave the impact so as to be where the plan needs the object at its next impact (after the last one:
+    the planned velocity, corrected toward the planned end position if ``aim_final_position``)."""
     later = [i for i in plan.impacts_of(impact.object) if i.time_s > impact.time_s + 1e-9]
     if not later:
-        return np.asarray(impact.object_velocity_after, float)
+        v = np.asarray(impact.object_velocity_after, float)
+        left = plan.tf_s - impact.time_s
+        if aim_final_position and left > 1e-6:
+            end = plan.bodies[impact.object].position(plan.tf_s)
+            v = v + (end - (np.asarray(position_at_impact, float) + v * left)) / left
+        return v
     nxt = min(later, key=lambda i: i.time_s)
     return (np.asarray(nxt.position) - position_at_impact) / (nxt.time_s - impact.time_s)
 
@@ -103,18 +118,29 @@ class ReferenceSelector:
     Args:
         plan: the plan flown (swap with :meth:`set_plan` after a mission replan).
         grid_dt: the plan's grid interval (s); dt: the control period (s).
-        strategy: the :class:`ContactStrategy` (default :class:`PlanContact`).
+        strategy: the :class:`ContactStrategy` (default :class:`PlanContact` without final aiming).
         replan_intervals: replanning starts this many grid intervals before an impact.
+        thrust_fraction: share of the thrust limit a replanned segment may use (see acceleration_bound).
+        disc_offset: before the approach window, fly the plan shifted to where a disc meets the object
+        (:meth:`_offset_toward`); box: robot -> the box its centre must stay in (for that shift).
     """
 
     def __init__(self, plan: Plan, grid_dt: float, dt: float, strategy: ContactStrategy | None = None,
-                 replan_intervals: int = 2) -> None:
+                 replan_intervals: int = 2, thrust_fraction: float = 0.8, disc_offset: bool = False,
+                 box: Callable[[Body], tuple[float, float, float, float]] | None = None) -> None:
         self.grid_dt, self.dt = grid_dt, dt
+        self.disc_offset, self.box = disc_offset, box
+        self.thrust_fraction = thrust_fraction
         self.strategy = strategy or PlanContact()
         self.replan_intervals = replan_intervals
         self.replanned: dict[str, Replanned] = {}
         self.replans = 0
         self.set_plan(plan)
+
+    def acceleration_bound(self, robot: Body) -> tuple[float, float]:
+        """Per-axis acceleration a replanned segment may ask for: ``thrust_fraction`` of the thrust limit
+        (heading held, so body axes are world axes), the rest is the MPC's margin for disturbances."""
+        return tuple(self.thrust_fraction * f / robot.mass_kg for f in robot.thrust_limit_N)
 
     def set_plan(self, plan: Plan) -> None:
         self.plan = plan
@@ -154,12 +180,15 @@ class ReferenceSelector:
             # after the impact: rejoin the plan from where the robot really is
             t1 = current.post.t1_s
             current.post = replan_segment(state[:2], state[3:5], self.sampler.position(name, t1),
-                                          self.sampler.velocity(name, t1), t, t1, robot.velocity_bound_mps, limits)
+                                          self.sampler.velocity(name, t1), t, t1, robot.velocity_bound_mps, limits,
+                                          self.acceleration_bound(robot))
         elif current is not None:
             del self.replanned[name]
             current = None
         approaching = approaching and current is not None and current.impact is nxt
         reference = self._reference(name, times, current, approaching)
+        if self.disc_offset and nxt is not None and not approaching:
+            self._offset_toward(reference, times, robot, obj_of(nxt.object), nxt, past_times, window_start)
         impact_spec = None
         if approaching and current.pre.t1_s > t:
             k = round((current.pre.t1_s - t) / self.dt)
@@ -182,9 +211,35 @@ class ReferenceSelector:
         pre, post = replan_around_impact(t, state[:2], state[3:5], impact.time_s, contact, t_rejoin,
                                          self.sampler.position(robot.name, t_rejoin),
                                          self.sampler.velocity(robot.name, t_rejoin),
-                                         robot.velocity_bound_mps, limits)
+                                         robot.velocity_bound_mps, limits, self.acceleration_bound(robot))
         self.replans += 1
         return Replanned(impact, pre, post)
+
+    def _offset_toward(self, ref: np.ndarray, times: np.ndarray, robot: Body, obj: Body, impact: PlannedImpact,
+                       past_times: list[float], window_start: float) -> None:
+        """Shift the plan toward where a disc must be at the coming impact, in place.
+
+        The planner's bodies are points: at a planned impact the robot's centre is at the object's. A disc
+        must be ``r_R + r_O`` behind it along the contact normal, so a robot that flies the plan arrives too
+        close to speed up to the contact velocity (it then backs away or arrives slow). From its last
+        impact (or the start) to the approach window, the reference is the plan moved by that offset, faded
+        in with a quintic smoothstep (zero velocity and acceleration at both ends); then the replanner takes
+        over from a state that has the plan's velocity profile. Kept inside ``self.box`` if given."""
+        dv = np.subtract(impact.object_velocity_after, impact.object_velocity_before)
+        size = float(np.hypot(*dv))
+        t_a = max(past_times) + self.grid_dt if past_times else 0.0
+        if size < 1e-6 or window_start - t_a < self.grid_dt:
+            return
+        offset = -(robot.radius_m + obj.radius_m) * dv / size
+        u = np.clip((times - t_a) / (window_start - t_a), 0.0, 1.0)
+        s = u ** 3 * (10.0 - 15.0 * u + 6.0 * u ** 2)
+        ds = 30.0 * u ** 2 * (1.0 - u) ** 2 / (window_start - t_a)
+        ref[:, :2] += np.outer(s, offset)
+        ref[:, 2:] += np.outer(ds, offset)
+        if self.box is not None:
+            x0, x1, y0, y1 = self.box(robot)
+            np.clip(ref[:, 0], x0, x1, out=ref[:, 0])
+            np.clip(ref[:, 1], y0, y1, out=ref[:, 1])
 
     def _reference(self, name: str, times: np.ndarray, current: Replanned | None, approaching: bool) -> np.ndarray:
         """[x, y, vx, vy] at the horizon's nodes: the replanned segments where they apply, else the plan.

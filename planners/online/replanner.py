@@ -15,6 +15,9 @@ over degree-10 Bezier control points is solved (a high degree because bounding c
 conservative: the hull tightens with it):
 
 - velocity bounds (Eq. 25) on the velocity control points, per axis;
+- acceleration bounds (the thrust limits, as in the offline planner) on the acceleration control points,
+  so that the MPC can fly the segment: a segment that asks for more makes the robot arrive late and slow
+  (measured: 0.26 m/s instead of 0.30 at a planned impact, the object then off by 0.03 m/s);
 - "safe segments" (:class:`SegmentLimits`): every control point inside the world box shrunk by the robot's
   radius (the convex hull property then keeps the whole curve inside), every control point on the free side
   of given half-planes (an obstacle face, shifted out by the radius), and, at sample times, the robot's
@@ -66,10 +69,15 @@ def hermite(p0, v0, p1, v1, t0: float, t1: float) -> Segment:
     return Segment(t0, t1, np.array([p0, p0 + v0 * T / 3.0, p1 - v1 * T / 3.0, p1]))
 
 
-def within_bounds(segment: Segment, velocity_bound) -> bool:
-    if velocity_bound is None:
-        return True
-    return bool(np.all(np.abs(segment.velocity_control_points()) <= np.asarray(velocity_bound) + 1e-9))
+def within_bounds(segment: Segment, velocity_bound, acceleration_bound=None) -> bool:
+    """Velocity (and acceleration) control points within the per-axis bounds: the hull bounds the curve."""
+    if velocity_bound is not None and \
+            not np.all(np.abs(segment.velocity_control_points()) <= np.asarray(velocity_bound) + 1e-9):
+        return False
+    if acceleration_bound is not None and len(segment.control_points) > 2 and \
+            not np.all(np.abs(segment.acceleration_control_points()) <= np.asarray(acceleration_bound) + 1e-9):
+        return False
+    return True
 
 
 def _sample_phases() -> np.ndarray:
@@ -98,9 +106,11 @@ def _separation_rows(segment: Segment, limits: SegmentLimits) -> list[tuple[np.n
     return rows
 
 
-def respects(segment: Segment, velocity_bound, limits: SegmentLimits | None, tol: float = 1e-7) -> bool:
-    """True if the segment keeps its velocity bound and the limits (on its control points / samples)."""
-    if not within_bounds(segment, velocity_bound):
+def respects(segment: Segment, velocity_bound, limits: SegmentLimits | None, tol: float = 1e-7,
+             acceleration_bound=None) -> bool:
+    """True if the segment keeps its velocity (and acceleration) bound and the limits (on its control points
+    and separation samples)."""
+    if not within_bounds(segment, velocity_bound, acceleration_bound):
         return False
     if limits is None:
         return True
@@ -113,20 +123,24 @@ def respects(segment: Segment, velocity_bound, limits: SegmentLimits | None, tol
     for n, b in limits.half_planes:
         if np.min(cp @ n) < b - tol:
             return False
-    return not any(n @ segment.position(segment.t0_s + s * segment.duration_s) < b - tol
-                   for s, n, b in _separation_rows(segment, limits))
+    rows = _separation_rows(segment, limits)
+    if not rows:
+        return True
+    phases = np.array([r[0] for r in rows])
+    points = bezier.evaluate(segment.control_points, phases)
+    return all(n @ p >= b - tol for (_, n, b), p in zip(rows, points))
 
 
 _REG = 1e-8  # Tikhonov weight toward the straight line: makes the Hessian definite, moves the optimum < 1 um
 
 
 @lru_cache(maxsize=4)
-def _qp(degree: int) -> tuple[ca.Function, np.ndarray, int]:
-    """The QP of one segment, built once: (solver, Hessian, number of rows).
+def _qp(degree: int) -> tuple[ca.Function, np.ndarray, int, np.ndarray]:
+    """The QP of one segment, built once: (solver, Hessian, number of rows, velocity-row pattern).
 
     Variables are the control points ``[x_0..x_d, y_0..y_d]``; the end positions and velocities fix the
-    first two and last two control points of each axis (through their bounds). Rows: the velocity control
-    points (sparse), then ``MAX_HALF_PLANES`` half-plane blocks of d+1 rows and ``SEPARATION_SAMPLES``
+    first two and last two control points of each axis (through their bounds). Rows: the velocity and the
+    acceleration control points (sparse), then ``MAX_HALF_PLANES`` half-plane blocks of d+1 rows and ``SEPARATION_SAMPLES``
     separation rows (dense). DAQP (a dual active-set method for small dense QPs, bundled with CasADi) takes
     about 0.15 ms here, a quarter of qrqp's time on the same problem.
     """
@@ -140,25 +154,32 @@ def _qp(degree: int) -> tuple[ca.Function, np.ndarray, int]:
     hess = np.zeros((nv, nv))
     hess[:n, :n] = hess[n:, n:] = 2.0 * d2.T @ d2
     hess += 2.0 * _REG * np.eye(nv)
-    rows = 2 * degree + MAX_HALF_PLANES * n + SEPARATION_SAMPLES
+    na = 2 * (degree - 1)  # acceleration control points, both axes
+    rows = 2 * degree + na + MAX_HALF_PLANES * n + SEPARATION_SAMPLES
     pattern = np.zeros((rows, nv))
+    diff = np.zeros((2 * degree + na, nv))  # velocity (per degree / T) and acceleration (per d (d-1) / T^2) rows
     for axis in range(2):
         for i in range(degree):
-            pattern[axis * degree + i, axis * n + i:axis * n + i + 2] = 1.0
-    pattern[2 * degree:] = 1.0
+            diff[axis * degree + i, axis * n + i:axis * n + i + 2] = (-1.0, 1.0)
+        for i in range(degree - 1):
+            diff[2 * degree + axis * (degree - 1) + i, axis * n + i:axis * n + i + 3] = (1.0, -2.0, 1.0)
+    pattern[:2 * degree + na] = diff != 0.0
+    pattern[2 * degree + na:] = 1.0
     solver = ca.conic("replan_qp", "daqp", {"h": ca.DM(hess).sparsity(), "a": ca.DM(pattern).sparsity()},
                       {"error_on_fail": False})
-    return solver, hess, rows
+    return solver, hess, rows, diff
 
 
 def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree: int = DEGREE,
-                    limits: SegmentLimits | None = None, around: Segment | None = None) -> Segment | None:
+                    limits: SegmentLimits | None = None, around: Segment | None = None,
+                    acceleration_bound=None) -> Segment | None:
     """The convex QP: min integral |r''|^2 over degree-``degree`` Bezier control points, end states fixed,
-    velocity control points within the per-axis bound, and the ``limits``. None if infeasible.
+    velocity (and acceleration) control points within the per-axis bounds, and the ``limits``. None if
+    infeasible.
 
     ``around`` is the segment the separation rows are linearised about (default: the Hermite cubic).
     """
-    solver, hess, rows = _qp(degree)
+    solver, hess, rows, diff = _qp(degree)
     n = degree + 1
     T = t1 - t0
     p0, v0, p1, v1 = (np.asarray(a, float) for a in (p0, v0, p1, v1))
@@ -166,12 +187,16 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
     lba = np.full(rows, -np.inf)
     uba = np.full(rows, np.inf)
     k = degree / T
-    for axis in range(2):  # velocity control points (Eq. 25)
-        for i in range(degree):
-            A[axis * degree + i, axis * n + i:axis * n + i + 2] = (-k, k)
+    na = 2 * (degree - 1)
+    A[:2 * degree] = k * diff[:2 * degree]  # velocity control points (Eq. 25)
+    A[2 * degree:2 * degree + na] = degree * (degree - 1) / T ** 2 * diff[2 * degree:]  # acceleration ones
+    for axis in range(2):
         if velocity_bound is not None:
             lba[axis * degree:(axis + 1) * degree] = -float(velocity_bound[axis])
             uba[axis * degree:(axis + 1) * degree] = float(velocity_bound[axis])
+        if acceleration_bound is not None:
+            rows_a = slice(2 * degree + axis * (degree - 1), 2 * degree + (axis + 1) * (degree - 1))
+            lba[rows_a], uba[rows_a] = -float(acceleration_bound[axis]), float(acceleration_bound[axis])
     lbx = np.full(2 * n, -np.inf)
     ubx = np.full(2 * n, np.inf)
     if limits is not None and limits.box is not None:
@@ -184,15 +209,16 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
     values = [p0[0], p0[0] + v0[0] / k, p1[0] - v1[0] / k, p1[0], p0[1], p0[1] + v0[1] / k, p1[1] - v1[1] / k, p1[1]]
     lbx[fixed] = ubx[fixed] = values
     if limits is not None:
-        r = 2 * degree
+        r = 2 * degree + na
         for normal, offset in limits.half_planes[:MAX_HALF_PLANES]:
             normal = np.asarray(normal, float)
             lo = min(offset, normal @ p0, normal @ p1)  # never ask the fixed ends to move
-            A[r:r + n, :n] = np.diag(np.full(n, normal[0]))
-            A[r:r + n, n:] = np.diag(np.full(n, normal[1]))
+            idx = np.arange(n)
+            A[r + idx, idx] = normal[0]
+            A[r + idx, n + idx] = normal[1]
             lba[r:r + n] = lo
             r += n
-        r = 2 * degree + MAX_HALF_PLANES * n
+        r = 2 * degree + na + MAX_HALF_PLANES * n
         base = around if around is not None else hermite(p0, v0, p1, v1, t0, t1)
         for s, normal, offset in _separation_rows(base, limits)[:SEPARATION_SAMPLES]:
             w = bezier.bernstein(degree, s)[0]
@@ -205,22 +231,31 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
         return None
     x = sol["x"].full().ravel()
     seg = Segment(t0, t1, np.column_stack([x[:n], x[n:]]))
-    if not within_bounds(seg, None if velocity_bound is None else np.asarray(velocity_bound) + 1e-6):
+    if not within_bounds(seg, None if velocity_bound is None else np.asarray(velocity_bound) + 1e-6,
+                         None if acceleration_bound is None else np.asarray(acceleration_bound) + 1e-6):
         return None
     return seg
 
 
 def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
-                   limits: SegmentLimits | None = None) -> Segment:
-    """Closed form if it respects the bounds and limits, else the bounded QP (with the limits, then without
-    them if they cannot be met together with the end states), else the closed form."""
+                   limits: SegmentLimits | None = None, acceleration_bound=None) -> Segment:
+    """The cheapest segment that meets what can be met, in this order of giving up:
+
+    the closed form if it respects everything; else the QP with every bound and limit; else without the
+    limits (the MPC's keep-offs still guard walls and robots) but flyable (acceleration bound); else with the
+    velocity bound alone (the paper's replanner); else the closed form."""
     segment = hermite(p0, v0, p1, v1, t0, t1)
-    if respects(segment, velocity_bound, limits):
+    if respects(segment, velocity_bound, limits, acceleration_bound=acceleration_bound):
         return segment
+    attempts = []
     if limits is not None:
-        safe = bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound, limits=limits)
-        if safe is not None:
-            return safe
+        attempts.append((limits, acceleration_bound))
+    if acceleration_bound is not None:
+        attempts.append((None, acceleration_bound))
+    for lim, acc in attempts:
+        qp = bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound, limits=lim, acceleration_bound=acc)
+        if qp is not None:
+            return qp
     if within_bounds(segment, velocity_bound):
         return segment
     return bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound) or segment
@@ -228,14 +263,14 @@ def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
 
 def replan_around_impact(t_now: float, position, velocity, t_impact: float, contact, t_rejoin: float,
                          rejoin_position, rejoin_velocity, velocity_bound=None,
-                         limits: SegmentLimits | None = None) -> tuple[Segment, Segment]:
+                         limits: SegmentLimits | None = None, acceleration_bound=None) -> tuple[Segment, Segment]:
     """The robot's new pre- and post-impact segments (see the module docstring)."""
     if not t_now < t_impact < t_rejoin:
         raise ValueError(f"need t_now < t_impact < t_rejoin, got {t_now}, {t_impact}, {t_rejoin}")
     pre = replan_segment(position, velocity, contact.robot_position, contact.robot_velocity_before, t_now, t_impact,
-                         velocity_bound, limits)
+                         velocity_bound, limits, acceleration_bound)
     post = replan_segment(contact.robot_position, contact.robot_velocity_after, rejoin_position, rejoin_velocity,
-                          t_impact, t_rejoin, velocity_bound, limits)
+                          t_impact, t_rejoin, velocity_bound, limits, acceleration_bound)
     return pre, post
 
 
