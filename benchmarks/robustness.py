@@ -211,7 +211,8 @@ def plot(cells: list[dict], scenarios, path: str) -> None:
         for j, axis in enumerate(axes_names):
             ax = grid[i, j]
             for stack in STACKS:
-                pts = [(0.0, c) for c in cells if c["scenario"] == name and c["stack"] == stack and c["axis"] == "nominal"]
+                pts = [(0.0, c) for c in cells
+                       if c["scenario"] == name and c["stack"] == stack and c["axis"] == "nominal"]
                 pts += [(c["level"], c) for c in cells if c["scenario"] == name and c["stack"] == stack
                         and c["axis"] == axis]
                 if len(pts) < 2:

@@ -140,7 +140,8 @@ def _qp(degree: int) -> tuple[ca.Function, np.ndarray, int, np.ndarray]:
 
     Variables are the control points ``[x_0..x_d, y_0..y_d]``; the end positions and velocities fix the
     first two and last two control points of each axis (through their bounds). Rows: the velocity and the
-    acceleration control points (sparse), then ``MAX_HALF_PLANES`` half-plane blocks of d+1 rows and ``SEPARATION_SAMPLES``
+    acceleration control points (sparse), then ``MAX_HALF_PLANES`` half-plane blocks of d+1 rows and
+    ``SEPARATION_SAMPLES``
     separation rows (dense). DAQP (a dual active-set method for small dense QPs, bundled with CasADi) takes
     about 0.15 ms here, a quarter of qrqp's time on the same problem.
     """
