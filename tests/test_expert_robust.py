@@ -177,3 +177,29 @@ def test_unplanned_contacts_are_counted_per_pair(hold_stop):
               {**ev, "time": 9.0, "a": "R1", "b": "wall"}, {**ev, "time": 9.5, "a": "R2", "b": "R1"}]
     assert book.observe(events, {"R1", "R2"}, {"O1"}) == [0]  # the planned throw, once
     assert dict(book.unplanned) == {"O1-R1": 1, "R1-wall": 1, "R1-R2": 1}
+
+
+# ------------------------------------------------------------------------------------- new scenarios
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["ping_pong_stop", "relay", "two_objects"])
+def test_new_scenarios_plan_with_highs_and_fly_nominally_without_unplanned_robot_contacts(name):
+    scenario = load_scenario(name)
+    plan = plan_spatially_robust(scenario)
+    assert plan.robustness > 0 and plan.mip_gap < 1e-3
+    result, expert = fly(scenario, plan, ExpertConfig())
+    assert result.success, result.robustness
+    robots = {r.name for r in scenario.robots}
+    assert not any(set(pair.split("-")) & robots for pair in expert.report()["unplanned_contacts"])
+
+
+@pytest.mark.slow
+def test_safe_segments_remove_the_relays_wall_contacts():
+    """The paper's stack touches the walls in the relay (R1 starts 0.3 m off two walls); safe segments alone
+    bring the count to zero."""
+    scenario = load_scenario("relay")
+    plan = plan_spatially_robust(scenario)
+    _, paper = fly(scenario, plan, ExpertConfig.paper())
+    _, safe = fly(scenario, plan, ExpertConfig.paper(safe_segments=True))
+    walls = {k: v for k, v in paper.report()["unplanned_contacts"].items() if "wall" in k}
+    assert sum(walls.values()) > 0
+    assert not any("wall" in k for k in safe.report()["unplanned_contacts"])
