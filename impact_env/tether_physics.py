@@ -13,7 +13,8 @@ Fidelity levels (``fidelity=``):
   integrated by one classical Runge-Kutta (RK4) step; with no tether it stops. One tether: a straight line
   toward the anchor at speed ``w``. Two: the branch of the hyperbola ``|x - a_1| - |x - a_2| = const`` (both
   distances shrink at the same rate ``w (1 + cos theta)``) at speed ``2 w cos(theta / 2)``, ``theta`` the angle
-  between the tethers at the cargo.
+  between the tethers at the cargo. Where the cargo touches a wall, the velocity component into it is dropped
+  (it slides, frictionless).
 - ``"reel"``: each tether is a pymunk slide joint whose maximum length is set, every substep, to the current
   distance minus ``w dt``, with the joint's ``max_force`` at the winch limit and its error fully corrected in
   one step. So a winch reels in at least at ``w`` whenever its force suffices, can only pull (a slack tether
@@ -118,12 +119,19 @@ class TetherWorld:
         self._winch_N = station.winch_force_limit_N
         self._stop2 = station.stop_radius_m ** 2
         self._anchors = [tuple(map(float, a.position_m)) for a in station.anchors]
+        ends = np.array(station.walls, dtype=float)  # (n_walls, 2, 2)
+        self._wall_a = ends[:, 0]
+        self._wall_e = ends[:, 1] - ends[:, 0]
+        self._wall_ee = np.einsum("ij,ij->i", self._wall_e, self._wall_e)
 
         space = pymunk.Space()
         space.gravity = (0.0, 0.0)
         space.damping = 1.0
         space.collision_slop = _SLOP_M
         space.iterations = 30  # two taut tethers couple through the cargo: solve them to ~1e-12 (default 10)
+        # push overlaps apart within a few steps (pymunk's default leaves 53 % of one after a 0.1 s step); the bias
+        # is a separate velocity in pymunk, so it adds no kinetic energy
+        space.collision_bias = 1e-10
         self.space = space
         elasticity = math.sqrt(station.restitution)
         r = station.cargo.radius_m
@@ -249,7 +257,7 @@ class TetherWorld:
         if self.fidelity == "kinematic":
             if active:
                 nx, ny = _rk4_eq5(x, y, [self._anchors[t.anchor] for t in active], w, dt)
-                vx, vy = (nx - x) / dt, (ny - y) / dt
+                vx, vy = self._slide_along_walls(x, y, (nx - x) / dt, (ny - y) / dt)
             else:
                 vx = vy = 0.0
             cargo.velocity = (vx, vy)
@@ -299,6 +307,25 @@ class TetherWorld:
         for robot, t in enumerate(self._tethers):
             if t is not None and not t.pulling and t.ready_s <= self.time_s + 1e-9:
                 self._activate(robot, t)
+
+    def _slide_along_walls(self, x: float, y: float, vx: float, vy: float) -> tuple[float, float]:
+        """Eq. (5) without inertia meets a wall: drop the velocity component into each wall the cargo touches.
+
+        The cargo then slides along the wall (no friction) instead of being driven into it every substep, which
+        pymunk's contacts would only undo a step later.
+        """
+        rel = np.array([x, y]) - self._wall_a
+        s = np.clip(np.einsum("ij,ij->i", rel, self._wall_e) / self._wall_ee, 0.0, 1.0)
+        away = rel - s[:, None] * self._wall_e  # from the nearest wall point to the centre
+        dist = np.hypot(away[:, 0], away[:, 1])
+        touching = np.flatnonzero(dist <= self.station.cargo.radius_m + 2.0 * _SLOP_M)
+        for _ in range(2):  # two passes settle a corner (two walls)
+            for i in touching:
+                nx, ny = away[i] / dist[i]
+                into = -(vx * nx + vy * ny)
+                if into > 0.0:
+                    vx, vy = vx + into * nx, vy + into * ny
+        return vx, vy
 
     def _check_tethers(self) -> None:
         x, y = self.position_m
