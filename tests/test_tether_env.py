@@ -294,3 +294,46 @@ def test_team_reward_matches_the_gym_env_and_episode_end():
         np.testing.assert_array_equal(par.state(), gobs)
         steps += 1
     assert steps == 600 and all(terms.values()) and not any(truncs.values()) and ginfo["is_success"]
+
+
+# ------------------------------------------------------------------------------------------------ CLI
+
+
+def test_cli_lists_shows_and_runs_stations(tmp_path, capsys):
+    import json
+
+    from impact_env.cli import main
+    from impact_env.scenario import scenario_names
+    from impact_env.station import station_names
+
+    assert not set(scenario_names()) & set(station_names())  # one name space for both kinds of file
+    assert main(["scenarios"]) == 0
+    out = capsys.readouterr().out
+    assert "corridor" in out and all(name in out for name in station_names())
+    png = tmp_path / "L.png"
+    assert main(["show", "L", "--out", str(png)]) == 0 and png.read_bytes()[:4] == b"\x89PNG"
+    paths = {k: tmp_path / f"run.{k}" for k in ("json", "png", "mp4")}
+    assert main(["run", "T", "--controller", "random", "--fidelity", "reel", "--episodes", "2", "--seed", "5",
+                 "--json", str(paths["json"]), "--plot", str(paths["png"]), "--video", str(paths["mp4"])]) == 0
+    summary = json.loads(paths["json"].read_text())
+    assert summary["station"] == "T" and summary["env_options"]["fidelity"] == "reel"
+    assert [e["seed"] for e in summary["episodes"]] == [5, 6] and summary["switches"] > 0
+    assert paths["png"].stat().st_size > 1000 and paths["mp4"].stat().st_size > 1000
+    zero = tmp_path / "zero.json"
+    assert main(["run", "L", "--controller", "zero", "--json", str(zero)]) == 0
+    result = json.loads(zero.read_text())
+    # nobody pulls: the cargo stays at its start, 16 m left and 11 m below the goal box's near corner
+    assert result["path_length_m"] == 0.0 and result["robustness"] == pytest.approx(-math.hypot(15.5, 10.5))
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["run", "L", "--restitution", "0.5"], "--restitution applies to impact scenarios, not to station 'L'"),
+    (["run", "corridor", "--fidelity", "reel"], "--fidelity and --energy-penalty apply to tether stations"),
+    (["run", "L", "--reward", "conjuncts"], "reward_mode must be one of ('dense', 'sparse')"),
+])
+def test_cli_station_errors_are_one_line(argv, message, capsys):
+    from impact_env.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
