@@ -109,6 +109,14 @@ class Station:
         return np.array([a.position_m for a in self.anchors], dtype=float).reshape(-1, 2)
 
     @cached_property
+    def notches(self) -> np.ndarray:
+        """(m, 2) the reflex vertices (interior angle > 180 deg): the only corners a tether can snag on."""
+        p = np.array(self.polygon, dtype=float)
+        before, after = p - np.roll(p, 1, axis=0), np.roll(p, -1, axis=0) - p
+        cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+        return p[cross < 0.0].reshape(-1, 2)
+
+    @cached_property
     def shapely_polygon(self) -> Polygon:
         """The station as a shapely Polygon (prepared for repeated predicates)."""
         poly = Polygon(self.polygon)
