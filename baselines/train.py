@@ -17,8 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from baselines import hyperparams
-from baselines.cli import ALGOS  # the one list (cli.py must stay importable without the [rl] extra)
+from baselines import ALGOS, hyperparams
 from impact_env import GYM_IDS
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario

@@ -27,8 +27,8 @@ import numpy as np
 from impact_env.envs.transport import TransportEnv
 from impact_env.rollout import robot_object_impacts, run_episode
 from impact_env.scenario import load_scenario, scenario_names
+from planners.offline.sr_planner import plan_spatially_robust
 from planners.plan import Plan
-from planners.sr_planner import plan_spatially_robust
 
 _WORKER: dict = {}
 

@@ -22,11 +22,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from planners.errors import PlannerError, PlanTimeoutError
-from planners.solvers import SOLVERS as SOLVER_NAMES
+from planners.offline.solvers import SOLVERS as SOLVER_NAMES
 
 if TYPE_CHECKING:
+    from planners.offline.solvers.base import Progress
     from planners.plan import Plan
-    from planners.solvers.base import Progress
 
 EXIT_TIME_LIMIT = 3
 
@@ -62,7 +62,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _cmd_plan(args: argparse.Namespace) -> int:
     from impact_env.scenario import load_scenario
-    from planners.sr_planner import PlannerConfig, build_model, plan_spatially_robust
+    from planners.offline.sr_planner import PlannerConfig, build_model, plan_spatially_robust
 
     _check_options(args)
     scenario = load_scenario(args.scenario)

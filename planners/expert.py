@@ -34,11 +34,11 @@ import numpy as np
 from impact_env.envs.core import ACTION_PER_ROBOT, OBS_PER_BODY
 from impact_env.scenario import Scenario, load_scenario
 from planners.errors import PlannerError
-from planners.impact_model import required_contact
-from planners.mpc import AvoidSpec, FreeflyerMPC, ImpactSpec, MPCConfig
+from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
+from planners.online.impact_model import required_contact
+from planners.online.mpc import AvoidSpec, FreeflyerMPC, ImpactSpec, MPCConfig
+from planners.online.replanner import replan_around_impact, replan_segment
 from planners.plan import Plan, PlannedImpact, Segment
-from planners.replanner import replan_around_impact, replan_segment
-from planners.sr_planner import PlannerConfig, plan_spatially_robust
 
 KEEP_OFF_MARGIN_M = 0.03  # extra clearance around objects' discs away from planned impacts
 REPLAN_INTERVALS = 2  # replanning starts this many grid intervals before an impact (after the previous one)

@@ -245,5 +245,7 @@ def test_property_any_orthogonal_station(polygon, spacing, reverse):
         samples = [seg.interpolate(t, normalized=True) for t in np.linspace(0.0, 1.0, 101)]
         if visible:
             assert all(poly.buffer(1e-9).covers(q) for q in samples)
-        else:
+        elif not any(seg.distance(Point(v)) < 1e-6 for v in s.polygon):
+            # hidden: the segment leaves the polygon by more than rounding, unless it grazes a corner, where
+            # either answer is right (the tether would touch the wall there)
             assert not grown.covers(seg)

@@ -2,7 +2,7 @@
 
 When a robot is on its pre-impact segment and its object flies freely toward the planned impact, the
 replanner takes the robot's current state, the contact it must make (from the circular impact model,
-:func:`planners.impact_model.required_contact`: contact position, pre- and post-impact velocities) and
+:func:`planners.online.impact_model.required_contact`: contact position, pre- and post-impact velocities) and
 the point where it rejoins the offline plan, and returns two segments:
 
     pre:  (p_now, v_now) at t_now      -> (p_contact, v_before) at t_impact
@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from planners.milp.model import LinExpr, Model
+from planners.offline.milp.model import LinExpr, Model
+from planners.offline.solvers import solve
+from planners.offline.solvers.base import SolverOptions, Status
 from planners.plan import Segment
-from planners.solvers import solve
-from planners.solvers.base import SolverOptions, Status
 
 
 def hermite(p0, v0, p1, v1, t0: float, t1: float) -> Segment:

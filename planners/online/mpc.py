@@ -63,8 +63,8 @@ import casadi as ca
 import numpy as np
 
 from impact_env.scenario import Body
-from planners.freeflyer import _rk4_sx, rk4_step, state_from_sim
-from planners.mpc_specs import (
+from planners.online.freeflyer import _rk4_sx, rk4_step, state_from_sim
+from planners.online.mpc_specs import (
     _NSA,
     _NSI,
     _WEIGHTS,

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planners.milp.impacts import mass_fractions
+from planners.offline.milp.impacts import mass_fractions
 
 
 def disc_impact(p_robot, v_robot, m_robot: float, p_object, v_object, m_object: float, e: float

@@ -11,8 +11,8 @@ import time
 from collections.abc import Callable
 
 from planners.errors import InfeasiblePlanError
-from planners.milp.model import LinExpr, Model
-from planners.solvers.base import SolveResult, SolverOptions, Status
+from planners.offline.milp.model import LinExpr, Model
+from planners.offline.solvers.base import SolveResult, SolverOptions, Status
 
 DEFAULT_CHECK_TIME_LIMIT_S = 10.0
 
@@ -53,7 +53,7 @@ def _check_options(options: SolverOptions | None) -> SolverOptions:
 
 
 def _proven_infeasible(model: Model, solver: str, options: SolverOptions) -> bool:
-    from planners.solvers import solve  # the package imports nothing from here at import time
+    from planners.offline.solvers import solve  # the package imports nothing from here at import time
 
     return solve(model, solver, options).status is Status.INFEASIBLE
 

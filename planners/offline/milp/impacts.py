@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from planners.milp.model import LinExpr, Model
-from planners.milp.trajectories import ObjectTrajectory, RobotTrajectory, velocity_bound
+from planners.offline.milp.model import LinExpr, Model
+from planners.offline.milp.trajectories import ObjectTrajectory, RobotTrajectory, velocity_bound
 
 
 @dataclass

@@ -25,8 +25,8 @@ import numpy as np
 from impact_env.geometry import ConvexPolygon
 from impact_env.stl import Always, And, Eventually, FalseFormula, Formula, InRegion, Not, Or, TrueFormula, Until
 from planners.errors import UnsupportedSpecError
-from planners.milp.model import LinExpr, Model
-from planners.milp.trajectories import Grid, Point
+from planners.offline.milp.model import LinExpr, Model
+from planners.offline.milp.trajectories import Grid, Point
 
 
 class NotInRegion(Formula):
@@ -120,8 +120,8 @@ class STLEncoder:
             poly = self.regions[region]
             x0, x1, y0, y1 = self.boxes[body]
             if inside:
-                from planners.solvers import solve
-                from planners.solvers.base import Status
+                from planners.offline.solvers import solve
+                from planners.offline.solvers.base import Status
 
                 lp = Model(name="chebyshev")
                 cx, cy, r = lp.add_var(x0, x1), lp.add_var(y0, y1), lp.add_var(-self.bound, self.bound)

@@ -1,4 +1,4 @@
-"""Configuration, inputs and outputs of the impact-aware MPC (the controller is planners/mpc.py)."""
+"""Configuration, inputs and outputs of the impact-aware MPC (the controller is planners/online/mpc.py)."""
 
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ Maximises the STL spatial robustness rho of the scenario's task subject to satis
 point-mass impact law in real velocities, conditional smoothness, velocity bounds, thrust limits, robot
 separation and obstacle clearance. The model is solved by an open-source solver (HiGHS by default); a
 second stage fixes the binaries and smooths the robots' accelerations with a convex QP (Eq. 28) while
-keeping rho. See ``planners/milp/`` for each constraint family.
+keeping rho. See ``planners/offline/milp/`` for each constraint family.
 """
 
 from __future__ import annotations
@@ -20,11 +20,11 @@ import numpy as np
 
 from impact_env.scenario import Scenario
 from planners.errors import PlannerError, PlanTimeoutError
-from planners.milp.collisions import add_robot_object_separation, add_robot_separation
-from planners.milp.impacts import ImpactVars, add_impacts
-from planners.milp.model import LinExpr, Model
-from planners.milp.stl_encoding import STLEncoder
-from planners.milp.trajectories import (
+from planners.offline.milp.collisions import add_robot_object_separation, add_robot_separation
+from planners.offline.milp.impacts import ImpactVars, add_impacts
+from planners.offline.milp.model import LinExpr, Model
+from planners.offline.milp.stl_encoding import STLEncoder
+from planners.offline.milp.trajectories import (
     Grid,
     ObjectTrajectory,
     RobotTrajectory,
@@ -33,9 +33,9 @@ from planners.milp.trajectories import (
     allowed_box,
     value,
 )
+from planners.offline.solvers import solve
+from planners.offline.solvers.base import Progress, SolverOptions, Status
 from planners.plan import BodyPlan, Plan, PlannedImpact, Segment
-from planners.solvers import solve
-from planners.solvers.base import Progress, SolverOptions, Status
 
 DEFAULT_INTERVALS = 10
 DEFAULT_DEGREE = 4
@@ -188,7 +188,7 @@ def plan_spatially_robust(scenario: Scenario, config: PlannerConfig | None = Non
                             warm_start=_warm_start(built, config.warm_start))
     result = solve(built.model, config.solver, options)
     if result.status == Status.INFEASIBLE:
-        from planners.solvers.diagnose import explain_infeasible
+        from planners.offline.solvers.diagnose import explain_infeasible
 
         if config.diagnose_infeasibility:
             # each check is capped: an undecided check keeps its group (a superset is still a true answer)

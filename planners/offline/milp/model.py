@@ -3,7 +3,7 @@
 Why not a modelling library: the planner needs one model that three solvers (HiGHS, SCIP, Gurobi) can
 take, constraint *groups* for infeasibility diagnosis (re-solve with groups left out), and nothing else;
 PuLP's CBC misreports time-limit stops as optimal and CasADi's CBC plugin returned wrong answers on these
-models (shared/reference/ecosystem.md). The model is plain data: the backends in ``planners/solvers``
+models (docs/background.md). The model is plain data: the backends in ``planners/offline/solvers``
 turn it into their own API.
 """
 

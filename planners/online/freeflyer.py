@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 
 from impact_env.scenario import Body
-from planners.mpc_specs import NU, NX, MPCInputError, _vector
+from planners.online.mpc_specs import NU, NX, MPCInputError, _vector
 
 
 def _xdot(x, u, mass_kg: float, inertia_kgm2: float, cos, sin):

@@ -19,9 +19,9 @@ import numpy as np
 from gurobipy import GRB
 
 from planners.errors import SolverNotAvailableError
-from planners.milp.model import Model
-from planners.solvers.base import Progress, SolveResult, SolverOptions, Status, limit_message
-from planners.solvers.diagnose import resolve_infeasible_or_unbounded
+from planners.offline.milp.model import Model
+from planners.offline.solvers.base import Progress, SolveResult, SolverOptions, Status, limit_message
+from planners.offline.solvers.diagnose import resolve_infeasible_or_unbounded
 
 NAME = "gurobi"
 _REPORT_INTERVAL_S = 1.0

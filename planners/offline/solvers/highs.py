@@ -2,7 +2,7 @@
 
 HiGHS solves LPs, MILPs and convex QPs, but not MIQPs. Never import casadi in a process that uses this
 module: highspy and CasADi's bundled HiGHS plugin each ship a ``libhighs.so.1`` and cannot both be loaded
-(shared/reference/ecosystem.md).
+(docs/background.md).
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ import time
 import highspy
 import numpy as np
 
-from planners.milp.model import Model
-from planners.solvers.base import Progress, SolveResult, SolverOptions, Status, limit_message
-from planners.solvers.diagnose import resolve_infeasible_or_unbounded
+from planners.offline.milp.model import Model
+from planners.offline.solvers.base import Progress, SolveResult, SolverOptions, Status, limit_message
+from planners.offline.solvers.diagnose import resolve_infeasible_or_unbounded
 
 NAME = "highs"
 _REPORT_INTERVAL_S = 1.0

@@ -4,7 +4,7 @@ The planner uses ONE time grid for all bodies: N intervals of equal duration dt 
 t_k = k dt. On interval k a robot is a degree-d Bezier curve (control points are variables) and an object
 a straight segment between its knot positions. Why a fixed grid: an impact law in real velocities needs
 the time-curve derivatives dh/ds of the four segments meeting at an impact to be equal
-(shared/reference/paper-scenarios.md, item 2), and a free-flying object needs equal durations on both
+(docs/background.md, item 2), and a free-flying object needs equal durations on both
 sides of every knot it crosses without an impact, so object segments all end up with one fixed duration
 anyway. Putting the robots on the same grid then makes every kinematic condition linear and EXACT:
 
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from impact_env.scenario import Body, Scenario
-from planners.milp.model import LinExpr, Model
+from planners.offline.milp.model import LinExpr, Model
 
 Point = tuple[LinExpr, LinExpr]
 

@@ -16,9 +16,9 @@ import pyscipopt
 from pyscipopt import SCIP_EVENTTYPE, Eventhdlr
 from pyscipopt.scip import Expr, ExprCons, Term
 
-from planners.milp.model import Model
-from planners.solvers.base import Progress, SolveResult, SolverOptions, Status, limit_message
-from planners.solvers.diagnose import resolve_infeasible_or_unbounded
+from planners.offline.milp.model import Model
+from planners.offline.solvers.base import Progress, SolveResult, SolverOptions, Status, limit_message
+from planners.offline.solvers.diagnose import resolve_infeasible_or_unbounded
 
 NAME = "scip"
 _REPORT_INTERVAL_S = 1.0

@@ -1,7 +1,7 @@
 """Solver backends behind one call: ``solve(model, solver="highs", options=None) -> SolveResult``.
 
 Backends are imported only when used: importing this package loads no solver library (highspy must not
-share a process with CasADi's bundled HiGHS plugin, shared/reference/ecosystem.md).
+share a process with CasADi's bundled HiGHS plugin, docs/background.md).
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import importlib
 import importlib.util
 
 from planners.errors import SolverNotAvailableError
-from planners.milp.model import Model
-from planners.solvers.base import Progress, SolveResult, SolverOptions, Status
+from planners.offline.milp.model import Model
+from planners.offline.solvers.base import Progress, SolveResult, SolverOptions, Status
 
 SOLVERS = ("highs", "scip", "gurobi")
 
@@ -42,5 +42,5 @@ def solve(model: Model, solver: str = "highs", options: SolverOptions | None = N
         importlib.import_module(_PACKAGES[solver])
     except ImportError as err:
         raise SolverNotAvailableError(f"{_INSTALL_HINTS[solver]} ({err})") from err
-    backend = importlib.import_module(f"planners.solvers.{solver}")
+    backend = importlib.import_module(f"planners.offline.solvers.{solver}")
     return backend.solve(model, options)

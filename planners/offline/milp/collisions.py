@@ -11,8 +11,8 @@ body is simultaneous with interval k of another.
 
 from __future__ import annotations
 
-from planners.milp.model import LinExpr, Model
-from planners.milp.trajectories import RobotTrajectory
+from planners.offline.milp.model import LinExpr, Model
+from planners.offline.milp.trajectories import RobotTrajectory
 
 
 def _bounding_box(model: Model, robot, k: int, box) -> tuple[LinExpr, ...]:
