@@ -63,9 +63,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise ImpactEnvError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.seed < 0:
+        raise ImpactEnvError(f"--seed must be >= 0, got {args.seed}")
     sc = load_scenario(args.scenario)
     env = TransportEnv(sc, render_mode="rgb_array" if args.video else None, **_env_kwargs(args))
-    controller = make_controller(args.controller, sc, plan=args.plan)
+    controller = make_controller(args.controller, sc, plan=args.plan, trust_pickle=True if args.trust_pickle else None)
     results = []
     for k in range(args.episodes):
         seed = args.seed + k
@@ -134,6 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--restitution", type=float, default=None, help="simulate with this e (model mismatch)")
     p.add_argument("--thrust-noise", type=float, default=0.0, help="std of multiplicative thrust noise")
     p.add_argument("--init-noise", type=float, default=0.0, help="objects' initial position noise radius (m)")
+    p.add_argument("--trust-pickle", action="store_true",
+                   help="a controller may unpickle its files (e.g. an old model folder's vecnormalize.pkl); a "
+                        "pickle can run any code: only for files you made yourself")
     p.set_defaults(func=_cmd_run)
 
     for ep in entry_points(group=COMMANDS_GROUP):
