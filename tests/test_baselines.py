@@ -4,6 +4,8 @@ and the PettingZoo parameter-sharing route."""
 from __future__ import annotations
 
 import json
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +16,8 @@ pytest.importorskip("supersuit")
 from baselines import hyperparams  # noqa: E402
 from baselines.train import TrainConfig, train  # noqa: E402
 from impact_env.cli import main  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parents[1] / "baselines" / "results"
 
 
 def test_hyperparameter_files_parse_without_eval():
@@ -33,7 +37,7 @@ def test_hyperparameter_files_parse_without_eval():
 def test_ppo_smoke_train_save_load_and_run(tmp_path):
     run_dir = train(TrainConfig(algo="ppo", scenario="corridor", timesteps=2048, n_envs=2, out=str(tmp_path),
                                 eval_freq=1024, eval_episodes=1, progress_bar=False))
-    assert (run_dir / "model.zip").is_file() and (run_dir / "vecnormalize.pkl").is_file()
+    assert (run_dir / "model.zip").is_file() and (run_dir / "vecnormalize.json").is_file()
     assert list((run_dir / "tb").iterdir())  # TensorBoard logs
     assert json.loads((run_dir / "train.json").read_text())["timesteps"] == 2048
     out = tmp_path / "run.json"
@@ -157,8 +161,7 @@ def test_bench_model_template_must_exist_for_every_scenario(tmp_path):
     from baselines.bench import parse_controllers
     from impact_env.errors import ImpactEnvError
 
-    (tmp_path / "corridor").mkdir()
-    (tmp_path / "corridor" / "model.zip").write_bytes(b"")
+    shutil.copytree(RESULTS / "models" / "ppo_corridor", tmp_path / "corridor")
     spec, = parse_controllers(f"ppo:{tmp_path}/{{scenario}}/model.zip", ["corridor"])
     assert spec.label == "ppo"
     with pytest.raises(ImpactEnvError, match="obstacle_avoidance/model.zip"):
