@@ -136,9 +136,10 @@ def test_final_box_smaller_than_the_grid_can_trim_to_is_infeasible():
     scenario = scenario_from_dict(data)
     with pytest.raises(InfeasiblePlanError) as exc:
         plan_impact_robust(scenario)
+    # without either of these two groups the model is feasible, so the deletion filter keeps both whatever
+    # the load (the others it names depend on which of its time-capped checks finish)
     assert "final box" in exc.value.groups
     assert any(g.startswith("delta >= min_delta_mps") for g in exc.value.groups)
-    assert "task: F[0, 20] in(O1, goal)" in exc.value.groups
 
 
 def test_options_are_checked():

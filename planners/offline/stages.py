@@ -3,7 +3,8 @@
 Both planners maximise one quantity (rho, the STL spatial robustness, or delta, the tolerated post-impact
 velocity error) and then, keeping it, prefer plans with fewer impacts and less acceleration:
 
-1. stage 1: maximise the primary quantity (with tie-breaks below the MIP gap), to proven optimality;
+1. stage 1: maximise the primary quantity (with tie-breaks below the MIP gap), to proven optimality (or
+   to ``node_limit`` nodes: the mission replanner's budget; stage 2 then runs only if it proved optimality);
 2. stage 2: keep it (>= its optimum - 1e-7), minimise the number of impacts plus the L1 acceleration
    (Eq. 28 in L1 form; impacts only if the model says so, and acceleration is then left to stage 3),
    warm-started from stage 1, cut after ``refine_nodes`` branch-and-bound nodes. A node
@@ -28,12 +29,16 @@ from planners.offline.milp.model import LinExpr, Model
 from planners.offline.solvers import solve
 from planners.offline.solvers.base import SolveResult, SolverOptions, Status
 
+DIAGNOSE_NODES = 100  # branch-and-bound nodes per check of the infeasibility diagnosis
+DIAGNOSE_SAFETY_S = 20.0  # and a time limit per check that only a pathological model reaches
+
 
 class StageConfig(Protocol):
     """The options the stages read (both planners' configs have them)."""
 
     solver: str
     time_limit_s: float | None
+    node_limit: int | None
     mip_gap: float
     threads: int | None
     verbose: bool
@@ -80,21 +85,24 @@ def solve_stages(staged: StagedModel, config: StageConfig, scenario_name: str,
 
     Raises:
         InfeasiblePlanError: stage 1 is infeasible; ``.groups`` names the conflicting constraint groups
-            (found by re-solving with groups left out, each check capped at 2 s) if
+            (found by re-solving with groups left out, each check capped at ``DIAGNOSE_NODES`` nodes) if
             ``config.diagnose_infeasibility``.
         PlannerError: the solver failed.
         PlanTimeoutError: stage 1 found no solution within the time limit (with a solution, the caller
             decides: ``result.status`` is ``TIME_LIMIT``).
     """
-    options = SolverOptions(time_limit_s=config.time_limit_s, mip_gap=config.mip_gap, threads=config.threads,
-                            verbose=config.verbose, progress=progress, seed=config.seed, warm_start=warm_start)
+    options = SolverOptions(time_limit_s=config.time_limit_s, node_limit=config.node_limit, mip_gap=config.mip_gap,
+                            threads=config.threads, verbose=config.verbose, progress=progress, seed=config.seed,
+                            warm_start=warm_start)
     result = solve(staged.model, config.solver, options)
     if result.status == Status.INFEASIBLE:
         if config.diagnose_infeasibility:
             from planners.offline.solvers.diagnose import explain_infeasible
 
-            # each check is capped: an undecided check keeps its group (a superset is still a true answer)
-            raise explain_infeasible(staged.model, config.solver, SolverOptions(time_limit_s=2.0))
+            # each check is capped by work, not time (an undecided check keeps its group): under the former
+            # 2 s cap, which groups were named depended on how busy the machine was
+            raise explain_infeasible(staged.model, config.solver,
+                                     SolverOptions(time_limit_s=DIAGNOSE_SAFETY_S, node_limit=DIAGNOSE_NODES))
         raise InfeasiblePlanError(f"no plan satisfies the task of {scenario_name!r}")
     if result.status in (Status.ERROR, Status.UNBOUNDED):
         raise PlannerError(f"solver {config.solver} failed on {scenario_name!r}: {result.status.value} "
