@@ -21,11 +21,11 @@ $(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml
 	touch $@
 
 # The dev install: torch pinned to the CPU build first (an unpinned torch pulls several GB of CUDA
-# wheels), then stable-baselines3, supersuit, SCIP (so the tests cover that planner backend too) and the
-# test tools.
+# wheels), then stable-baselines3, supersuit, SCIP (so the tests cover that planner backend too), z3 (the
+# tether planners' thesis pipeline) and the test tools.
 $(VENV)/.dev-installed: $(VENV)/.base-installed
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e '.[rl,dev,scip]'
+	$(BIN)/pip install --quiet -e '.[rl,dev,scip,tether]'
 	touch $@
 
 # The main demo: plan the corridor (MILP, HiGHS), fly it with the expert (replanner + MPC) in the
