@@ -193,8 +193,11 @@ class ReachabilityPlanner:
         return len(self.levels)
 
     # -------------------------------------------------------------------------------------- plans
-    def plan(self, start: np.ndarray | tuple[float, float] | None = None) -> TetherPlan:
+    def plan(self, start: np.ndarray | tuple[float, float] | None = None, prefer: int | None = None) -> TetherPlan:
         """The plan with the fewest pulls from ``start`` (default the station's cargo start).
+
+        ``prefer``: an anchor to keep for the first pull if it is one of the fewest-pull choices (the expert
+        replanning while a tether already pulls).
 
         Raises:
             TetherInfeasibleError: the reachable set's fixed point does not contain the start (a proof).
@@ -217,7 +220,7 @@ class ReachabilityPlanner:
         here = x
         while n > 0:
             target = self.levels[n - 1]
-            choice = self._best_pull(here, target)
+            choice = self._best_pull(here, target, prefer if not pulls else None)
             if choice is None:
                 raise PlannerError(f"internal: level {n} contains {here.round(6).tolist()} but no pull reaches level "
                                    f"{n - 1} from it (numerical trouble at a region boundary)")
@@ -232,11 +235,14 @@ class ReachabilityPlanner:
                           stats={"levels": len(self.levels), "setup_s": self.setup_s, "level_s": self.level_s,
                                  "clearance_m": self.config.clearance_m})
 
-    def _best_pull(self, here: np.ndarray, target: BaseGeometry) -> tuple[int, np.ndarray] | None:
-        """The anchor and switch point of a pull from ``here`` into ``target``: deepest (capped), then shortest."""
+    def _best_pull(self, here: np.ndarray, target: BaseGeometry, prefer: int | None = None
+                   ) -> tuple[int, np.ndarray] | None:
+        """The anchor and switch point of a pull from ``here`` into ``target``: deepest (capped), then shortest;
+        ``prefer`` wins whenever it reaches the target at all."""
         best = None
         boundary = target.boundary
-        for a in self.cells:
+        order = ([prefer] if prefer in self.cells else []) + [a for a in self.cells if a != prefer]
+        for a in order:
             seg = pull_segment(self.station, self.free, here, a, self.stop_m)
             if seg is None:
                 continue
@@ -254,7 +260,7 @@ class ReachabilityPlanner:
             depth = shapely.distance(shapely.points(pts), boundary)
             depth = np.minimum(depth, shapely.distance(shapely.points(pts), self.free.boundary))
             length = np.linalg.norm(pts - here, axis=1)
-            score = np.minimum(depth, self.config.depth_cap_m) * 1e3 - length
+            score = np.minimum(depth, self.config.depth_cap_m) * 1e3 - length + (1e7 if a == prefer else 0.0)
             k = int(np.argmax(score))
             if best is None or score[k] > best[0]:
                 best = (score[k], a, pts[k])
