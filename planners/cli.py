@@ -57,12 +57,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", help="write the plan as JSON (planners.plan.Plan.save)")
     p.add_argument("--plot", help="write a PNG of the plan: xy view, positions and velocities over time")
     p.add_argument("--quiet", action="store_true", help="no header and no progress lines; only the result")
+    from planners.tether.cli import add_arguments as add_tether_arguments
+
+    add_tether_arguments(p)  # a tether station (impact-env plan L) is planned by planners/tether/cli.py
     p.set_defaults(func=_cmd_plan)
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
     from impact_env.scenario import load_scenario
+    from impact_env.station import is_station_file
     from planners.offline.sr_planner import PlannerConfig, build_model, plan_spatially_robust
+
+    if is_station_file(args.scenario):
+        from planners.tether.cli import plan_station
+
+        return plan_station(args)
 
     _check_options(args)
     scenario = load_scenario(args.scenario)
