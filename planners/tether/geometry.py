@@ -99,10 +99,12 @@ def shadow(anchor: np.ndarray, geom: BaseGeometry, far_m: float) -> BaseGeometry
 
 
 def shadow_quads(anchor: np.ndarray, geom: BaseGeometry, far_m: float) -> np.ndarray:
-    """The quadrilaterals (array of Polygons) whose union with ``geom`` is its shadow from ``anchor``.
+    """Polygons (an array) whose union with ``geom`` is its shadow from ``anchor``.
 
     Only the edges that face away from the light are needed: a point of the shadow outside ``geom`` lies on a
-    ray from the anchor that last leaves ``geom`` through such an edge.
+    ray from the anchor that last leaves ``geom`` through such an edge. A run of consecutive such edges turns
+    monotonically about the anchor, so the run and its far image (each vertex pushed ``far_m`` out along its
+    ray) bound one simple polygon: one piece per run rather than one quadrilateral per edge.
     """
     a = np.asarray(anchor, dtype=float)
     out = []
@@ -114,17 +116,32 @@ def shadow_quads(anchor: np.ndarray, geom: BaseGeometry, far_m: float) -> np.nda
             e0, e1 = c[:-1], c[1:]
             d = e1 - e0
             mid = 0.5 * (e0 + e1) - a
-            facing_away = (d[:, 1] * mid[:, 0] - d[:, 0] * mid[:, 1]) > 1e-12  # outward normal (dy, -dx) . ray
-            e0, e1 = e0[facing_away], e1[facing_away]
-            if not len(e0):
+            away = (d[:, 1] * mid[:, 0] - d[:, 0] * mid[:, 1]) > 1e-12  # outward normal (dy, -dx) . ray
+            if not away.any():
                 continue
-            d0, d1 = e0 - a, e1 - a
-            f0 = e0 + far_m * d0 / np.linalg.norm(d0, axis=1)[:, None]
-            f1 = e1 + far_m * d1 / np.linalg.norm(d1, axis=1)[:, None]
-            out.append(np.stack([e0, e1, f1, f0, e0], axis=1))
+            n = len(away)
+            if away.all():
+                runs = [np.arange(n)]
+            else:
+                first = int(np.flatnonzero(~away)[0])  # start the scan after a front-facing edge
+                order = (np.arange(n) + first) % n
+                runs, cur = [], []
+                for i in order:
+                    if away[i]:
+                        cur.append(i)
+                    elif cur:
+                        runs.append(np.asarray(cur))
+                        cur = []
+                if cur:
+                    runs.append(np.asarray(cur))
+            for run in runs:
+                chain = np.vstack([e0[run], e1[run[-1]][None, :]])
+                rays = chain - a
+                far = chain + far_m * rays / np.linalg.norm(rays, axis=1)[:, None]
+                out.append(np.vstack([chain, far[::-1], chain[:1]]))
     if not out:
         return np.array([], dtype=object)
-    return shapely.polygons(np.concatenate(out))
+    return np.array([Polygon(ring) for ring in out], dtype=object)
 
 
 def visibility_polygon(station: Station, anchor_index: int) -> BaseGeometry:
