@@ -12,9 +12,10 @@ its tether pulls yet) from the observation, and the tether events from ``info``,
    attaches ``t_switch`` before the switch point while the current one still pulls, and the current one lets go
    when the new tether pulls ("make before break"); with ``k = 1``, or when the next anchor is not yet in sight,
    the robot lets go and re-attaches;
-2. it replans from the current state (the exact planner's levels are kept, so this costs a forward read) at every
-   switch, when the cargo is more than ``deviation_m`` off the pull's line (inertia under ``reel`` and ``force``,
-   a wall contact), and when a tether snags, is blocked or arrives early;
+2. closed loop: every step it asks the planner whether the current pull, from where the cargo really is, still
+   lands in the level it was meant for, and where it should end there; when it does not (inertia under ``reel``
+   and ``force``, a wall contact), and when a tether snags, is blocked or arrives early, it replans from the
+   current state (the exact planner's levels are kept, so this costs a forward read);
 3. under ``reel`` and ``force`` a released cargo keeps moving, and a new tether keeps the velocity across it
    (the cargo swings around the new anchor). So at a switch the expert first brakes: a tether toward an anchor
    opposite the cargo's motion pulls until the velocity along the motion is gone, and the next pull starts from
@@ -32,6 +33,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import shapely
 
 from impact_env.envs.tether_core import ATTACH0, KEEP, RELEASE
 from impact_env.station import Station, load_station
@@ -42,6 +44,7 @@ from planners.tether.reachability import ReachabilityConfig, ReachabilityPlanner
 
 BRAKE_COS = -0.5  # an anchor brakes when its direction is within 120 degrees of opposite to the motion
 STOPPED_MPS = 0.01  # the cargo counts as at rest below this speed
+MOVING_MPS = 0.03  # under inertia, a new pull starts only below this speed (else the expert brakes first)
 
 
 @dataclass
@@ -60,19 +63,17 @@ class TetherExpert:
         station: the station the environment runs (or its name / path).
         plan: a plan to start from (e.g. ``TetherPlan.load(...)``); planned from the observed start if None.
         config: the exact planner's options.
-        deviation_m: replan when the cargo is this far (m) off the current pull's line.
     """
 
     name = "expert"
 
     def __init__(self, station: Station | str, plan: TetherPlan | None = None,
-                 config: ReachabilityConfig | None = None, deviation_m: float = 0.15) -> None:
+                 config: ReachabilityConfig | None = None) -> None:
         self.station = station if isinstance(station, Station) else load_station(station)
         if plan is not None and plan.station != self.station.name:
             raise PlannerError(f"the plan is for station {plan.station!r}, not {self.station.name!r}")
         self.planner = ReachabilityPlanner(self.station, config)
         self.initial_plan = plan
-        self.deviation_m = deviation_m
         st = self.station
         self.n_robots, self.n_anchors = st.n_robots, st.n_anchors
         self.k = st.k
@@ -93,9 +94,9 @@ class TetherExpert:
         self.index = 0
         self.braking: int | None = None  # the anchor of a braking tether
         self.brake_direction: np.ndarray | None = None
+        self._last_speed: float | None = None
         self.stats = ExpertStats()
         self._cache: tuple[int, np.ndarray] | None = None
-        self.failed = False
 
     def act(self, observation: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
         """One command per robot: 0 keep, 1 release, 2 + j attach to anchor j."""
@@ -110,8 +111,7 @@ class TetherExpert:
         held, pulling, los = self._decode(obs)
         events = (info or {}).get("events", [])
         commands = [KEEP] * self.n_robots
-        if not self.failed:
-            self._step(x, v, held, pulling, los, events, commands)
+        self._step(x, v, held, pulling, los, events, commands)
         action = np.asarray(commands, dtype=np.int64)
         self._cache = (step, action)
         self.stats.act_ms.append(1e3 * (time.perf_counter() - t0))
@@ -153,15 +153,18 @@ class TetherExpert:
 
     def _replan(self, x: np.ndarray, prefer: int | None = None) -> None:
         t0 = time.perf_counter()
+        x = self.planner.inside_free(x)  # a cargo pressed against a wall is a hair outside the free space
         try:
             self.plan = self.planner.plan(x, prefer=prefer)
         except TetherInfeasibleError:
             self.stats.infeasible += 1
-            self.plan = None
-            self.failed = True  # nothing reaches the goal from here: keep still rather than pull at random
+            self.plan = None  # nothing reaches the goal from here: keep still, try again next step
         self.index = 0
         self.stats.replans += 1
         self.stats.plan_ms.append(1e3 * (time.perf_counter() - t0))
+
+    def _target_level(self) -> int:
+        return int(self.plan.stats["targets"][self.index])
 
     def _step(self, x, v, held, pulling, los, events, commands) -> None:
         trouble = any(e["kind"] in ("snagged", "blocked") for e in events)
@@ -172,32 +175,36 @@ class TetherExpert:
         if self.plan is not None and self.index < len(self.plan.pulls) and any(
                 e["kind"] == "arrived" and e["anchor"] == self.plan.pulls[self.index].anchor for e in events):
             trouble = True  # released early, at the stop radius
-        if self.plan is None or trouble:
-            current = next((a for a, p in zip(held, pulling) if p and a != self.braking), None)
-            self._replan(x, prefer=current)
-            if self.plan is None:
-                return
         # braking at a switch (reel / force): hold the brake until the motion it opposes has stopped
         if self.braking is not None:
             robot = held.index(self.braking) if self.braking in held else None
             along = float(np.dot(v, self.brake_direction))
-            if robot is None or (pulling[robot] and along <= STOPPED_MPS):
+            speed = float(np.linalg.norm(v))
+            slowing = self._last_speed is None or speed < self._last_speed
+            self._last_speed = speed if robot is not None and pulling[robot] else None
+            # let go once the motion it opposes has stopped, or once it no longer slows the cargo down
+            if robot is None or (pulling[robot] and (along <= STOPPED_MPS or not slowing)):
                 if robot is not None:
                     commands[robot] = RELEASE
                 self.braking = None
                 self._replan(x)
             return
+        if self.plan is None or trouble:
+            current = next((a for a, p in zip(held, pulling) if p), None)
+            self._replan(x, prefer=current)
+            if self.plan is None:
+                return
         if self.index >= len(self.plan.pulls):
             return  # in the goal (or through it): nothing left to do
         pull = self.plan.pulls[self.index]
         a = pull.anchor
-        start, end = np.asarray(pull.start_m), np.asarray(pull.end_m)
-        length = float(np.linalg.norm(end - start))
-        u = (end - start) / max(length, 1e-12)
-        progress = float(np.dot(x - start, u))
-        off = abs(float((x - start)[0] * u[1] - (x - start)[1] * u[0]))
         robot = held.index(a) if a in held else None
+        moving = float(np.linalg.norm(v)) > MOVING_MPS
         if robot is None:
+            pulling_robot = next((r for r, (h, p) in enumerate(zip(held, pulling)) if p), None)
+            if self.drifts and moving and pulling_robot is not None:
+                self._brake(x, v, held, pulling_robot, los, commands, coast_s=0.0, advance=False)
+                return  # a new tether on a moving cargo would keep the motion across it: brake first
             self._attach(a, held, commands, los, x)
             return
         if not pulling[robot]:
@@ -205,17 +212,24 @@ class TetherExpert:
         # the new tether pulls: let go of the previous anchors (make before break), keep the next one attaching
         upcoming = self.plan.pulls[self.index + 1].anchor if self.index + 1 < len(self.plan.pulls) else None
         for r, h in enumerate(held):
-            if r != robot and h is not None and h != self.braking and h != upcoming:
+            if r != robot and h is not None and h != upcoming:
                 commands[r] = RELEASE
-        if off > self.deviation_m:
-            self._replan(x, prefer=a)
+        # closed loop: from where the cargo is, does this pull still land in its level? where should it end?
+        level = self._target_level()
+        if level == 0 and self.planner.levels[0].distance(shapely.Point(*x)) < 1e-9:
+            self.index += 1  # in the goal box
+            return
+        end = self.planner.pull_end(x, a, level)
+        if end is None:  # off course: under inertia stop first, then plan from (nearly) rest
+            if self.drifts and moving:
+                self._brake(x, v, held, robot, los, commands, coast_s=0.0, advance=False)
+            else:
+                self._replan(x, prefer=None)
             return
         last = self.index == len(self.plan.pulls) - 1
-        remaining = length - progress
         if last:
-            if remaining <= 0.5 * self.w * self.dt:
-                self.index += 1  # at its end, in the goal box
-            return  # the last pull runs through the goal box; the task is to be in it once
+            return  # the last pull runs into the goal box; the task is to be in it once
+        remaining = float(np.linalg.norm(end - x))
         nxt = self.plan.pulls[self.index + 1].anchor
         speed = max(float(np.linalg.norm(v)), 0.5 * self.w)
         if self.drifts:
@@ -227,14 +241,12 @@ class TetherExpert:
         if self.k >= 2 and remaining <= lead + 0.5 * speed * self.dt and nxt not in held and los[nxt]:
             self._attach(nxt, held, commands, los, x, keep=robot)
         if remaining <= 0.5 * speed * self.dt:
-            if nxt in held:
-                self.index += 1  # its tether takes over when it pulls
-            else:  # re-attach this robot (it lets go of the old anchor first) and wait t_switch
-                self.index += 1
+            self.index += 1
+            if nxt not in held:  # re-attach this robot (it lets go of the old anchor first) and wait t_switch
                 self._replan(x, prefer=None)
                 if self.plan is not None and self.plan.pulls:
-                    commands[robot] = ATTACH0 + self.plan.pulls[0].anchor if los[self.plan.pulls[0].anchor] \
-                        else RELEASE
+                    first = self.plan.pulls[0].anchor
+                    commands[robot] = ATTACH0 + first if los[first] else RELEASE
 
     def _attach(self, anchor: int, held, commands, los, x, keep: int | None = None) -> None:
         """Attach a robot to ``anchor``: a free robot if ``k`` allows, else re-attach one (it lets go first)."""
@@ -250,11 +262,12 @@ class TetherExpert:
             if victims:
                 commands[victims[0]] = ATTACH0 + anchor
 
-    def _brake(self, x, v, held, robot, los, commands, coast_s: float) -> None:
+    def _brake(self, x, v, held, robot, los, commands, coast_s: float, advance: bool = True) -> None:
         """At a switch under inertia: trade the pulling tether for one toward an anchor opposite the motion,
         which pulls when the coasting cargo reaches the switch point (``coast_s`` from now)."""
         speed = float(np.linalg.norm(v))
-        self.index += 1
+        if advance:
+            self.index += 1
         if speed <= STOPPED_MPS:
             self._replan(x)
             return
@@ -274,6 +287,7 @@ class TetherExpert:
         commands[robot] = ATTACH0 + c  # lets go of the pulling anchor and attaches to the brake
         self.braking = c
         self.brake_direction = vhat
+        self._last_speed = None
         self.stats.brakes += 1
 
 

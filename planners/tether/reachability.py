@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
+import shapely.ops
 from shapely.geometry import Point
 from shapely.geometry.base import BaseGeometry
 
@@ -217,6 +218,7 @@ class ReachabilityPlanner:
                 f"({reach.area:.3g} m^2) and is {cert['start_distance_m']:.3g} m from the start", certificate=cert,
                 groups=["anchors", "line of sight", "free space"])
         pulls: list[Pull] = []
+        targets: list[int] = []  # per pull, the level it lands in
         here = x
         while n > 0:
             target = self.levels[n - 1]
@@ -229,19 +231,38 @@ class ReachabilityPlanner:
                               end_m=(float(end[0]), float(end[1]))))
             here = end
             n = self.level_of(here)
+            targets.append(n)
         return TetherPlan(station=st.name, start_m=(float(x[0]), float(x[1])), goal_box=st.goal_box, pulls=pulls,
                           pull_speed_mps=st.pull_speed_mps, switch_time_s=st.switch_time_s, method="reachability",
                           solve_time_s=time.perf_counter() - t0,
                           stats={"levels": len(self.levels), "setup_s": self.setup_s, "level_s": self.level_s,
-                                 "clearance_m": self.config.clearance_m})
+                                 "clearance_m": self.config.clearance_m, "targets": targets})
 
-    def _best_pull(self, here: np.ndarray, target: BaseGeometry, prefer: int | None = None
+    def pull_end(self, here: np.ndarray, anchor: int, level: int) -> np.ndarray | None:
+        """Where a pull toward ``anchor`` from ``here`` should end to land in level ``level`` (deepest point of
+        its segment in that level, as the forward read chooses); None if it misses the level."""
+        if anchor not in self.cells or level >= len(self.levels):
+            return None
+        got = self._best_pull(np.asarray(here, float), self.levels[level], prefer=anchor, only=True)
+        return None if got is None else got[1]
+
+    def inside_free(self, point: np.ndarray, inset_m: float = 0.01) -> np.ndarray:
+        """``point``, or if it is outside the free space the nearest point of it, ``inset_m`` further in."""
+        pt = Point(float(point[0]), float(point[1]))
+        if self.free.covers(pt):
+            return np.asarray(point, float)
+        inner = self.free.buffer(-inset_m)
+        region = inner if not inner.is_empty else self.free
+        q = shapely.ops.nearest_points(region, pt)[0]
+        return np.array([q.x, q.y])
+
+    def _best_pull(self, here: np.ndarray, target: BaseGeometry, prefer: int | None = None, only: bool = False
                    ) -> tuple[int, np.ndarray] | None:
         """The anchor and switch point of a pull from ``here`` into ``target``: deepest (capped), then shortest;
         ``prefer`` wins whenever it reaches the target at all."""
         best = None
         boundary = target.boundary
-        order = ([prefer] if prefer in self.cells else []) + [a for a in self.cells if a != prefer]
+        order = ([prefer] if prefer in self.cells else []) + ([] if only else [a for a in self.cells if a != prefer])
         for a in order:
             seg = pull_segment(self.station, self.free, here, a, self.stop_m)
             if seg is None:
