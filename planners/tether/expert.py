@@ -95,6 +95,7 @@ class TetherExpert:
         self.braking: int | None = None  # the anchor of a braking tether
         self.brake_direction: np.ndarray | None = None
         self._last_speed: float | None = None
+        self._end: np.ndarray | None = None  # the current pull's switch point
         self.stats = ExpertStats()
         self._cache: tuple[int, np.ndarray] | None = None
 
@@ -160,6 +161,7 @@ class TetherExpert:
             self.stats.infeasible += 1
             self.plan = None  # nothing reaches the goal from here: keep still, try again next step
         self.index = 0
+        self._end = None
         self.stats.replans += 1
         self.stats.plan_ms.append(1e3 * (time.perf_counter() - t0))
 
@@ -214,12 +216,26 @@ class TetherExpert:
         for r, h in enumerate(held):
             if r != robot and h is not None and h != upcoming:
                 commands[r] = RELEASE
+        if upcoming is not None and upcoming in held and pulling[held.index(upcoming)]:
+            commands[robot] = RELEASE  # the next tether pulls: hand over now
+            self.index += 1
+            self._end = None
+            return
         # closed loop: from where the cargo is, does this pull still land in its level? where should it end?
         level = self._target_level()
         if level == 0 and self.planner.levels[0].distance(shapely.Point(*x)) < 1e-9:
             self.index += 1  # in the goal box
             return
-        end = self.planner.pull_end(x, a, level)
+        end = self._end
+        if end is not None:  # keep the switch point while it is still ahead on the line to the anchor
+            u = self.station.anchor_positions[a] - x
+            u /= max(float(np.linalg.norm(u)), 1e-12)
+            ahead = end - x
+            if float(np.dot(ahead, u)) < -0.5 * self.w * self.dt or abs(ahead[0] * u[1] - ahead[1] * u[0]) > 0.05:
+                end = None
+        if end is None:
+            end = self.planner.pull_end(x, a, level)
+            self._end = end
         if end is None:  # off course: under inertia stop first, then plan from (nearly) rest
             if self.drifts and moving:
                 self._brake(x, v, held, robot, los, commands, coast_s=0.0, advance=False)
@@ -240,13 +256,14 @@ class TetherExpert:
         lead = speed * self.t_switch  # attach the next robot this far ahead of the switch point
         if self.k >= 2 and remaining <= lead + 0.5 * speed * self.dt and nxt not in held and los[nxt]:
             self._attach(nxt, held, commands, los, x, keep=robot)
-        if remaining <= 0.5 * speed * self.dt:
+        if remaining <= 0.5 * speed * self.dt and nxt not in held:
             self.index += 1
-            if nxt not in held:  # re-attach this robot (it lets go of the old anchor first) and wait t_switch
-                self._replan(x, prefer=None)
-                if self.plan is not None and self.plan.pulls:
-                    first = self.plan.pulls[0].anchor
-                    commands[robot] = ATTACH0 + first if los[first] else RELEASE
+            self._end = None
+            # re-attach this robot (it lets go of the old anchor first) and wait t_switch
+            self._replan(x, prefer=None)
+            if self.plan is not None and self.plan.pulls:
+                first = self.plan.pulls[0].anchor
+                commands[robot] = ATTACH0 + first if los[first] else RELEASE
 
     def _attach(self, anchor: int, held, commands, los, x, keep: int | None = None) -> None:
         """Attach a robot to ``anchor``: a free robot if ``k`` allows, else re-attach one (it lets go first)."""
@@ -268,6 +285,7 @@ class TetherExpert:
         speed = float(np.linalg.norm(v))
         if advance:
             self.index += 1
+            self._end = None
         if speed <= STOPPED_MPS:
             self._replan(x)
             return
