@@ -4,7 +4,7 @@ The third learned baseline: a stable-baselines3 PPO ``MlpPolicy`` (the architect
 to the expert's (observation, action) pairs by maximising the log-likelihood of the expert's actions under
 the policy's Gaussian, with a small entropy bonus, minibatch Adam, and a held-out share of episodes to
 report validation error and keep the epoch that imitates the held-out episodes best. The result is saved
-like any trained model (``model.zip``, ``vecnormalize.pkl`` with the dataset's observation statistics,
+like any trained model (``model.zip``, ``vecnormalize.json`` with the dataset's observation statistics,
 ``train.json``), so ``impact-env run --controller`` and ``impact-env bench`` fly it unchanged.
 
 Why a loop of our own instead of the ``imitation`` library's BC: ``pip install imitation`` (1.0.1) would
@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
 from baselines.record import dataset_id
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario
@@ -125,7 +126,8 @@ def behaviour_clone(config: BCConfig) -> Path:
     run_dir.mkdir(parents=True, exist_ok=True)
     policy.set_training_mode(False)
     model.save(run_dir / "model.zip")
-    venv.save(str(run_dir / "vecnormalize.pkl"))
+    save_normalization(venv, run_dir / NORMALIZATION_FILE)
+    (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
     (run_dir / "train.json").write_text(json.dumps({
         "algo": "ppo", "method": "behaviour cloning", "scenario": scenario.name,
         "dataset": dataset_id(scenario.name), "episodes_train": len(train_eps), "episodes_validation": len(val_eps),

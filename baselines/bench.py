@@ -39,6 +39,7 @@ class ControllerSpec:
     label: str
     name: str  # what make_controller takes
     options: tuple[tuple[str, str], ...] = ()
+    trust_pickle: bool = False  # a model folder's pickles may be unpickled (--trust-pickle)
 
 
 def model_path(spec: ControllerSpec, scenario: str) -> str:
@@ -46,17 +47,22 @@ def model_path(spec: ControllerSpec, scenario: str) -> str:
     return spec.name.replace("{scenario}", scenario)
 
 
-def parse_controllers(text: str, scenarios: list[str] | None = None) -> list[ControllerSpec]:
-    """``expert,random,zero,label:path.zip`` -> specs; model files must exist for every scenario."""
+def parse_controllers(text: str, scenarios: list[str] | None = None,
+                      trust_pickle: bool = False) -> list[ControllerSpec]:
+    """``expert,random,zero,label:path.zip`` -> specs; model files must exist for every scenario, and are checked
+    (train.json, the zip's JSON, pickles: :func:`baselines.model_files.preflight`) before any worker starts."""
+    from baselines.model_files import preflight
+
     specs = []
     for item in filter(None, (s.strip() for s in text.split(","))):
         label, _, path = item.partition(":") if ":" in item else ("", "", item)
         target = path or item
         if target.endswith(".zip"):
-            spec = ControllerSpec(label or Path(target).parent.name, target)
+            spec = ControllerSpec(label or Path(target).parent.name, target, trust_pickle=trust_pickle)
             for name in (scenarios or [""]) if "{scenario}" in target else [""]:
                 if not Path(model_path(spec, name)).is_file():
                     raise ImpactEnvError(f"controller {item!r}: model file {model_path(spec, name)!r} does not exist")
+                preflight(Path(model_path(spec, name)), trust_pickle)
             specs.append(spec)
         else:
             specs.append(ControllerSpec(label or target, target))
@@ -75,7 +81,8 @@ def _episode(job: tuple[str, ControllerSpec, int, str | None, dict[str, Any]]) -
     scenario = load_scenario(scenario_name)
     if key not in _CACHE:  # one controller per worker process (the expert compiles its MPCs once)
         _CACHE[key] = make_controller(model_path(spec, scenario_name), scenario,
-                                      plan=plan_path if spec.name == "expert" else None)
+                                      plan=plan_path if spec.name == "expert" else None,
+                                      trust_pickle=True if spec.trust_pickle else None)
     controller = _CACHE[key]
     env = TransportEnv(scenario, **env_options)
     res = run_episode(env, controller, seed=seed)

@@ -49,7 +49,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--thrust-noise", type=float, default=0.0, help="std of multiplicative thrust noise (0.05 = 5%%)")
     p.add_argument("--init-noise", type=float, default=0.0, help="objects start within this radius (m)")
     p.add_argument("--restitution", type=float, default=None, help="simulate with this restitution")
+    p.add_argument("--trust-pickle", action="store_true",
+                   help="also load pickled files of model folders (old vecnormalize.pkl, unknown pickled model "
+                        "entries); a pickle can run any code: only for files you made yourself")
     p.set_defaults(func=_bench)
+
+    p = subparsers.add_parser("convert-model", help="rewrite old model folders without pickles (vecnormalize.pkl "
+                                                    "-> vecnormalize.json)")
+    p.add_argument("folders", nargs="+", help="folders holding model.zip and vecnormalize.pkl")
+    p.add_argument("--trust-pickle", action="store_true",
+                   help="required: converting unpickles the old file, which can run code; only for your own files")
+    p.set_defaults(func=_convert)
 
     p = subparsers.add_parser("record", help="record expert episodes as a Minari dataset")
     p.add_argument("scenario", help="shipped name or path to a .toml file")
@@ -78,6 +88,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--labels", default=None, help="comma-separated legend labels, one per run")
     p.add_argument("--table", default=None, help="also write a markdown table of the runs to this file")
     p.set_defaults(func=_curves)
+
+
+def _convert(args: argparse.Namespace) -> int:
+    from baselines.model_files import TRUST_FLAG, convert_folder
+    from impact_env.errors import UntrustedFileError
+
+    if not args.trust_pickle:
+        raise UntrustedFileError(f"convert-model unpickles the old vecnormalize.pkl, which can run code: pass "
+                                 f"{TRUST_FLAG} if you made these folders yourself")
+    for folder in args.folders:
+        for line in convert_folder(Path(folder)):
+            print(line)
+    return 0
 
 
 def _curves(args: argparse.Namespace) -> int:
@@ -136,8 +159,8 @@ def _bench(args: argparse.Namespace) -> int:
     options = {"thrust_noise": args.thrust_noise, "initial_position_noise_m": args.init_noise}
     if args.restitution is not None:
         options["restitution"] = args.restitution
-    summary = run_bench(scenarios, parse_controllers(args.controllers, scenarios), args.episodes, Path(args.out),
-                        args.workers, options)
+    summary = run_bench(scenarios, parse_controllers(args.controllers, scenarios, args.trust_pickle), args.episodes,
+                        Path(args.out), args.workers, options)
     print(markdown_table(summary))
     print(f"wrote {args.out}/summary.md, summary.csv, episodes.csv, bench.png")
     return 0

@@ -7,13 +7,13 @@ the success rate against environment steps, one line per run.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from impact_env.errors import ImpactEnvError
+from baselines.model_files import read_train_json
+from impact_env.errors import ImpactEnvError, ModelFileError
 
 
 @dataclass
@@ -31,12 +31,19 @@ def load_curve(run_dir: str | Path) -> Curve:
     if not path.is_file():
         raise ImpactEnvError(f"{run} has no evaluations ({path} is missing): is it an `impact-env train` run "
                              "that reached its first evaluation?")
-    data = np.load(path)
-    meta = json.loads((run / "train.json").read_text()) if (run / "train.json").is_file() else {}
+    try:  # allow_pickle stays False: an object array in the file is refused, not unpickled
+        with np.load(path, allow_pickle=False) as data:
+            timesteps, rho = np.asarray(data["timesteps"]), np.asarray(data["results"], dtype=float)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ModelFileError(f"{path} is not an evaluations file written by impact-env train: "
+                             f"{str(exc)[:200]}") from None
+    if rho.ndim != 2 or timesteps.shape != (len(rho),):
+        raise ModelFileError(f"{path}: results must have shape (evaluations, episodes) and timesteps one entry per "
+                             f"evaluation, got {rho.shape} and {timesteps.shape}")
+    meta = read_train_json(run)
     mode = meta.get("env_options", {}).get("reward_mode", "dense")
     label = f"{meta.get('algo', run.name)} ({mode})" if meta else run.name
-    rho = np.asarray(data["results"], dtype=float)
-    return Curve(label, meta, np.asarray(data["timesteps"]), rho, (rho > 0).mean(axis=1))
+    return Curve(label, meta, timesteps, rho, (rho > 0).mean(axis=1))
 
 
 def training_table(curves: list[Curve]) -> str:

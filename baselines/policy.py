@@ -2,59 +2,49 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from impact_env.envs.core import OBS_PER_BODY
-from impact_env.errors import ImpactEnvError
+from baselines import model_files
+from impact_env.envs.core import ACTION_PER_ROBOT, OBS_PER_BODY
+from impact_env.errors import ControllerError
 
 
 class SB3Controller:
     """Flies a saved PPO or SAC model in the central Gymnasium env.
 
     Beside ``model.zip`` it reads ``train.json`` (algorithm, whether the policy was trained per agent with
-    parameter sharing) and ``vecnormalize.pkl`` (observation statistics) when they exist. A parameter-
-    shared policy is queried once per robot with that robot's own observation (own body first).
+    parameter sharing) and ``vecnormalize.json`` (observation statistics) when they exist. Nothing in the
+    folder is unpickled (:mod:`baselines.model_files`): the model's spaces are rebuilt from the scenario's
+    environment. ``trust_pickle=True`` (``--trust-pickle``) also loads an old folder's ``vecnormalize.pkl``
+    and any pickled entries of the zip, with a warning. A parameter-shared policy is queried once per robot
+    with that robot's own observation (own body first).
     """
 
     name = "sb3"
 
-    def __init__(self, scenario: Any, model_path: str | Path) -> None:
-        from stable_baselines3 import PPO, SAC
+    def __init__(self, scenario: Any, model_path: str | Path, trust_pickle: bool = False) -> None:
+        from gymnasium import spaces
+
+        from impact_env.envs.core import TransportCore
 
         path = Path(model_path)
         if not path.is_file():
-            raise ImpactEnvError(f"model file {str(path)!r} does not exist")
-        meta_path = path.parent / "train.json"
-        self.meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-        algo = self.meta.get("algo")
-        loaders = [{"ppo": PPO, "sac": SAC}[algo]] if algo in ("ppo", "sac") else [PPO, SAC]
-        for cls in loaders:
-            try:
-                self.model = cls.load(str(path), device="cpu")
-                break
-            except Exception as exc:  # the other algorithm's file: try the next loader
-                error = exc
-        else:
-            raise ImpactEnvError(f"{path} is not a PPO or SAC model saved by stable-baselines3: {error}")
+            raise ControllerError(f"model file {str(path)!r} does not exist")
+        self.meta = model_files.read_train_json(path.parent)
         self.scenario = scenario
         self.multiagent = bool(self.meta.get("multiagent"))
-        self._obs_rms = None
-        stats = path.parent / "vecnormalize.pkl"
-        if stats.is_file():
-            import pickle
-
-            with open(stats, "rb") as f:
-                vn = pickle.load(f)
-            self._obs_rms, self._clip, self._eps = vn.obs_rms, vn.clip_obs, vn.epsilon
+        core = TransportCore(scenario)
+        n_actions = ACTION_PER_ROBOT * (1 if self.multiagent else core.n_robots)
+        obs_space = spaces.Box(core.obs_low, core.obs_high, dtype=np.float32)
+        act_space = spaces.Box(-1.0, 1.0, shape=(n_actions,), dtype=np.float32)
+        self.model = model_files.load_model(path, self.meta.get("algo"), obs_space, act_space, trust_pickle)
+        self._normalization = model_files.load_normalization(path.parent, core.obs_size, trust_pickle)
 
     def _normalise(self, obs: np.ndarray) -> np.ndarray:
-        if self._obs_rms is None:
-            return obs
-        return np.clip((obs - self._obs_rms.mean) / np.sqrt(self._obs_rms.var + self._eps), -self._clip, self._clip)
+        return obs if self._normalization is None else self._normalization.apply(obs)
 
     def reset(self, env: Any, seed: int | None) -> None:
         self._n_bodies = len(env.unwrapped.scenario.bodies)
@@ -75,7 +65,7 @@ class SB3Controller:
         return np.concatenate(out)
 
 
-def make_sb3_controller(scenario: Any, model: str | None = None, **_: Any) -> SB3Controller:
+def make_sb3_controller(scenario: Any, model: str | None = None, trust_pickle: bool = False, **_: Any) -> SB3Controller:
     if model is None:
-        raise ImpactEnvError("the sb3 controller needs a model: --controller path/to/model.zip")
-    return SB3Controller(scenario, model)
+        raise ControllerError("the sb3 controller needs a model: --controller path/to/model.zip")
+    return SB3Controller(scenario, model, trust_pickle=trust_pickle)

@@ -55,7 +55,7 @@ publish() {  # the trained models (no checkpoints) and the learning curves
     for a in ppo sac bc; do
         for s in $SCENARIOS; do
             mkdir -p "$RESULTS/models/${a}_$s"
-            cp "$RUNS/${a}_${s}_s0"/{model.zip,vecnormalize.pkl,train.json} "$RESULTS/models/${a}_$s/"
+            cp "$RUNS/${a}_${s}_s0"/{model.zip,vecnormalize.json,train.json} "$RESULTS/models/${a}_$s/"
         done
     done
     for s in $SCENARIOS; do

@@ -4,9 +4,11 @@ Single agent (central control of all robots): the Gymnasium env in ``n_envs`` su
 ``VecNormalize`` (observations and rewards), periodic evaluation on a separate env (best model kept; its
 returns are the task's final STL robustness whatever the training reward; ``eval/evaluations.npz``),
 checkpoints, TensorBoard logs, a progress bar; the model is saved in SB3's format (``model.zip``, plus
-``vecnormalize.pkl`` when normalising). Multi-agent (``multiagent=True``): the PettingZoo parallel env
-through SuperSuit's vector-env route, so ONE policy acts for every robot on its own observation (parameter
-sharing). Environment options (reward mode, fuel penalty, noise) pass through.
+the normalisation statistics as plain JSON, ``vecnormalize.json``, when normalising: never a pickle, see
+``baselines/model_files.py``; the periodic checkpoints in ``checkpoints/`` are SB3's own, pickles included,
+for resuming training, and nothing in impact-env loads them). Multi-agent (``multiagent=True``): the
+PettingZoo parallel env through SuperSuit's vector-env route, so ONE policy acts for every robot on its own
+observation (parameter sharing). Environment options (reward mode, fuel penalty, noise) pass through.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from baselines import ALGOS, hyperparams
+from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
 from impact_env import GYM_IDS
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario
@@ -52,7 +55,7 @@ def env_id_for(scenario: str) -> str:
 
 
 def train(config: TrainConfig) -> Path:
-    """Train and save; returns the run directory (model.zip, vecnormalize.pkl, logs, checkpoints)."""
+    """Train and save; returns the run directory (model.zip, vecnormalize.json, logs, checkpoints)."""
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
     from stable_baselines3.common.env_util import make_vec_env
@@ -104,7 +107,10 @@ def train(config: TrainConfig) -> Path:
     model.learn(total_timesteps=timesteps, callback=CallbackList(callbacks), progress_bar=config.progress_bar)
     model.save(run_dir / "model.zip")
     if isinstance(venv, VecNormalize):
-        venv.save(str(run_dir / "vecnormalize.pkl"))
+        save_normalization(venv, run_dir / NORMALIZATION_FILE)
+    else:
+        (run_dir / NORMALIZATION_FILE).unlink(missing_ok=True)  # a previous run's statistics are not this model's
+    (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
     (run_dir / "train.json").write_text(json.dumps({
         "algo": config.algo, "scenario": scenario.name, "env_id": env_id, "timesteps": timesteps,
         "timesteps_trained": int(model.num_timesteps), "max_minutes": config.max_minutes,

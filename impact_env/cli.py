@@ -78,6 +78,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise ImpactEnvError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.seed < 0:
+        raise ImpactEnvError(f"--seed must be >= 0, got {args.seed}")
     if is_station_file(args.scenario):
         from impact_env.tether_cli import run_station
 
@@ -86,7 +88,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise ImpactEnvError("--fidelity and --energy-penalty apply to tether stations, not to impact scenarios")
     sc = load_scenario(args.scenario)
     env = TransportEnv(sc, render_mode="rgb_array" if args.video else None, **_env_kwargs(args))
-    controller = make_controller(args.controller, sc, plan=args.plan)
+    controller = make_controller(args.controller, sc, plan=args.plan, trust_pickle=True if args.trust_pickle else None)
     results = []
     for k in range(args.episodes):
         seed = args.seed + k
@@ -158,6 +160,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
                    help="stations only: tether physics (see impact_env.tether_physics)")
     p.add_argument("--energy-penalty", type=float, default=0.0, help="stations only: reward cost per J of winch work")
+    p.add_argument("--trust-pickle", action="store_true",
+                   help="a controller may unpickle its files (e.g. an old model folder's vecnormalize.pkl); a "
+                        "pickle can run any code: only for files you made yourself")
     p.set_defaults(func=_cmd_run)
 
     for ep in entry_points(group=COMMANDS_GROUP):

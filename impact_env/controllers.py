@@ -14,7 +14,7 @@ from typing import Any, Protocol
 import gymnasium as gym
 import numpy as np
 
-from impact_env.errors import ImpactEnvError
+from impact_env.errors import ControllerError
 
 ENTRY_POINT_GROUP = "impact_env.controllers"
 
@@ -55,10 +55,6 @@ class RandomController:
 
 
 BUILTIN = {"zero": ZeroController, "random": RandomController}
-
-
-class ControllerError(ImpactEnvError, ValueError):
-    """An unknown controller name, or a controller that could not be built."""
 
 
 def available_controllers() -> list[str]:

@@ -1,14 +1,22 @@
-"""Typed errors of impact_env.
+"""Typed errors of impact_env: the contract for bad input.
 
-Every error a user can provoke with bad input is one of these, with a message that names the offending
-field or token and says what would be accepted instead.
+Every error a user can provoke with bad input (a scenario file, an STL text, an action, an environment
+option, a controller name, a model folder) is one of the classes below, with a message that names the
+offending field, token or file and says what would be accepted instead. Nothing else escapes on purpose:
+no ``KeyError`` from a lookup, no ``RecursionError`` from a parser, no ``ZeroDivisionError`` from a
+degenerate polygon. The planners add theirs in ``planners/errors.py`` (all subclasses of
+:class:`ImpactEnvError`, listed in ``planners.errors.PLANNER_ERRORS``).
+
+:data:`TYPED_ERRORS` lists this package's classes. The property-based tests (``tests/fuzz/``) accept
+exactly these and the planners' as the outcome of a bad input, and ``tests/test_errors_contract.py`` checks
+that every exception class the packages define is listed here or there.
 """
 
 from __future__ import annotations
 
 
 class ImpactEnvError(Exception):
-    """Base class of every error raised on purpose by impact_env."""
+    """Base class of every error raised on purpose by impact_env (and by planners/ and baselines/)."""
 
 
 class ScenarioError(ImpactEnvError, ValueError):
@@ -38,4 +46,31 @@ class STLBindingError(STLError, KeyError):
 
 
 class ActionError(ImpactEnvError, ValueError):
-    """An action has the wrong shape or contains NaN / infinite values."""
+    """An action has the wrong type or shape, or contains NaN / infinite values."""
+
+
+class EnvConfigError(ImpactEnvError, ValueError):
+    """An environment option is out of range or of the wrong kind."""
+
+
+class ControllerError(ImpactEnvError, ValueError):
+    """An unknown controller name, or a controller that could not be built."""
+
+
+class ModelFileError(ImpactEnvError, ValueError):
+    """A saved model folder (model.zip, train.json, normalisation statistics) is missing, malformed or does
+    not fit the scenario; names the file."""
+
+
+class UntrustedFileError(ModelFileError):
+    """A file could run code when loaded (a pickle, or a model zip's pickled entries) and was not trusted.
+
+    The message names the file and the option that would trust it (``--trust-pickle``); trust only files
+    you made yourself.
+    """
+
+
+TYPED_ERRORS: tuple[type[ImpactEnvError], ...] = (
+    ImpactEnvError, ScenarioError, STLError, STLSyntaxError, STLBindingError, ActionError, EnvConfigError,
+    ControllerError, ModelFileError, UntrustedFileError,
+)

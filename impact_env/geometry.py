@@ -16,12 +16,15 @@ import numpy as np
 
 from impact_env.errors import ScenarioError
 
+MAX_COORDINATE_M = 1e6  # |x|, |y| of every vertex; beyond it squared edge lengths lose all precision
 
-@dataclass(frozen=True)
+
+@dataclass(frozen=True, eq=False)
 class ConvexPolygon:
     """A convex polygon given by its vertices in counter-clockwise order, metres.
 
     Build one with :meth:`from_box` or :meth:`from_vertices` (which validates and orders the vertices).
+    Two polygons are equal when their vertex arrays are, so a polygon (and a Scenario) can be hashed.
     """
 
     vertices: np.ndarray  # (n, 2), counter-clockwise, no repeated closing vertex
@@ -29,7 +32,8 @@ class ConvexPolygon:
     offsets: np.ndarray = field(init=False, repr=False)  # (n,) so that normals @ x <= offsets inside
 
     def __post_init__(self) -> None:
-        v = np.asarray(self.vertices, dtype=float)
+        v = np.array(self.vertices, dtype=float)
+        v.setflags(write=False)  # shared by the hash, the fast paths and the planner: never edited in place
         edges = np.roll(v, -1, axis=0) - v
         lengths = np.hypot(edges[:, 0], edges[:, 1])
         normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1) / lengths[:, None]
@@ -50,30 +54,63 @@ class ConvexPolygon:
             for i in range(len(v))
         ])
 
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, ConvexPolygon):
+            return NotImplemented
+        return self.vertices.shape == other.vertices.shape and bool(np.array_equal(self.vertices, other.vertices))
+
+    def __hash__(self) -> int:
+        return hash((self.vertices.shape, self.vertices.tobytes()))
+
     @classmethod
-    def from_box(cls, xmin: float, xmax: float, ymin: float, ymax: float) -> ConvexPolygon:
+    def from_box(cls, xmin: float, xmax: float, ymin: float, ymax: float, where: str = "box") -> ConvexPolygon:
         """Axis-aligned box [xmin, xmax] x [ymin, ymax]."""
+        _check_coordinates(np.array([[xmin, ymin], [xmax, ymax]], dtype=float), where)
         if not (xmin < xmax and ymin < ymax):
-            raise ScenarioError(f"box must have xmin < xmax and ymin < ymax, got [{xmin}, {xmax}] x [{ymin}, {ymax}]")
+            raise ScenarioError(f"{where} must have xmin < xmax and ymin < ymax, "
+                                f"got [{xmin}, {xmax}] x [{ymin}, {ymax}]")
         return cls(np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]], dtype=float))
 
     @classmethod
     def from_vertices(cls, vertices: np.ndarray | list, where: str = "polygon") -> ConvexPolygon:
-        """Validate a vertex list (either orientation) and return the counter-clockwise polygon."""
-        v = np.asarray(vertices, dtype=float)
-        if v.ndim != 2 or v.shape[1] != 2 or len(v) < 3:
+        """Validate a vertex list (either orientation) and return the counter-clockwise polygon.
+
+        Repeated consecutive vertices, including a last vertex that repeats the first (a "closed" ring, as
+        GeoJSON and shapely write it), are dropped. The rest must be a simple convex polygon: every turn
+        in the same direction and one full turn in all, so a self-intersecting star, whose turns also all
+        go one way, is rejected.
+        """
+        try:
+            v = np.asarray(vertices, dtype=float)
+        except (TypeError, ValueError):
+            raise ScenarioError(f"{where} must be a list of [x, y] vertices") from None
+        if v.ndim != 2 or v.shape[1] != 2:
             raise ScenarioError(f"{where} needs at least 3 vertices [x, y], got shape {v.shape}")
         if not np.all(np.isfinite(v)):
             raise ScenarioError(f"{where} has non-finite coordinates")
+        _check_coordinates(v, where)
+        v = _drop_repeats(v)
+        if len(v) < 3:
+            raise ScenarioError(f"{where} needs at least 3 distinct vertices [x, y], got {len(v)}")
+        scale = float(np.ptp(v, axis=0).max())
         area2 = float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
-        if abs(area2) < 1e-12:
+        if abs(area2) <= 1e-12 * max(scale * scale, 1.0):
             raise ScenarioError(f"{where} has zero area")
         if area2 < 0:
             v = v[::-1].copy()
         edges = np.roll(v, -1, axis=0) - v
-        cross = edges[:, 0] * np.roll(edges[:, 1], -1) - edges[:, 1] * np.roll(edges[:, 0], -1)
-        if np.any(cross < -1e-12):
+        nxt = np.roll(edges, -1, axis=0)
+        cross = edges[:, 0] * nxt[:, 1] - edges[:, 1] * nxt[:, 0]
+        dot = np.einsum("ij,ij->i", edges, nxt)
+        lengths = np.hypot(edges[:, 0], edges[:, 1])
+        # a turn is the signed angle between consecutive edges; a convex polygon turns left (or goes straight)
+        # at every vertex and turns exactly once around in all (a pentagram turns twice)
+        turns = np.arctan2(cross, dot)
+        if np.any(cross < -1e-12 * lengths * np.roll(lengths, -1)) or np.any(turns < -1e-9):
             raise ScenarioError(f"{where} is not convex; split it into convex pieces")
+        if abs(float(turns.sum()) - 2.0 * math.pi) > 1e-6:
+            raise ScenarioError(f"{where} crosses itself (its edges wind {float(turns.sum()) / (2 * math.pi):.0f} "
+                                "times around); list the vertices in order around the boundary")
         return cls(v)
 
     @property
@@ -128,3 +165,21 @@ class ConvexPolygon:
             if d2 < best:
                 best = d2
         return -math.sqrt(best)
+
+
+def _check_coordinates(v: np.ndarray, where: str) -> None:
+    worst = float(np.max(np.abs(v))) if v.size else 0.0
+    if not worst <= MAX_COORDINATE_M:  # also catches NaN
+        raise ScenarioError(f"{where}: coordinates must be finite and within +-{MAX_COORDINATE_M:g} m, got {worst:g}")
+
+
+def _drop_repeats(v: np.ndarray) -> np.ndarray:
+    """Vertices without consecutive repeats (cyclically: a closing copy of the first vertex goes too)."""
+    scale = max(float(np.max(np.abs(v))), 1.0)
+    keep = [0]
+    for i in range(1, len(v)):
+        if np.max(np.abs(v[i] - v[keep[-1]])) > 1e-12 * scale:
+            keep.append(i)
+    while len(keep) > 1 and np.max(np.abs(v[keep[-1]] - v[keep[0]])) <= 1e-12 * scale:
+        keep.pop()
+    return v[keep]

@@ -15,6 +15,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from impact_env import limits
 from impact_env.errors import ScenarioError, STLError
 from impact_env.geometry import ConvexPolygon
 
@@ -24,6 +25,8 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 _SCENARIO_PACKAGE = "impact_env.scenarios"
+MAX_PLANNER_INTERVALS = 1000  # the MILP grows linearly with them; far beyond what solves in minutes
+MIN_ROBOT_DEGREE, MAX_ROBOT_DEGREE = 2, 8
 
 
 @dataclass(frozen=True)
@@ -60,7 +63,11 @@ class Body:
 
 @dataclass(frozen=True)
 class Scenario:
-    """Everything that defines one transport task. Build with :func:`load_scenario`."""
+    """Everything that defines one transport task. Build with :func:`load_scenario`.
+
+    Frozen, hashable and picklable. The task is parsed once, on first use of :attr:`formula`, and the tree
+    is kept (it is not part of equality, the hash or the repr: it follows from ``task``).
+    """
 
     name: str
     description: str
@@ -74,10 +81,11 @@ class Scenario:
     task: str
     control_period_s: float = 0.1
     substeps: int = 10
-    bezier_segments: dict[str, int] = field(default_factory=dict)
+    bezier_segments: dict[str, int] = field(default_factory=dict, hash=False)  # compared, not hashed (a dict)
     planner_intervals: int | None = None  # time-grid intervals of the offline planner
     planner_robot_degree: int | None = None  # degree of the robots' Bezier curves in the planner
     source: str = ""
+    _formula: Any = field(default=None, init=False, repr=False, compare=False, hash=False)
 
     @property
     def bodies(self) -> tuple[Body, ...]:
@@ -100,10 +108,12 @@ class Scenario:
 
     @property
     def formula(self):
-        """The task as an STL syntax tree (parsed on first use)."""
-        from impact_env.stl import parse
+        """The task as an STL syntax tree (parsed on first use, then kept)."""
+        if self._formula is None:
+            from impact_env.stl import parse
 
-        return parse(self.task)
+            object.__setattr__(self, "_formula", parse(self.task))
+        return self._formula
 
 
 # ----------------------------------------------------------------------------------------------- loading
@@ -119,22 +129,40 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     """Load a shipped scenario by name (``"corridor"``) or a TOML file by path, validated.
 
     Raises:
-        ScenarioError: unknown name, unreadable file, invalid TOML or any invalid field.
+        ScenarioError: unknown name, unreadable file, text that is not UTF-8, invalid TOML or any invalid field.
     """
+    if not isinstance(name_or_path, (str, Path)):
+        raise ScenarioError("a scenario is a shipped name or a path to a .toml file, "
+                            f"got {type(name_or_path).__name__}")
     text, source = _read_source(name_or_path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
+    except (ValueError, RecursionError) as exc:  # an integer of thousands of digits; arrays nested thousands deep
+        raise ScenarioError(f"{source}: not a usable TOML file: {str(exc)[:120]}") from None
     return scenario_from_dict(data, source=source)
 
 
 def _read_source(name_or_path: str | Path) -> tuple[str, str]:
     path = Path(name_or_path)
-    if path.suffix == ".toml" or path.exists() or "/" in str(name_or_path):
+    try:
+        is_path = path.suffix == ".toml" or path.exists() or "/" in str(name_or_path)
+    except (OSError, ValueError):  # e.g. a NUL byte or a name too long for the file system
+        raise ScenarioError(f"{str(name_or_path)[:80]!r} is neither a shipped scenario nor a readable path") from None
+    if is_path:
         if not path.is_file():
             raise ScenarioError(f"scenario file {str(path)!r} does not exist")
-        return path.read_text(encoding="utf-8"), str(path)
+        try:
+            raw = path.read_bytes()
+        except OSError as exc:
+            raise ScenarioError(f"cannot read scenario file {str(path)!r}: {exc.strerror or exc}") from None
+        try:
+            return raw.decode("utf-8"), str(path)
+        except UnicodeDecodeError as exc:
+            line = raw[:exc.start].count(b"\n") + 1
+            raise ScenarioError(f"{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at line {line}, byte offset "
+                                f"{exc.start}); TOML files must be UTF-8") from None
     name = str(name_or_path)
     if name not in scenario_names():
         raise ScenarioError(f"unknown scenario {name!r}; shipped scenarios: {', '.join(scenario_names())} "
@@ -172,32 +200,44 @@ def _check(value: Any, kind: str, where: str) -> Any:
         return value
     if kind == "str":
         if not isinstance(value, str):
-            raise ScenarioError(f"{where} must be a string, got {value!r}")
+            raise ScenarioError(f"{where} must be a string, got {_short(value)}")
         return value
     if kind == "name":
         if not isinstance(value, str) or not value.isidentifier():
-            raise ScenarioError(f"{where} must be a name made of letters, digits and _, got {value!r}")
+            raise ScenarioError(f"{where} must be a name made of letters, digits and _, got {_short(value)}")
         return value
     if kind == "int":
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ScenarioError(f"{where} must be an integer, got {value!r}")
+            raise ScenarioError(f"{where} must be an integer, got {_short(value)}")
         return value
     if kind == "float":
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ScenarioError(f"{where} must be a finite number, got {value!r}")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite(value):
+            raise ScenarioError(f"{where} must be a finite number, got {_short(value)}")
         return float(value)
     if kind == "vec2":
         if not isinstance(value, list) or len(value) != 2:
-            raise ScenarioError(f"{where} must be a list of 2 numbers [x, y], got {value!r}")
+            raise ScenarioError(f"{where} must be a list of 2 numbers [x, y], got {_short(value)}")
         return tuple(_check(v, "float", f"{where}[{i}]") for i, v in enumerate(value))
     if kind == "box":
         if not isinstance(value, list) or len(value) != 4:
-            raise ScenarioError(f"{where} must be [xmin, xmax, ymin, ymax], got {value!r}")
+            raise ScenarioError(f"{where} must be [xmin, xmax, ymin, ymax], got {_short(value)}")
         box = tuple(_check(v, "float", f"{where}[{i}]") for i, v in enumerate(value))
         if not (box[0] < box[1] and box[2] < box[3]):
             raise ScenarioError(f"{where} must have xmin < xmax and ymin < ymax, got {list(box)}")
         return box
     raise AssertionError(kind)  # programming error, not user input
+
+
+def _finite(value: int | float) -> bool:
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an integer too large for a float
+        return False
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _positive(value: float, where: str, allow_zero: bool = False) -> float:
@@ -216,7 +256,7 @@ def _region(table: Any, where: str) -> Region:
                             "or 'polygon = [[x, y], ...]'")
     f.finish()
     if box is not None:
-        return Region(name, ConvexPolygon.from_box(*box))
+        return Region(name, ConvexPolygon.from_box(*box, where=f"{where}.box"))
     if not isinstance(vertices, list):
         raise ScenarioError(f"{where}.polygon must be a list of [x, y] vertices")
     pts = [_check(v, "vec2", f"{where}.polygon[{i}]") for i, v in enumerate(vertices)]
@@ -275,12 +315,13 @@ def _build(data: dict, source: str) -> Scenario:
     substeps = top.get("substeps", 10, kind="int")
     if substeps < 1:
         raise ScenarioError(f"substeps must be >= 1, got {substeps}")
+    limits.check_timing(tf, period, substeps)
     task = top.get("task", kind="str")
 
     world = _Fields(top.get("world"), "world")
     world_box = world.get("box", kind="box")
     world.finish()
-    world_poly = ConvexPolygon.from_box(*world_box)
+    world_poly = ConvexPolygon.from_box(*world_box, where="world.box")
 
     def tables(key: str) -> list:
         value = top.get(key, [])
@@ -300,11 +341,11 @@ def _build(data: dict, source: str) -> Scenario:
     if not isinstance(segments, dict):
         raise ScenarioError("planner.bezier_segments must be a table like { R1 = 4, O1 = 6 }")
     intervals = planner.get("intervals", None, kind="int")
-    if intervals is not None and intervals < 2:
-        raise ScenarioError(f"planner.intervals must be >= 2, got {intervals}")
+    if intervals is not None and not 2 <= intervals <= MAX_PLANNER_INTERVALS:
+        raise ScenarioError(f"planner.intervals must be in 2..{MAX_PLANNER_INTERVALS}, got {intervals}")
     degree = planner.get("robot_degree", None, kind="int")
-    if degree is not None and not 2 <= degree <= 8:
-        raise ScenarioError(f"planner.robot_degree must be in 2..8, got {degree}")
+    if degree is not None and not MIN_ROBOT_DEGREE <= degree <= MAX_ROBOT_DEGREE:
+        raise ScenarioError(f"planner.robot_degree must be in {MIN_ROBOT_DEGREE}..{MAX_ROBOT_DEGREE}, got {degree}")
     planner.finish()
     top.finish()
 
@@ -339,7 +380,10 @@ def _build(data: dict, source: str) -> Scenario:
             a, c = bodies[i], bodies[j]
             if math.dist(a.position_m, c.position_m) < a.radius_m + c.radius_m:
                 raise ScenarioError(f"initial discs of {a.name!r} and {c.name!r} overlap")
-    _check_substeps(bodies, restitution, period / substeps, period, substeps)
+    kinds = [f"robots[{i}]" for i in range(len(robots))] + [f"objects[{i}]" for i in range(len(objects))]
+    for b, where in zip(bodies, kinds):
+        limits.check_body(b, where, tf)
+    limits.check_tunnelling(bodies, kinds, restitution, world_box, period, substeps)
 
     scenario = Scenario(
         name=name, description=description, world_box=world_box, obstacles=obstacles, regions=regions,
@@ -359,24 +403,9 @@ def _unique(names: list[str], what: str) -> None:
         seen.add(n)
 
 
-def _check_substeps(bodies, restitution: float, dt: float, period: float, substeps: int) -> None:
-    """No tunnelling: at the fastest planned speed, a substep must move less than a quarter radius.
-
-    The fastest planned speed is a robot's velocity bound, and an object can leave an impact with up to
-    (1 + e) times the robot's speed (Eq. 5 with a resting object and equal masses).
-    """
-    bounds = [math.hypot(*b.velocity_bound_mps) for b in bodies if b.velocity_bound_mps is not None]
-    if not bounds:
-        return
-    v_max = (1.0 + restitution) * max(bounds)
-    r_min = min(b.radius_m for b in bodies)
-    if v_max * dt > 0.25 * r_min:
-        need = math.ceil(v_max * period / (0.25 * r_min))
-        raise ScenarioError(f"substeps = {substeps} is too few: at {v_max:.2f} m/s a body moves {v_max * dt:.3f} m per "
-                            f"substep, more than a quarter of the smallest radius ({r_min} m); use substeps >= {need}")
-
-
 def _check_task(scenario: Scenario) -> None:
+    from impact_env.stl import horizon_steps
+
     try:
         formula = scenario.formula
     except STLError as exc:
@@ -396,3 +425,11 @@ def _check_task(scenario: Scenario) -> None:
                             "wrap it, e.g. 'F[0,100] in(O1, goal)'")
     if formula.horizon_s > scenario.tf_s + 1e-9:
         raise ScenarioError(f"task horizon {formula.horizon_s} s exceeds tf_s = {scenario.tf_s} s")
+    try:
+        steps = horizon_steps(formula, scenario.control_period_s)
+    except STLError as exc:  # an interval between two samples
+        raise ScenarioError(f"task: {exc}") from None
+    if steps < 1:
+        raise ScenarioError(f"task horizon {formula.horizon_s:g} s is shorter than one control period "
+                            f"({scenario.control_period_s:g} s), so the episode would have no steps; "
+                            "lengthen the task's intervals or shorten control_period_s")

@@ -43,7 +43,7 @@ _STATION_PACKAGE = "impact_env.stations"
 CARGO = "cargo"  # the cargo's name in the STL task
 GOAL = "goal"  # the goal box's name in the STL task
 ON_WALL_TOL_M = 1e-6  # a listed anchor may be this far from its wall; it is then projected onto it
-_LOS_INSET_M = 1e-7  # the tether segment is tested up to this far from the anchor (which sits on the wall)
+LOS_TOL_M = 1e-9  # line of sight tolerates this much: anchors sit on walls, and a tether may graze a corner
 
 
 @dataclass(frozen=True)
@@ -109,11 +109,25 @@ class Station:
         return np.array([a.position_m for a in self.anchors], dtype=float).reshape(-1, 2)
 
     @cached_property
+    def notches(self) -> np.ndarray:
+        """(m, 2) the reflex vertices (interior angle > 180 deg): the only corners a tether can snag on."""
+        p = np.array(self.polygon, dtype=float)
+        before, after = p - np.roll(p, 1, axis=0), np.roll(p, -1, axis=0) - p
+        cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+        return p[cross < 0.0].reshape(-1, 2)
+
+    @cached_property
     def shapely_polygon(self) -> Polygon:
         """The station as a shapely Polygon (prepared for repeated predicates)."""
         poly = Polygon(self.polygon)
         shapely.prepare(poly)
         return poly
+
+    @cached_property
+    def _sight_polygon(self) -> Polygon:
+        grown = self.shapely_polygon.buffer(LOS_TOL_M)
+        shapely.prepare(grown)
+        return grown
 
     def free_space(self, quad_segs: int = 16) -> Polygon:
         """Where the cargo centre may be with the whole disc inside the station: the polygon shrunk by the radius.
@@ -156,8 +170,8 @@ class Station:
         """Boolean mask: which anchors a tether from ``point_m`` reaches with no wall in between.
 
         A tether sees its anchor when the segment from the point to the anchor lies in the closed station
-        polygon: it may touch a wall or graze a corner, but not pass outside. The anchor end of the segment is
-        pulled in by 0.1 micrometre, since an anchor sits on a wall and rounding could put it a hair outside.
+        polygon: it may touch a wall or graze a corner, but not pass outside. The test allows ``LOS_TOL_M``
+        (1 nm) of rounding, since an anchor sits on a wall and a grazing segment passes exactly through a corner.
 
         Args:
             point_m: (x, y) of the tether's cargo end (the cargo centre), m.
@@ -168,13 +182,8 @@ class Station:
             return np.zeros(0, dtype=bool)
         p = np.asarray(point_m, dtype=float).reshape(2)
         a = self.anchor_positions[idx]
-        d = p[None, :] - a
-        length = np.hypot(d[:, 0], d[:, 1])
-        inset = np.minimum(_LOS_INSET_M, 0.5 * length)
-        start = a + d * (inset / np.maximum(length, 1e-300))[:, None]
-        coords = np.stack([start, np.broadcast_to(p, start.shape)], axis=1)
-        lines = shapely.linestrings(coords)
-        return np.asarray(shapely.covers(self.shapely_polygon, lines), dtype=bool)
+        coords = np.stack([a, np.broadcast_to(p, a.shape)], axis=1)
+        return np.asarray(shapely.covers(self._sight_polygon, shapely.linestrings(coords)), dtype=bool)
 
     def cargo_inside(self, point_m: tuple[float, float], tol_m: float = 1e-9) -> bool:
         """Whether the cargo disc centred at ``point_m`` lies inside the station (up to ``tol_m``)."""

@@ -14,6 +14,7 @@ no plan within the time limit).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import textwrap
 import time
@@ -21,6 +22,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from impact_env.scenario import MAX_PLANNER_INTERVALS, MAX_ROBOT_DEGREE, MIN_ROBOT_DEGREE
 from planners.errors import PlannerError, PlanTimeoutError
 from planners.offline.solvers import SOLVERS as SOLVER_NAMES
 
@@ -122,16 +124,19 @@ def _check_options(args: argparse.Namespace) -> None:
     """Reject option values the planner would otherwise fail on deep inside, with a one-line message."""
     if args.solver not in SOLVER_NAMES:
         raise PlannerError(f"unknown solver {args.solver!r}; choose one of: {', '.join(SOLVER_NAMES)}")
-    if args.time_limit is not None and args.time_limit <= 0:
-        raise PlannerError(f"--time-limit must be > 0 seconds, got {args.time_limit:g}")
+    if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
+        raise PlannerError(f"--time-limit must be a finite number of seconds > 0, got {args.time_limit:g}")
     if not 0.0 <= args.mip_gap < 1.0:
         raise PlannerError(f"--mip-gap must be in [0, 1), got {args.mip_gap:g}")
     if args.threads is not None and args.threads < 1:
         raise PlannerError(f"--threads must be >= 1, got {args.threads}")
-    if args.intervals is not None and args.intervals < 2:
-        raise PlannerError(f"--intervals must be >= 2, got {args.intervals}")
-    if args.degree is not None and args.degree < 2:
-        raise PlannerError(f"--degree must be >= 2, got {args.degree}")
+    if args.intervals is not None and not 2 <= args.intervals <= MAX_PLANNER_INTERVALS:
+        raise PlannerError(f"--intervals must be in 2..{MAX_PLANNER_INTERVALS}, got {args.intervals}")
+    if args.degree is not None and not MIN_ROBOT_DEGREE <= args.degree <= MAX_ROBOT_DEGREE:
+        raise PlannerError(f"--degree must be in {MIN_ROBOT_DEGREE}..{MAX_ROBOT_DEGREE} (as planner.robot_degree in "
+                           f"scenario files), got {args.degree}")
+    if not 0 <= args.seed <= 2**31 - 1:
+        raise PlannerError(f"--seed must be in 0..{2**31 - 1}, got {args.seed}")
     if args.refine_nodes < 0:
         raise PlannerError(f"--refine-nodes must be >= 0 (0 skips the second stage), got {args.refine_nodes}")
 

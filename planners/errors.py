@@ -1,4 +1,4 @@
-"""Typed errors of the planners."""
+"""Typed errors of the planners (all :class:`impact_env.errors.ImpactEnvError`; see that module's contract)."""
 
 from __future__ import annotations
 
@@ -42,3 +42,8 @@ class PlanCheckError(PlannerError, ValueError):
     def __init__(self, violations: list[str]) -> None:
         super().__init__("plan check failed:\n  " + "\n  ".join(violations))
         self.violations = violations
+
+
+PLANNER_ERRORS: tuple[type[ImpactEnvError], ...] = (
+    PlannerError, UnsupportedSpecError, SolverNotAvailableError, InfeasiblePlanError, PlanTimeoutError, PlanCheckError,
+)

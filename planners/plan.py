@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from impact_env.scenario import Scenario
-from planners import bezier
+from planners import bezier, plan_schema
 from planners.errors import PlanCheckError
 
 
@@ -155,24 +157,38 @@ class Plan:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Plan:
-        try:
-            bodies = {
-                name: BodyPlan(name, b["kind"], [Segment(float(s["t0_s"]), float(s["t1_s"]),
-                                                         np.array(s["control_points"], dtype=float))
-                                                 for s in b["segments"]])
-                for name, b in data["bodies"].items()
-            }
-            impacts = [PlannedImpact(
-                time_s=float(i["time_s"]), robot=i["robot"], object=i["object"], position=tuple(i["position"]),
-                object_velocity_before=tuple(i["object_velocity_before"]),
-                object_velocity_after=tuple(i["object_velocity_after"]),
-                robot_velocity_before=tuple(i["robot_velocity_before"]),
-                robot_velocity_after=tuple(i["robot_velocity_after"])) for i in data["impacts"]]
-            return cls(data["scenario"], data["planner"], float(data["robustness"]), bodies, impacts,
-                       data.get("solver", ""), float(data.get("solve_time_s", 0.0)),
-                       float(data.get("build_time_s", 0.0)), float(data.get("mip_gap", 0.0)), data.get("stats", {}))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise PlanCheckError([f"not a plan file: missing or malformed field {exc}"]) from None
+        """Build a plan from its JSON form, every field checked (:mod:`planners.plan_schema`).
+
+        Raises:
+            PlanCheckError: listing every missing, unknown or malformed field by its path, e.g.
+                ``bodies.R1.segments[3].control_points[2][0] must be a finite number ...``.
+        """
+        problems: list[str] = []
+        fields = plan_schema.read(data, plan_schema.PLAN_FIELDS, "", problems)
+        if fields is plan_schema.INVALID:
+            raise PlanCheckError(problems)
+        bodies = {}
+        for name, b in fields["bodies"].items():
+            segments = []
+            for k, seg in enumerate(b["segments"]):
+                pair = seg["time_control_points"]
+                if pair is not None and pair != (seg["t0_s"], seg["t1_s"]):
+                    problems.append(f"bodies.{name}.segments[{k}].time_control_points = {list(pair)} must be "
+                                    f"[t0_s, t1_s] = {[seg['t0_s'], seg['t1_s']]}")
+                segments.append(Segment(seg["t0_s"], seg["t1_s"], seg["control_points"]))
+            bodies[name] = BodyPlan(name, b["kind"], segments)
+        impacts = []
+        for k, i in enumerate(fields["impacts"]):
+            if i["time"] is not None and i["time"] != i["time_s"]:
+                problems.append(f"impacts[{k}].time = {i['time']} differs from impacts[{k}].time_s = {i['time_s']}")
+            impacts.append(PlannedImpact(
+                time_s=i["time_s"], robot=i["robot"], object=i["object"], position=i["position"],
+                object_velocity_before=i["object_velocity_before"], object_velocity_after=i["object_velocity_after"],
+                robot_velocity_before=i["robot_velocity_before"], robot_velocity_after=i["robot_velocity_after"]))
+        if problems:
+            raise PlanCheckError(problems)
+        return cls(fields["scenario"], fields["planner"], fields["robustness"], bodies, impacts, fields["solver"],
+                   fields["solve_time_s"], fields["build_time_s"], fields["mip_gap"], fields["stats"])
 
     def save(self, path: str | Path) -> Path:
         path = Path(path)
@@ -182,17 +198,25 @@ class Plan:
 
     @classmethod
     def load(cls, path: str | Path) -> Plan:
+        """Read a plan file written by :meth:`save`; any problem is a :class:`PlanCheckError` naming it."""
         try:
-            data = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise PlanCheckError([f"cannot read plan {path}: {exc}"]) from None
+            data = json.loads(Path(path).read_bytes())
+        except OSError as exc:
+            raise PlanCheckError([f"cannot read plan {path}: {exc.strerror or exc}"]) from None
+        except RecursionError:
+            raise PlanCheckError([f"plan {path} is nested too deeply to be a plan file"]) from None
+        except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError, an integer of thousands of digits
+            raise PlanCheckError([f"plan {path} is not a JSON plan file: {str(exc)[:200]}"]) from None
         return cls.from_dict(data)
 
     # ----------------------------------------------------------------------------------------- check
     def check(self, scenario: Scenario, tol: float = 1e-6) -> None:
         """Verify the plan against the scenario; raise :class:`PlanCheckError` listing every violation.
 
-        Checks: contiguous segments covering [0, tf]; position continuity; initial and final states;
+        Checks (:data:`PLAN_CHECKS`, in order): the plan has exactly the scenario's bodies, each with its kind,
+        and finite segments of shape (degree + 1, 2); every impact names a robot and an object of the
+        scenario at a time in [0, tf] with finite 2-D numbers, and none is listed twice; then contiguous
+        segments covering [0, tf]; position continuity; initial and final states;
         per-axis velocity bounds and thrust limits (m * |acceleration| <= thrust_limit_N per axis, with the
         robot's heading held, so body axes are world axes) on the hull of the derivative control points,
         which bounds every point of the curve; objects move in straight lines at constant velocity between
@@ -201,18 +225,86 @@ class Plan:
         relative velocity is reversed and scaled by e.
         """
         bad: list[str] = []
-        for spec in scenario.bodies:
-            if spec.name not in self.bodies:
-                bad.append(f"{spec.name}: missing from the plan")
-                continue
-            bad += _check_body(self.bodies[spec.name], spec, scenario.tf_s, self._impact_times(spec.name), tol)
-        for imp in self.impacts:
-            bad += _check_impact(self, imp, scenario, tol)
+        for check in PLAN_CHECKS:
+            bad += check(self, scenario, tol)
+            if bad and check in _STRUCTURAL:  # later checks index bodies and segments that must exist
+                break
         if bad:
             raise PlanCheckError(bad)
 
     def _impact_times(self, name: str) -> list[float]:
         return [i.time_s for i in self.impacts_of(name)]
+
+
+def _check_structure(plan: Plan, scenario: Scenario, tol: float) -> list[str]:
+    """The plan has the scenario's bodies with the right kinds, and well-formed, finite segments."""
+    bad = []
+    if not isinstance(plan.bodies, dict):
+        return [f"bodies must be a dict name -> BodyPlan, got {type(plan.bodies).__name__}"]
+    kinds = {b.name: ("robot" if b.is_robot else "object") for b in scenario.bodies}
+    for name in plan.bodies:
+        if name not in kinds:
+            bad.append(f"{name}: in the plan but not in scenario {scenario.name!r} (bodies: {', '.join(kinds)})")
+    for name, kind in kinds.items():
+        body = plan.bodies.get(name)
+        if body is None:
+            bad.append(f"{name}: missing from the plan")
+            continue
+        if body.kind != kind:
+            bad.append(f"{name}: kind {body.kind!r} in the plan, but it is a {kind} in the scenario")
+        if not body.segments:
+            bad.append(f"{name}: has no segments")
+        for k, seg in enumerate(body.segments):
+            cp = np.asarray(seg.control_points)
+            if cp.ndim != 2 or cp.shape[1] != 2 or not 2 <= len(cp) <= plan_schema.MAX_DEGREE + 1:
+                bad.append(f"{name}: segment {k} control points have shape {cp.shape}, need (degree + 1, 2) with "
+                           f"degree 1..{plan_schema.MAX_DEGREE}")
+            elif not np.all(np.isfinite(cp.astype(float))):
+                bad.append(f"{name}: segment {k} has non-finite control points")
+            if not (math.isfinite(seg.t0_s) and math.isfinite(seg.t1_s)):
+                bad.append(f"{name}: segment {k} has non-finite times [{seg.t0_s}, {seg.t1_s}]")
+    return bad
+
+
+def _check_impact_records(plan: Plan, scenario: Scenario, tol: float) -> list[str]:
+    """Each impact names a robot and an object of the scenario, at a time in [0, tf], with finite 2-D numbers;
+    no impact is listed twice."""
+    bad = []
+    kinds = {b.name: ("robot" if b.is_robot else "object") for b in scenario.bodies}
+    seen: list[tuple[str, str, float]] = []
+    for k, imp in enumerate(plan.impacts):
+        label = f"impacts[{k}]"
+        for role in ("robot", "object"):
+            who = getattr(imp, role)
+            if kinds.get(who) != role:
+                bad.append(f"{label}: {role} {who!r} is not {'a' if role == 'robot' else 'an'} {role} of scenario "
+                           f"{scenario.name!r} ({role}s: {', '.join(n for n, r in kinds.items() if r == role)})")
+        if not (isinstance(imp.time_s, (int, float)) and 0.0 <= imp.time_s <= scenario.tf_s + tol):
+            bad.append(f"{label}: time {imp.time_s} s is outside [0, {scenario.tf_s}] s")
+        for key in ("position", "object_velocity_before", "object_velocity_after", "robot_velocity_before",
+                    "robot_velocity_after"):
+            value = np.asarray(getattr(imp, key), dtype=float)
+            if value.shape != (2,) or not np.all(np.isfinite(value)):
+                bad.append(f"{label}: {key} must be 2 finite numbers, got {getattr(imp, key)!r}")
+        for r, o, t in seen:
+            if (r, o) == (imp.robot, imp.object) and abs(t - imp.time_s) <= tol:
+                bad.append(f"{label}: {imp.robot}->{imp.object} at t = {imp.time_s} s is listed twice")
+        seen.append((imp.robot, imp.object, imp.time_s))
+    return bad
+
+
+def _check_trajectories(plan: Plan, scenario: Scenario, tol: float) -> list[str]:
+    bad = []
+    for spec in scenario.bodies:
+        bad += _check_body(plan.bodies[spec.name], spec, scenario.tf_s, plan._impact_times(spec.name), tol)
+    return bad
+
+
+def _check_impact_laws(plan: Plan, scenario: Scenario, tol: float) -> list[str]:
+    bad = []
+    for imp in plan.impacts:
+        bad += _check_impact(plan, imp, scenario, tol)
+    return bad
 
 
 def _check_body(body: BodyPlan, spec, tf_s: float, impact_times: list[float], tol: float) -> list[str]:
@@ -296,3 +388,11 @@ def _left_velocity(body: BodyPlan, t: float) -> np.ndarray:
         if s.t0_s < t <= s.t1_s + 1e-12:
             return s.velocity(s.t1_s)[0] if abs(s.t1_s - t) < 1e-9 else s.velocity(t)[0]
     return body.segments[0].velocity(t)[0]
+
+
+# What Plan.check verifies, in order. The structural checks come first: when one fails, the later ones (which
+# index bodies and evaluate curves) are skipped. A new plan feature adds its check here.
+PLAN_CHECKS: tuple[Callable[[Plan, Scenario, float], list[str]], ...] = (
+    _check_structure, _check_impact_records, _check_trajectories, _check_impact_laws,
+)
+_STRUCTURAL = frozenset({_check_structure, _check_impact_records})

@@ -4,6 +4,8 @@ and the PettingZoo parameter-sharing route."""
 from __future__ import annotations
 
 import json
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +16,8 @@ pytest.importorskip("supersuit")
 from baselines import hyperparams  # noqa: E402
 from baselines.train import TrainConfig, train  # noqa: E402
 from impact_env.cli import main  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parents[1] / "baselines" / "results"
 
 
 def test_hyperparameter_files_parse_without_eval():
@@ -33,7 +37,7 @@ def test_hyperparameter_files_parse_without_eval():
 def test_ppo_smoke_train_save_load_and_run(tmp_path):
     run_dir = train(TrainConfig(algo="ppo", scenario="corridor", timesteps=2048, n_envs=2, out=str(tmp_path),
                                 eval_freq=1024, eval_episodes=1, progress_bar=False))
-    assert (run_dir / "model.zip").is_file() and (run_dir / "vecnormalize.pkl").is_file()
+    assert (run_dir / "model.zip").is_file() and (run_dir / "vecnormalize.json").is_file()
     assert list((run_dir / "tb").iterdir())  # TensorBoard logs
     assert json.loads((run_dir / "train.json").read_text())["timesteps"] == 2048
     out = tmp_path / "run.json"
@@ -148,6 +152,32 @@ def test_behaviour_cloning_is_deterministic(demonstrations, tmp_path):
     assert histories[0] == histories[1]
 
 
+def test_behaviour_cloning_unpickles_nothing_and_writes_no_pickle(demonstrations, tmp_path):
+    """Malicious pickles planted in the dataset folder and in bc's output folder (the payload would create a
+    marker file) are never loaded; bc's model folder holds no pickle and flies without --trust-pickle."""
+    import pickle
+
+    from tests.test_model_safety import Payload, with_malicious_zip_entry
+
+    marker = tmp_path / "marker"
+    run_dir = tmp_path / "runs" / "bc_throw_and_catch_exp_s0"
+    run_dir.mkdir(parents=True)
+    for folder in (demonstrations, run_dir):
+        (folder / "vecnormalize.pkl").write_bytes(pickle.dumps(Payload(marker)))
+    shutil.copy(RESULTS / "models" / "bc_throw_and_catch_exp" / "model.zip", demonstrations / "model.zip")
+    with_malicious_zip_entry(demonstrations, marker, "evil")
+    try:
+        assert main(["bc", "throw_and_catch_exp", "--dataset", str(demonstrations), "--epochs", "2",
+                     "--out", str(tmp_path / "runs")]) == 0
+    finally:
+        for name in ("vecnormalize.pkl", "model.zip"):
+            (demonstrations / name).unlink()
+    assert not marker.exists()
+    assert sorted(p.name for p in run_dir.iterdir()) == ["model.zip", "train.json", "vecnormalize.json"]
+    assert main(["run", "throw_and_catch_exp", "--controller", str(run_dir / "model.zip")]) == 0
+    assert not marker.exists()
+
+
 def test_behaviour_cloning_without_a_dataset_is_a_clear_error(tmp_path, capsys):
     pytest.importorskip("minari")
     assert main(["bc", "corridor", "--dataset", str(tmp_path / "empty")]) == 2
@@ -157,8 +187,7 @@ def test_bench_model_template_must_exist_for_every_scenario(tmp_path):
     from baselines.bench import parse_controllers
     from impact_env.errors import ImpactEnvError
 
-    (tmp_path / "corridor").mkdir()
-    (tmp_path / "corridor" / "model.zip").write_bytes(b"")
+    shutil.copytree(RESULTS / "models" / "ppo_corridor", tmp_path / "corridor")
     spec, = parse_controllers(f"ppo:{tmp_path}/{{scenario}}/model.zip", ["corridor"])
     assert spec.label == "ppo"
     with pytest.raises(ImpactEnvError, match="obstacle_avoidance/model.zip"):

@@ -115,6 +115,16 @@ def test_line_of_sight_from_the_l_start():
     assert visible == expected
 
 
+def test_line_of_sight_grazing_a_notch_is_visible():
+    # from (3, 2) the segment to (4.5, 5) passes exactly through the notch (4, 4): touching is not blocking
+    s = make_station([[0, 0], [6, 0], [6, 5], [4, 5], [4, 4], [0, 4]], start=(3, 2), goal=(3, 2),
+                     anchors={"points": [[4.5, 5.0]]})
+    assert s.line_of_sight((3.0, 2.0)).tolist() == [True]
+    assert s.line_of_sight((3.0 + 1e-6, 2.0)).tolist() == [True]  # right of the notch, inside the column
+    assert s.line_of_sight((3.0 - 1e-6, 2.0)).tolist() == [False]  # left of it: outside, above the lower room
+    np.testing.assert_array_equal(s.notches, [[4.0, 4.0]])
+
+
 def test_line_of_sight_past_the_notch():
     """The segment to (7.5, 15) passes the notch (5, 10) above it from x = 2.4 and below it from x = 2.6."""
     s = make_station(anchors={"points": [[7.5, 15.0]]})

@@ -97,6 +97,14 @@ def test_kinematic_first_leg_is_eq5_at_w():
     np.testing.assert_allclose(obs[2:4], 0.1 * u, atol=1e-6)
 
 
+def test_one_gym_id_per_shipped_station():
+    from impact_env.station import station_names
+
+    assert sorted(impact_env.TETHER_GYM_IDS.values()) == sorted(station_names())
+    for env_id, name in impact_env.TETHER_GYM_IDS.items():
+        assert gym.spec(env_id).kwargs == {"station": name}
+
+
 @pytest.mark.parametrize("env_id", sorted(impact_env.TETHER_GYM_IDS))
 def test_gymnasium_check_env(env_id):
     env = gym.make(env_id)

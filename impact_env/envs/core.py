@@ -20,6 +20,12 @@ Reward (both environments):
   arrives, tens of seconds later. Here every conjunct is credited when it changes. This is shaping that
   changes the objective (a mean is not a min): ``info["robustness"]`` and ``is_success`` stay the task's.
 - both: minus ``fuel_penalty`` times the step's fuel, sum over robots of |F| * control period (N s).
+
+A task that holds or fails whatever the bodies do (``F[0,20] true``, or ``true | in(O1, goal)``) has the
+robustness +-inf. No signed distance between a point of the world and a region can exceed the diagonal of
+the box around the world and every region, so the environment reports robustness clipped to +- that
+length (:attr:`TransportCore.robustness_limit_m`): rewards and ``info["robustness"]`` stay finite, the
+rewards still sum to the (clipped) final robustness, and the sign, hence ``is_success``, is unchanged.
 """
 
 from __future__ import annotations
@@ -30,7 +36,9 @@ from typing import Any
 
 import numpy as np
 
-from impact_env.errors import ActionError, ImpactEnvError
+from impact_env.envs import starts
+from impact_env.envs.actions import numbers_of
+from impact_env.errors import ActionError, EnvConfigError, ImpactEnvError
 from impact_env.physics import ImpactEvent, World
 from impact_env.scenario import Scenario, load_scenario
 from impact_env.stl import OnlineMonitor, conjuncts
@@ -38,6 +46,7 @@ from impact_env.stl import OnlineMonitor, conjuncts
 REWARD_MODES = ("dense", "sparse", "conjuncts")
 OBS_PER_BODY = 7  # x, y, vx, vy, cos(heading), sin(heading), angular velocity
 ACTION_PER_ROBOT = 3  # body-frame Fx, Fy, torque, each in [-1, 1]
+_FLOAT32_LIMIT = float(np.finfo(np.float32).max) / 2  # observation bounds stay finite in float32
 
 
 def speed_bounds(scenario: Scenario, duration_s: float) -> tuple[float, float]:
@@ -56,11 +65,18 @@ def speed_bounds(scenario: Scenario, duration_s: float) -> tuple[float, float]:
     v_max = math.sqrt(2.0 * energy / min(b.mass_kg for b in bodies))
     w_max = max(abs(b.angular_velocity_radps) + (duration_s * b.torque_limit_Nm / b.inertia_kgm2 if b.is_robot else 0.0)
                 for b in bodies)
-    return v_max, max(w_max, 1.0)
+    return min(v_max, _FLOAT32_LIMIT), min(max(w_max, 1.0), _FLOAT32_LIMIT)
 
 
-class EnvConfigError(ImpactEnvError, ValueError):
-    """An environment option is out of range or of the wrong kind."""
+def robustness_limit(scenario: Scenario) -> float:
+    """Diagonal (m) of the box around the world and every region: no signed distance in the task exceeds it."""
+    xs = [scenario.world_box[0], scenario.world_box[1]]
+    ys = [scenario.world_box[2], scenario.world_box[3]]
+    for region in scenario.regions + scenario.obstacles:
+        xmin, xmax, ymin, ymax = region.polygon.bounds
+        xs += (xmin, xmax)
+        ys += (ymin, ymax)
+    return math.hypot(max(xs) - min(xs), max(ys) - min(ys))
 
 
 @dataclass
@@ -96,6 +112,8 @@ class TransportCore:
                 raise EnvConfigError(f"{name} must be a finite number >= 0, got {value!r}")
         if restitution is not None and not (isinstance(restitution, (int, float)) and 0.0 <= restitution <= 1.0):
             raise EnvConfigError(f"restitution must be in [0, 1] or None, got {restitution!r}")
+        if initial_position_noise_m > 0:
+            starts.check_noise(self.scenario, float(initial_position_noise_m))
         self.reward_mode = reward_mode
         self.fuel_penalty = float(fuel_penalty)
         self.restitution = restitution
@@ -111,6 +129,9 @@ class TransportCore:
         self.horizon_steps = self.monitor.horizon_steps
         self.conjunct_monitors = ([OnlineMonitor(part, sc.region_map(), self.dt_s) for part in conjuncts(sc.formula)]
                                   if reward_mode == "conjuncts" else [])
+        self.robustness_limit_m = robustness_limit(sc)
+        n = self.n_robots * ACTION_PER_ROBOT
+        self._action_shapes = ((n,), (self.n_robots, ACTION_PER_ROBOT))
         self.wrench_limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in sc.robots], dtype=float)
         self._limits_py = [tuple(float(x) for x in row) for row in self.wrench_limits]
 
@@ -140,10 +161,7 @@ class TransportCore:
         """Start a new episode: a fresh pymunk world, an empty trace; randomness only from ``rng``."""
         overrides = {}
         if self.initial_position_noise_m > 0:
-            for body in self.scenario.objects:
-                r = self.initial_position_noise_m * math.sqrt(rng.uniform())
-                a = rng.uniform(0.0, 2.0 * math.pi)
-                overrides[body.name] = (body.position_m[0] + r * math.cos(a), body.position_m[1] + r * math.sin(a))
+            overrides = starts.draw_starts(self.scenario, self.initial_position_noise_m, rng)
         self.world = World(self.scenario, restitution=self.restitution, initial_positions_m=overrides)
         self._rng = rng
         self.step_count = 0
@@ -151,11 +169,15 @@ class TransportCore:
         self.last_wrenches = [(0.0, 0.0, 0.0)] * self.n_robots
         self.monitor.reset()
         self._state = self.world.read_state()
-        self.log.robustness = self.monitor.update(self._positions())
+        self.log.robustness = self._clip(self.monitor.update(self._positions()))
         for part in self.conjunct_monitors:
             part.reset()
             part.update(self._positions())
         self._prev_estimate = 0.0
+
+    def _clip(self, rho: float) -> float:
+        limit = self.robustness_limit_m
+        return limit if rho > limit else (-limit if rho < -limit else rho)
 
     def _positions(self) -> dict[str, tuple[float, float]]:
         return {name: (s[0], s[1]) for name, s in zip(self.body_names, self._state)}
@@ -163,19 +185,15 @@ class TransportCore:
     def wrenches_from_action(self, action: Any) -> list[tuple[float, float, float]]:
         """Scale a normalised action (n_robots * 3 numbers in [-1, 1]) to body-frame (Fx, Fy, torque).
 
-        Values outside [-1, 1] are clipped (so limits are never exceeded); NaN or infinite values raise
-        :class:`ActionError`, since no clipping can make sense of them.
+        The action has shape (3 n_robots,) or (n_robots, 3); any other shape, non-numbers or a ragged list
+        raise :class:`ActionError` (:mod:`impact_env.envs.actions`). Values outside [-1, 1] are clipped (so
+        limits are never exceeded); NaN or infinite values raise :class:`ActionError`, since no clipping can
+        make sense of them.
         """
-        values = action.tolist() if isinstance(action, np.ndarray) else action
-        if isinstance(values, (list, tuple)) and len(values) and isinstance(values[0], (list, tuple)):
-            values = [x for row in values for x in row]  # (n_robots, 3) given
-        n = self.n_robots * ACTION_PER_ROBOT
-        try:
-            values = [float(x) for x in values]
-        except (TypeError, ValueError):
-            raise ActionError(f"action must be {n} numbers (Fx, Fy, torque per robot), got {action!r}") from None
-        if len(values) != n:
-            raise ActionError(f"action must have {n} numbers (Fx, Fy, torque per robot), got shape {np.shape(action)}")
+        if isinstance(action, np.ndarray) and action.dtype.kind == "f" and action.shape == self._action_shapes[0]:
+            values = action.tolist()  # the common case, kept fast
+        else:
+            values = numbers_of(action, self._action_shapes, "action", "Fx, Fy, torque per robot")
         if not all(map(math.isfinite, values)):
             bad = [i for i, x in enumerate(values) if not math.isfinite(x)]
             raise ActionError(f"action contains NaN or infinite values at indices {bad}; actions must be finite "
@@ -201,7 +219,7 @@ class TransportCore:
         events = self.world.step(wrenches)
         self.step_count += 1
         self._state = self.world.read_state()
-        estimate = self.monitor.update(self._positions())
+        estimate = self._clip(self.monitor.update(self._positions()))
         terminated = self.step_count >= self.horizon_steps
         if terminated:
             events = events + self.world.flush_impacts()
@@ -215,7 +233,8 @@ class TransportCore:
             self._prev_estimate = estimate
         elif self.reward_mode == "conjuncts":
             positions = self._positions()
-            potential = sum(part.update(positions) for part in self.conjunct_monitors) / len(self.conjunct_monitors)
+            potential = sum(self._clip(part.update(positions)) for part in self.conjunct_monitors) \
+                / len(self.conjunct_monitors)
             reward = potential - self._prev_estimate
             self._prev_estimate = potential
         else:

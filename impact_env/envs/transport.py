@@ -11,6 +11,7 @@ from gymnasium.utils import EzPickle
 
 from impact_env.envs import render_support
 from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
+from impact_env.errors import EnvConfigError
 from impact_env.scenario import Scenario
 
 
@@ -76,7 +77,10 @@ class TransportEnv(gym.Env, EzPickle):
         EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
                           initial_position_noise_m, render_mode, render_width_px)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+            raise EnvConfigError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
+                                 f"got {render_mode!r}")
+        if not (type(render_width_px) is int and 16 <= render_width_px <= 8192):
+            raise EnvConfigError(f"render_width_px must be an integer in 16..8192, got {render_width_px!r}")
         self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
                                   restitution=restitution, thrust_noise=thrust_noise,
                                   initial_position_noise_m=initial_position_noise_m)

@@ -6,6 +6,7 @@ AEC form without wrappers) and :func:`env` (the AEC form, order-enforced).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -16,7 +17,9 @@ from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from impact_env.envs import render_support
+from impact_env.envs.actions import numbers_of
 from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
+from impact_env.errors import ActionError, EnvConfigError
 from impact_env.scenario import Scenario
 
 
@@ -42,9 +45,12 @@ class TransportParallelEnv(ParallelEnv, EzPickle):
         EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
                           initial_position_noise_m, max_cycles, render_mode, render_width_px)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
-        if max_cycles is not None and (not isinstance(max_cycles, int) or max_cycles < 1):
-            raise ValueError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
+            raise EnvConfigError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
+                                 f"got {render_mode!r}")
+        if max_cycles is not None and not (type(max_cycles) is int and max_cycles >= 1):
+            raise EnvConfigError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
+        if not (type(render_width_px) is int and 16 <= render_width_px <= 8192):
+            raise EnvConfigError(f"render_width_px must be an integer in 16..8192, got {render_width_px!r}")
         self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
                                   restitution=restitution, thrust_noise=thrust_noise,
                                   initial_position_noise_m=initial_position_noise_m)
@@ -60,7 +66,8 @@ class TransportParallelEnv(ParallelEnv, EzPickle):
         self.observation_spaces = {a: obs_space for a in self.possible_agents}
         self.action_spaces = {a: act_space for a in self.possible_agents}
         self.state_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
-        self._zero = np.zeros(ACTION_PER_ROBOT, dtype=np.float32)
+        self._zero_list = [0.0] * ACTION_PER_ROBOT
+        self._agent_set = frozenset(self.possible_agents)
         self._renderer = None
         self.np_random, _ = seeding.np_random(None)
 
@@ -90,14 +97,18 @@ class TransportParallelEnv(ParallelEnv, EzPickle):
         return self.core.observation()
 
     def step(self, actions: dict[str, Any]):
-        unknown = set(actions) - set(self.possible_agents)
+        if not isinstance(actions, Mapping):
+            raise ActionError(f"actions must be a dict from agent name to action, got {type(actions).__name__}")
+        unknown = [a for a in actions if a not in self._agent_set]
         if unknown:
-            raise KeyError(f"actions for unknown agents {sorted(unknown)}; agents are {self.possible_agents}")
-        joint = np.concatenate([
-            np.asarray(actions[a] if actions.get(a) is not None else self._zero, dtype=float).reshape(-1)
-            for a in self.possible_agents
-        ])
-        reward, terminated, info = self.core.step(joint)
+            raise ActionError(f"actions for unknown agents {sorted(map(repr, unknown))}; agents are "
+                              f"{self.possible_agents}")
+        joint: list[float] = []
+        for a in self.possible_agents:
+            action = actions.get(a)
+            joint += self._zero_list if action is None else numbers_of(action, ((ACTION_PER_ROBOT,),),
+                                                                        f"actions[{a!r}]", "Fx, Fy, torque")
+        reward, terminated, info = self.core.step(np.array(joint))
         self._cycles += 1
         truncated = not terminated and self.max_cycles is not None and self._cycles >= self.max_cycles
         agents = self.agents

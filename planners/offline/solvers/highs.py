@@ -22,6 +22,24 @@ _REPORT_INTERVAL_S = 1.0
 _scheduler_threads: int | None = None  # thread count this module last sized HiGHS's global scheduler to
 
 
+class _Highs(highspy.Highs):
+    """``highspy.Highs`` that is silent from its first call when ``verbose`` is false.
+
+    HiGHS logs its banner ("Running HiGHS ...") on the first call to an instance while ``output_flag`` is
+    still true, and says to set ``output_flag`` before any other call to suppress it. highspy's constructor
+    makes such a call itself (``enableCallbacks``), so the flag is set at the start of that call, before
+    the call reaches HiGHS.
+    """
+
+    def __init__(self, verbose: bool) -> None:
+        self._verbose = bool(verbose)
+        super().__init__()
+
+    def enableCallbacks(self) -> None:  # noqa: N802 - highspy's name
+        self.setOptionValue("output_flag", self._verbose)
+        super().enableCallbacks()
+
+
 def _lp(model: Model) -> highspy.HighsLp:
     """The model's linear part as a HighsLp (row-wise matrix, objective sense and offset included)."""
     start, index, value, row_lo, row_hi = model.csr()
@@ -137,7 +155,7 @@ def solve(model: Model, options: SolverOptions | None = None) -> SolveResult:
         raise ValueError("HiGHS does not solve mixed-integer QPs (quadratic objective with integer variables): "
                          "use solver='scip' or 'gurobi', or make the objective linear")
     t0 = time.perf_counter()
-    h = highspy.Highs()
+    h = _Highs(verbose=options.verbose)
     _set_options(h, options)
     status = h.passModel(_lp(model))
     if status == highspy.HighsStatus.kError:

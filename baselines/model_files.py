@@ -1,0 +1,327 @@
+"""Model folders read without running code from them: ``model.zip``, ``vecnormalize.json``, ``train.json``.
+
+A pickle runs whatever code it names when it is loaded, so a model folder from someone else must never be
+unpickled. stable-baselines3's ``model.zip`` keeps the weights as ``.pth`` files, which it loads with
+``torch.load(weights_only=True)`` (plain tensors only), but it also pickles (cloudpickle) some entries of its
+``data`` JSON: the spaces, the policy class, schedules, buffers. :func:`load_model` rebuilds each of those
+entries itself (SB3's ``custom_objects``: the spaces from the environment, the policy class from the
+algorithm, constants for the training-only schedules), so no pickled entry is ever decoded, and refuses a
+zip whose pickled entries it does not know. The observation-normalisation statistics are plain JSON
+(``vecnormalize.json``, :func:`save_normalization`) rather than VecNormalize's pickle.
+
+Older folders hold ``vecnormalize.pkl``. Loading it (or a zip with unknown pickled entries) needs
+``trust_pickle=True`` (``--trust-pickle`` on the command line), which prints a warning; ``impact-env
+convert-model DIR --trust-pickle`` rewrites such a folder once into the safe form.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from impact_env.errors import ModelFileError, UntrustedFileError
+
+NORMALIZATION_FILE = "vecnormalize.json"
+LEGACY_NORMALIZATION_FILE = "vecnormalize.pkl"
+FORMAT = "impact_env.vecnormalize/1"
+TRUST_FLAG = "--trust-pickle"
+# entries of a model zip's data JSON that SB3 pickles and that are rebuilt here; the rest are training state
+_SPACES = ("observation_space", "action_space")
+_SCHEDULES = {"lr_schedule": 0.0, "learning_rate": 0.0, "clip_range": 0.2, "clip_range_vf": None}
+_TRAINING_ONLY = ("_last_obs", "_last_episode_starts", "_last_original_obs", "ep_info_buffer", "ep_success_buffer",
+                  "rollout_buffer_class", "replay_buffer_class", "action_noise")
+_POLICY_MODULES = {"ppo": "stable_baselines3.common.policies", "sac": "stable_baselines3.sac.policies"}
+
+
+def warn_trusted(path: Path | str) -> None:
+    print(f"impact-env: warning: unpickling {path} because of {TRUST_FLAG}: a pickle can run any code; "
+          "use this only for files you made yourself", file=sys.stderr, flush=True)
+
+
+# ----------------------------------------------------------------------------------------------- train.json
+
+
+def read_train_json(folder: Path) -> dict[str, Any]:
+    """The run's ``train.json`` as a dict ({} when absent), its known fields type-checked."""
+    path = folder / "train.json"
+    if not path.is_file():
+        return {}
+    try:
+        meta = json.loads(path.read_bytes())
+    except (ValueError, RecursionError) as exc:
+        raise ModelFileError(f"{path} is not valid JSON: {str(exc)[:200]}") from None
+    if not isinstance(meta, dict):
+        raise ModelFileError(f"{path} must hold a JSON object like {{\"algo\": \"ppo\", ...}}, got a "
+                             f"{type(meta).__name__}")
+    if "algo" in meta and meta["algo"] not in _POLICY_MODULES:
+        raise ModelFileError(f"{path}: algo must be one of {', '.join(_POLICY_MODULES)}, got {meta['algo']!r}")
+    if "multiagent" in meta and not isinstance(meta["multiagent"], bool):
+        raise ModelFileError(f"{path}: multiagent must be true or false, got {meta['multiagent']!r}")
+    if "env_options" in meta and not isinstance(meta["env_options"], dict):
+        raise ModelFileError(f"{path}: env_options must be an object, got {meta['env_options']!r}")
+    return meta
+
+
+# ---------------------------------------------------------------------------------------------- normalisation
+
+
+@dataclass(frozen=True)
+class Normalization:
+    """VecNormalize's observation statistics: obs -> clip((obs - mean) / sqrt(var + epsilon), +-clip_obs)."""
+
+    mean: np.ndarray
+    var: np.ndarray
+    count: float
+    clip_obs: float
+    epsilon: float
+    norm_obs: bool = True
+
+    def apply(self, obs: np.ndarray) -> np.ndarray:
+        if not self.norm_obs:
+            return obs
+        return np.clip((obs - self.mean) / np.sqrt(self.var + self.epsilon), -self.clip_obs, self.clip_obs)
+
+
+def save_normalization(vec_normalize: Any, path: Path | str) -> Path:
+    """Write a VecNormalize's statistics as plain JSON (floats round-trip exactly)."""
+    def rms(r: Any) -> dict[str, Any]:
+        return {"mean": np.asarray(r.mean, dtype=float).tolist(), "var": np.asarray(r.var, dtype=float).tolist(),
+                "count": float(r.count)}
+
+    vn = vec_normalize
+    data = {"format": FORMAT, "norm_obs": bool(vn.norm_obs), "norm_reward": bool(vn.norm_reward),
+            "clip_obs": float(vn.clip_obs), "clip_reward": float(vn.clip_reward), "gamma": float(vn.gamma),
+            "epsilon": float(vn.epsilon), "obs_rms": rms(vn.obs_rms), "ret_rms": rms(vn.ret_rms)}
+    path = Path(path)
+    path.write_text(json.dumps(data, indent=1))
+    return path
+
+
+def _vector(value: Any, where: str, size: int | None) -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelFileError(f"{where} must be a list of numbers") from None
+    if array.ndim != 1 or (size is not None and array.shape != (size,)) or not np.all(np.isfinite(array)):
+        raise ModelFileError(f"{where} must be {size or 'a list of'} finite numbers, got shape {array.shape}")
+    return array
+
+
+def _number(data: dict, key: str, where: str, positive: bool = False) -> float:
+    value = data.get(key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or (positive and not value > 0) or value < 0:
+        raise ModelFileError(f"{where}.{key} must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
+    return float(value)
+
+
+def read_normalization(path: Path, obs_size: int | None = None) -> Normalization:
+    """Read and check a ``vecnormalize.json``."""
+    try:
+        data = json.loads(path.read_bytes())
+    except (OSError, ValueError, RecursionError) as exc:
+        raise ModelFileError(f"cannot read {path}: {str(exc)[:200]}") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("obs_rms"), dict):
+        raise ModelFileError(f"{path} is not a {FORMAT} file (written by impact-env train or bc)")
+    rms = data["obs_rms"]
+    mean = _vector(rms.get("mean"), f"{path}: obs_rms.mean", obs_size)
+    var = _vector(rms.get("var"), f"{path}: obs_rms.var", len(mean))
+    if np.any(var < 0):
+        raise ModelFileError(f"{path}: obs_rms.var must be >= 0")
+    norm_obs = data.get("norm_obs", True)
+    if not isinstance(norm_obs, bool):
+        raise ModelFileError(f"{path}: norm_obs must be true or false, got {norm_obs!r}")
+    return Normalization(mean, var, _number(rms, "count", f"{path}: obs_rms"),
+                         _number(data, "clip_obs", str(path), positive=True), _number(data, "epsilon", str(path)),
+                         norm_obs)
+
+
+def _unpickle_normalization(path: Path) -> Normalization:
+    import pickle
+
+    warn_trusted(path)
+    try:
+        with open(path, "rb") as f:
+            vn = pickle.load(f)  # noqa: S301 - only with --trust-pickle
+        return Normalization(np.asarray(vn.obs_rms.mean, dtype=float), np.asarray(vn.obs_rms.var, dtype=float),
+                             float(vn.obs_rms.count), float(vn.clip_obs), float(vn.epsilon), bool(vn.norm_obs))
+    except Exception as exc:  # noqa: BLE001 - whatever the trusted pickle held, it is not usable statistics
+        raise ModelFileError(f"{path} does not hold VecNormalize statistics: {type(exc).__name__}: "
+                             f"{str(exc)[:200]}") from None
+
+
+def load_normalization(folder: Path, obs_size: int | None = None, trust_pickle: bool = False) -> Normalization | None:
+    """The folder's observation statistics: ``vecnormalize.json``, else (trusted only) ``vecnormalize.pkl``."""
+    safe, legacy = folder / NORMALIZATION_FILE, folder / LEGACY_NORMALIZATION_FILE
+    if safe.is_file():
+        return read_normalization(safe, obs_size)
+    if not legacy.is_file():
+        return None
+    if not trust_pickle:
+        raise UntrustedFileError(
+            f"{legacy} is a pickle, which can run code when loaded, so it is not loaded. If you made it, convert "
+            f"the folder once with `impact-env convert-model {folder} {TRUST_FLAG}`, or pass {TRUST_FLAG} to load "
+            "it as it is")
+    return _unpickle_normalization(legacy)
+
+
+# ------------------------------------------------------------------------------------------------ model.zip
+
+
+def read_zip_data(path: Path) -> dict[str, Any]:
+    """The ``data`` JSON of an SB3 model zip, decoded as JSON only (no entry is unpickled)."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            raw = archive.read("data")
+    except (OSError, zipfile.BadZipFile, KeyError, ValueError) as exc:
+        raise ModelFileError(f"{path} is not a model saved by stable-baselines3 (a zip with a 'data' entry): "
+                             f"{str(exc)[:200]}") from None
+    try:
+        data = json.loads(raw)
+    except (ValueError, RecursionError) as exc:
+        raise ModelFileError(f"{path}: its 'data' entry is not JSON: {str(exc)[:200]}") from None
+    if not isinstance(data, dict):
+        raise ModelFileError(f"{path}: its 'data' entry must be a JSON object")
+    return data
+
+
+def pickled_entries(data: dict[str, Any]) -> list[str]:
+    return sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
+
+
+def infer_algo(path: Path, data: dict[str, Any], hint: str | None) -> str:
+    """ppo or sac: from train.json's ``algo`` if given, else from the policy class's recorded module."""
+    recorded = data.get("policy_class", {})
+    module = recorded.get("__module__") if isinstance(recorded, dict) else None
+    algo = hint
+    if algo is None:
+        algo = next((a for a, m in _POLICY_MODULES.items() if m == module), None)
+        if algo is None:
+            raise ModelFileError(f"{path}: cannot tell whether it is a PPO or a SAC model (policy module {module!r}); "
+                                 "add train.json with \"algo\"")
+    elif module is not None and module != _POLICY_MODULES[algo]:
+        raise ModelFileError(f"{path}: train.json says {algo}, but the policy class comes from {module!r}")
+    return algo
+
+
+def _rebuildable(key: str) -> bool:
+    return key in ("policy_class", "train_freq") or key in _SPACES or key in _SCHEDULES or key in _TRAINING_ONLY
+
+
+def _untrusted_entry(path: Path, key: str) -> UntrustedFileError:
+    return UntrustedFileError(f"{path}: its entry {key!r} is a pickle that can run code when loaded, and impact-env "
+                              f"cannot rebuild it safely; pass {TRUST_FLAG} to unpickle it (only for files you made "
+                              "yourself)")
+
+
+def preflight(path: Path, trust_pickle: bool = False) -> None:
+    """Check a model folder before any worker loads it: train.json, the zip's data JSON, its pickled entries
+    and the normalisation file. Reads JSON only; imports neither torch nor stable-baselines3."""
+    meta = read_train_json(path.parent)
+    data = read_zip_data(path)
+    infer_algo(path, data, meta.get("algo"))
+    if trust_pickle:
+        return
+    for key in pickled_entries(data):
+        if not _rebuildable(key):
+            raise _untrusted_entry(path, key)
+    safe, legacy = path.parent / NORMALIZATION_FILE, path.parent / LEGACY_NORMALIZATION_FILE
+    if safe.is_file():
+        read_normalization(safe)
+    elif legacy.is_file():
+        load_normalization(path.parent)  # raises UntrustedFileError naming the flag
+
+
+def convert_folder(folder: Path) -> list[str]:
+    """Rewrite an old model folder into the safe form: vecnormalize.pkl -> vecnormalize.json (the pickle is
+    removed). Unpickles the old file, so only for folders you made; returns what was done."""
+    done = []
+    legacy = folder / LEGACY_NORMALIZATION_FILE
+    if legacy.is_file():
+        import pickle
+
+        warn_trusted(legacy)
+        with open(legacy, "rb") as f:
+            vn = pickle.load(f)  # noqa: S301 - the caller passed --trust-pickle
+        save_normalization(vn, folder / NORMALIZATION_FILE)
+        back = read_normalization(folder / NORMALIZATION_FILE)
+        if not (np.array_equal(back.mean, vn.obs_rms.mean) and np.array_equal(back.var, vn.obs_rms.var)):
+            raise ModelFileError(f"{folder}: the converted statistics differ from the pickled ones")
+        legacy.unlink()
+        done.append(f"{legacy} -> {folder / NORMALIZATION_FILE}")
+    model = folder / "model.zip"
+    if model.is_file():
+        unknown = [k for k in pickled_entries(read_zip_data(model)) if not _rebuildable(k)]
+        if unknown:
+            raise ModelFileError(f"{model}: entries {unknown} are pickles impact-env cannot rebuild; the folder "
+                                 "still needs --trust-pickle")
+        done.append(f"{model}: every pickled entry is rebuilt on load, nothing to change")
+    return done
+
+
+def safe_replacements(path: Path, data: dict[str, Any], algo: str, observation_space: Any,
+                      action_space: Any) -> dict[str, Any]:
+    """SB3 ``custom_objects`` for every pickled entry of the zip; UntrustedFileError for one it cannot rebuild."""
+    from stable_baselines3 import PPO, SAC
+
+    cls = {"ppo": PPO, "sac": SAC}[algo]
+    out: dict[str, Any] = {}
+    for key in pickled_entries(data):
+        if key == "policy_class":
+            out[key] = cls.policy_aliases["MlpPolicy"]
+        elif key in _SPACES:
+            space = observation_space if key == "observation_space" else action_space
+            shape = _recorded_shape(data[key])
+            if shape is not None and shape != tuple(space.shape):
+                raise ModelFileError(f"{path} was trained with {key.replace('_', ' ')} of shape {shape}, but this "
+                                     f"scenario's is {tuple(space.shape)}: it is a model for another scenario")
+            out[key] = space
+        elif key in _SCHEDULES:  # only training reads these; predict() does not
+            out[key] = _SCHEDULES[key]
+        elif key in _TRAINING_ONLY:
+            out[key] = None
+        elif key == "train_freq":
+            out[key] = 1
+        else:
+            raise _untrusted_entry(path, key)
+    return out
+
+
+def _recorded_shape(entry: dict[str, Any]) -> tuple[int, ...] | None:
+    """The ``_shape`` SB3 writes as readable text beside a pickled space, e.g. ``"[22]"``."""
+    try:
+        shape = json.loads(entry.get("_shape", "null"))
+    except (TypeError, ValueError):
+        return None
+    if isinstance(shape, list) and all(isinstance(n, int) for n in shape):
+        return tuple(shape)
+    return None
+
+
+def load_model(path: Path, algo: str | None, observation_space: Any, action_space: Any,
+               trust_pickle: bool = False) -> Any:
+    """Load a PPO or SAC ``model.zip`` on the CPU without decoding any pickled entry (unless trusted)."""
+    from stable_baselines3 import PPO, SAC
+
+    data = read_zip_data(path)
+    algo = infer_algo(path, data, algo)
+    cls = {"ppo": PPO, "sac": SAC}[algo]
+    if trust_pickle:
+        warn_trusted(path)
+        custom = None
+    else:
+        custom = safe_replacements(path, data, algo, observation_space, action_space)
+        if algo == "sac":
+            custom["buffer_size"] = 1  # SAC would allocate its whole replay buffer, which predict() never reads
+    try:
+        return cls.load(str(path), device="cpu", custom_objects=custom)
+    except Exception as exc:  # noqa: BLE001 - torch, zipfile and SB3 raise many types for a broken file
+        raise ModelFileError(f"{path} could not be loaded as a {algo.upper()} model: {type(exc).__name__}: "
+                             f"{str(exc)[:300]}") from None
