@@ -72,21 +72,30 @@ def parse_controllers(text: str, scenarios: list[str] | None = None,
 
 
 def _episode(job: tuple[str, ControllerSpec, int, str | None, dict[str, Any]]) -> dict[str, Any]:
+    from baselines import tether
     from impact_env.controllers import make_controller
     from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import robot_object_impacts, run_episode
 
     scenario_name, spec, seed, plan_path, env_options = job
     key = (scenario_name, spec.name)
-    scenario = load_scenario(scenario_name)
+    station = tether.is_station(scenario_name)
+    if station:
+        from impact_env.station import load_station
+
+        scenario = load_station(scenario_name)
+        env_options = tether.env_options(env_options, scenario_name)
+    else:
+        scenario = load_scenario(scenario_name)
+        env_options = {k: v for k, v in env_options.items() if k != "fidelity"}  # a tether-only option
     if key not in _CACHE:  # one controller per worker process (the expert compiles its MPCs once)
         _CACHE[key] = make_controller(model_path(spec, scenario_name), scenario,
                                       plan=plan_path if spec.name == "expert" else None,
                                       trust_pickle=True if spec.trust_pickle else None)
     controller = _CACHE[key]
-    env = TransportEnv(scenario, **env_options)
+    env = tether.make_env(scenario, **env_options) if station else TransportEnv(scenario, **env_options)
     res = run_episode(env, controller, seed=seed)
-    hits = len(robot_object_impacts(scenario, res.impacts))
+    hits = 0 if station else len(robot_object_impacts(scenario, res.impacts))
     return {"scenario": scenario_name, "controller": spec.label, "seed": seed, "success": res.success,
             "robustness": res.robustness, "fuel_Ns": res.fuel_Ns, "impacts": hits,
             "controller_ms": float(np.mean(res.controller_ms)), "positions": res.positions if seed == 0 else None}
@@ -99,16 +108,22 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
     ``env_options`` (TransportEnv keywords such as ``thrust_noise``) apply to every episode; they are
     checked once here, so a bad value is one clear error rather than one per worker.
     """
+    from baselines import tether
     from impact_env.envs.core import TransportCore
 
     env_options = dict(env_options or {})
     for name in scenarios:
-        TransportCore(name, **env_options)
+        if tether.is_station(name):
+            tether.make_env(name, **tether.env_options(env_options, name)).close()
+        else:
+            TransportCore(name, **{k: v for k, v in env_options.items() if k != "fidelity"})
     out.mkdir(parents=True, exist_ok=True)
     plan_paths: dict[str, str | None] = {}
     for name in scenarios:
         plan_paths[name] = None
-        if any(c.name == "expert" for c in controllers):
+        if any(c.name == "expert" for c in controllers) and tether.is_station(name):
+            plan_paths[name] = tether.save_expert_plan(name, out)
+        elif any(c.name == "expert" for c in controllers):
             from planners.offline.sr_planner import plan_spatially_robust
 
             plan_paths[name] = str(plan_spatially_robust(load_scenario(name)).save(out / "plans" / f"{name}.json"))
@@ -167,6 +182,7 @@ def markdown_table(summary: list[dict[str, Any]]) -> str:
 def _figure(results, summary, scenarios, controllers, path: Path) -> None:
     from matplotlib.figure import Figure
 
+    from baselines import tether
     from impact_env.plotting import draw_scenario
 
     n_c = len(controllers)
@@ -183,10 +199,16 @@ def _figure(results, summary, scenarios, controllers, path: Path) -> None:
             ax.text(k, 0, f"{100 * rows[c]['success_rate']:.0f}%", ha="center", va="bottom", fontsize=8)
         ax.set_title(f"{s}: robustness (m), success %", fontsize=9)
         ax.tick_params(axis="x", labelrotation=30, labelsize=8)
-        scenario = load_scenario(s)
+        if tether.is_station(s):
+            from impact_env.station import load_station
+            from impact_env.tether_plotting import draw_station
+
+            scenario, draw = load_station(s), draw_station
+        else:
+            scenario, draw = load_scenario(s), draw_scenario
         for k, c in enumerate(labels):
             ax = axes[i][k + 1]
-            draw_scenario(scenario, ax)
+            draw(scenario, ax)
             ax.get_legend() and ax.get_legend().remove()
             traj = next(r["positions"] for r in results if r["scenario"] == s and r["controller"] == c
                         and r["positions"] is not None)

@@ -33,6 +33,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--restitution", type=float, default=None)
     p.add_argument("--thrust-noise", type=float, default=0.0)
     p.add_argument("--init-noise", type=float, default=0.0)
+    p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
+                   help="tether stations only: the tether physics (see impact_env.tether_physics)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--verbose", type=int, default=0)
     p.set_defaults(func=_run)
@@ -52,6 +54,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--trust-pickle", action="store_true",
                    help="also load pickled files of model folders (old vecnormalize.pkl, unknown pickled model "
                         "entries); a pickle can run any code: only for files you made yourself")
+    p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
+                   help="tether stations only: the tether physics (see impact_env.tether_physics)")
     p.set_defaults(func=_bench)
 
     p = subparsers.add_parser("convert-model", help="rewrite old model folders without pickles (vecnormalize.pkl "
@@ -159,6 +163,10 @@ def _bench(args: argparse.Namespace) -> int:
     options = {"thrust_noise": args.thrust_noise, "initial_position_noise_m": args.init_noise}
     if args.restitution is not None:
         options["restitution"] = args.restitution
+    from baselines.tether import is_station
+
+    if any(is_station(s) for s in scenarios):
+        options["fidelity"] = args.fidelity
     summary = run_bench(scenarios, parse_controllers(args.controllers, scenarios, args.trust_pickle), args.episodes,
                         Path(args.out), args.workers, options)
     print(markdown_table(summary))
@@ -173,6 +181,10 @@ def _run(args: argparse.Namespace) -> int:
                "initial_position_noise_m": args.init_noise}
     if args.restitution is not None:
         options["restitution"] = args.restitution
+    from baselines.tether import is_station
+
+    if is_station(args.scenario):
+        options["fidelity"] = args.fidelity
     config = TrainConfig(algo=args.algo, scenario=args.scenario, timesteps=args.timesteps, seed=args.seed,
                          n_envs=args.n_envs, out=args.out, env_options=options, eval_freq=args.eval_freq,
                          multiagent=args.multiagent, progress_bar=not args.no_progress,

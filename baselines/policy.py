@@ -36,22 +36,34 @@ class SB3Controller:
         self.meta = model_files.read_train_json(path.parent)
         self.scenario = scenario
         self.multiagent = bool(self.meta.get("multiagent"))
-        core = TransportCore(scenario)
-        n_actions = ACTION_PER_ROBOT * (1 if self.multiagent else core.n_robots)
-        obs_space = spaces.Box(core.obs_low, core.obs_high, dtype=np.float32)
-        act_space = spaces.Box(-1.0, 1.0, shape=(n_actions,), dtype=np.float32)
+        self.tether = hasattr(scenario, "anchors")  # a tether station: discrete commands (baselines/tether.py)
+        if self.tether:
+            from baselines.tether import spaces_of
+
+            obs_space, act_space, obs_size = spaces_of(scenario)
+        else:
+            core = TransportCore(scenario)
+            n_actions = ACTION_PER_ROBOT * (1 if self.multiagent else core.n_robots)
+            obs_space = spaces.Box(core.obs_low, core.obs_high, dtype=np.float32)
+            act_space = spaces.Box(-1.0, 1.0, shape=(n_actions,), dtype=np.float32)
+            obs_size = core.obs_size
         self.model = model_files.load_model(path, self.meta.get("algo"), obs_space, act_space, trust_pickle)
-        self._normalization = model_files.load_normalization(path.parent, core.obs_size, trust_pickle)
+        self._normalization = model_files.load_normalization(path.parent, obs_size, trust_pickle)
 
     def _normalise(self, obs: np.ndarray) -> np.ndarray:
         return obs if self._normalization is None else self._normalization.apply(obs)
 
     def reset(self, env: Any, seed: int | None) -> None:
+        if self.tether:
+            return
         self._n_bodies = len(env.unwrapped.scenario.bodies)
         self._n_robots = len(env.unwrapped.scenario.robots)
 
     def act(self, observation: np.ndarray, info: dict[str, Any]) -> np.ndarray:
         obs = np.asarray(observation, dtype=np.float32)
+        if self.tether:
+            action, _ = self.model.predict(self._normalise(obs), deterministic=True)
+            return np.asarray(action, dtype=np.int64)
         if not self.multiagent:
             action, _ = self.model.predict(self._normalise(obs), deterministic=True)
             return np.asarray(action, dtype=np.float32)

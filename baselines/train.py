@@ -47,6 +47,10 @@ class TrainConfig:
 
 def env_id_for(scenario: str) -> str:
     """The registered id of a shipped scenario (its hyperparameters are keyed by it)."""
+    from baselines import tether
+
+    if tether.is_station(scenario):
+        return tether.env_id_for_station(scenario)
     name = load_scenario(scenario).name
     for env_id, sc in GYM_IDS.items():
         if sc == name:
@@ -61,32 +65,43 @@ def train(config: TrainConfig) -> Path:
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
+    from baselines import tether
     from impact_env.envs.transport import TransportEnv
 
     if config.algo not in ALGOS:
         raise ImpactEnvError(f"algorithm must be one of {ALGOS}, got {config.algo!r}")
     if config.max_minutes is not None and not config.max_minutes > 0:
         raise ImpactEnvError(f"max_minutes must be > 0, got {config.max_minutes!r}")
-    scenario = load_scenario(config.scenario)
+    station = tether.is_station(config.scenario)
+    if station:  # a tether station: TetherEnv (MultiDiscrete commands), see baselines/tether.py
+        from impact_env.envs.tether import TetherEnv
+        from impact_env.station import load_station
+
+        if config.algo != "ppo" or config.multiagent:
+            raise ImpactEnvError("tether stations train with ppo on the central env (their actions are discrete)")
+        scenario, env_cls = load_station(config.scenario), TetherEnv
+        config.env_options = tether.env_options(config.env_options, config.scenario)
+    else:
+        scenario, env_cls = load_scenario(config.scenario), TransportEnv
     env_id = env_id_for(config.scenario)
     entry = hyperparams.load(config.algo, env_id, config.hyperparams_file)
     n_envs = config.n_envs or int(entry.get("n_envs", 1))
     timesteps = int(config.timesteps or entry["n_timesteps"])
     run_dir = Path(config.out) / f"{config.algo}_{scenario.name}{'_ma' if config.multiagent else ''}_s{config.seed}"
     run_dir.mkdir(parents=True, exist_ok=True)
-    env_kwargs = {"scenario": config.scenario, **config.env_options}
+    env_kwargs = {"station" if station else "scenario": config.scenario, **config.env_options}
 
     if config.multiagent:
         if config.algo != "ppo":
             raise ImpactEnvError("parameter sharing over PettingZoo is supported with ppo")
         venv = _pettingzoo_vec_env(env_kwargs, n_envs)
     else:
-        venv = make_vec_env(TransportEnv, n_envs=n_envs, seed=config.seed, env_kwargs=env_kwargs,
+        venv = make_vec_env(env_cls, n_envs=n_envs, seed=config.seed, env_kwargs=env_kwargs,
                             vec_env_cls=SubprocVecEnv if n_envs > 1 else None)
     # evaluation scores the task itself: under "dense" with no fuel penalty an episode's return is its final
     # STL robustness, whatever shaping the training env uses
-    eval_kwargs = {**env_kwargs, "reward_mode": "dense", "fuel_penalty": 0.0}
-    eval_env = make_vec_env(TransportEnv, n_envs=1, seed=config.seed + 10_000, env_kwargs=eval_kwargs)
+    eval_kwargs = {**env_kwargs, "reward_mode": "dense", ("energy_penalty" if station else "fuel_penalty"): 0.0}
+    eval_env = make_vec_env(env_cls, n_envs=1, seed=config.seed + 10_000, env_kwargs=eval_kwargs)
     if entry.get("normalize"):
         venv = VecNormalize(venv, gamma=float(entry.get("gamma", 0.99)))
         eval_env = VecNormalize(eval_env, training=False, norm_reward=False, gamma=float(entry.get("gamma", 0.99)))
