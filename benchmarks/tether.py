@@ -4,7 +4,9 @@ Per station: the MP3 decomposition's region count; the thesis pipeline's wall ti
 automaton, divide and conquer with z3, under the thesis's anchor rule and under line of sight), its pulls or why
 it found none; the exact planner's cold time (a fresh planner: visibility polygons, radial cells, the levels,
 the forward read) and warm time (the same planner again from the start: the levels are kept), its pulls, path
-length and travel time with k = 1, 2, 3 (pulling at w plus the attach waits, see planners/tether/plan.py); then
+length and travel time with k = 1, 2, 3 (pulling at w plus the attach waits, see planners/tether/plan.py) and
+the pulling time of the time-optimal refinement with k robots (planners/tether/timing.py, Eq. 5's model, with
+the share of its relaxed activations at 0 or 1); then
 the tether expert flying it once per fidelity level (success, robustness, closest approach to the goal centre,
 snags, attachments). The baseline of the exact planner's times is the z3 pipeline measured in the same run; the
 literature figure is the thesis's 13 minutes for its full automaton with dReach on "a simple problem".
@@ -35,6 +37,7 @@ from planners.tether.automaton import build_thesis_map
 from planners.tether.expert import TetherExpert
 from planners.tether.reachability import ReachabilityPlanner
 from planners.tether.smt import SmtConfig, plan_smt
+from planners.tether.timing import refine_timing
 
 
 def exact_times(station, repeats: int):
@@ -86,8 +89,8 @@ def main() -> None:
     args = parser.parse_args()
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; times are medians of {args.repeats}")
     print("\n| station | regions | thesis pipeline, z3, region rule | z3, line-of-sight rule | exact cold s (CPU s) | "
-          "exact warm s | pulls | path m | travel s k=1 / 2 / 3 |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "exact warm s | pulls | path m | travel s k=1 / 2 / 3 | refined pulling s k=1 / 2 / 3 (bang-bang %) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     plans = {}
     for name in args.stations.split(","):
         st = load_station(name)
@@ -97,9 +100,11 @@ def main() -> None:
         cold, cold_cpu, warm, plan = exact_times(st, args.repeats)
         plans[name] = plan
         times = " / ".join(f"{plan.travel_time_s(k):.0f}" for k in (1, 2, 3))
+        refined = [refine_timing(st, plan, k) for k in (1, 2, 3)]
+        timing = " / ".join(f"{r.total_s:.0f}" if r.status == "optimal" else "-" for r in refined)
+        timing += " (" + " / ".join(f"{100 * r.bang_bang_fraction:.0f}" for r in refined) + ")"
         print(f"| {name} | {regions} | {z_region} | {z_sight} | {cold:.3f} ({cold_cpu:.3f}) | {warm:.4f} | "
-              f"{plan.switches} | "
-              f"{plan.path_length_m:.1f} | {times} |", flush=True)
+              f"{plan.switches} | {plan.path_length_m:.1f} | {times} | {timing} |", flush=True)
     print("\nThe plans flown by the tether expert in pymunk (seed 0): success, robustness (m), closest approach to "
           "the goal centre (m), snags, attachments")
     print("\n| station | kinematic | reel | force |")
