@@ -28,7 +28,7 @@ def sampled_search(station, planner, max_pulls: int, samples: int = 12, grid_m: 
     for depth in range(1, max_pulls + 1):
         nxt = []
         for x in frontier:
-            for a in planner.cells:
+            for a in planner.usable:
                 seg = pull_segment(station, planner.free, x, a, planner.stop_m)
                 if seg is None:
                     continue
@@ -94,7 +94,7 @@ def test_l_map_with_anchors_on_the_bottom_wall_only_is_proved_infeasible():
     assert planner.fixed_point and planner.levels[-1].area == pytest.approx(cert["reachable_area_m2"])
     # the proof: one more level adds nothing
     frontier = planner.levels[-1]
-    grown = shapely.union_all([frontier] + [planner.pre(a, frontier) for a in planner.cells])
+    grown = shapely.union_all([frontier] + [planner.pre(a, frontier) for a in planner.usable])
     assert grown.difference(frontier).area < 1e-9
 
 
@@ -117,7 +117,7 @@ def test_pre_matches_a_direct_check_of_each_pull(name):
     pts = np.column_stack([rng.uniform(x0, x1, 4000), rng.uniform(y0, y1, 4000)])
     pts = pts[shapely.contains_xy(planner.free, pts[:, 0], pts[:, 1])][:600]
     checked = 0
-    for a in list(planner.cells)[::3]:
+    for a in list(planner.usable)[::3]:
         pre = planner.pre(a, target)
         for x in pts:
             seg = pull_segment(st, planner.free, x, a, planner.stop_m)

@@ -98,50 +98,64 @@ def shadow(anchor: np.ndarray, geom: BaseGeometry, far_m: float) -> BaseGeometry
     return shapely.union_all([geom, *shapes])
 
 
-def shadow_quads(anchor: np.ndarray, geom: BaseGeometry, far_m: float) -> np.ndarray:
-    """Polygons (an array) whose union with ``geom`` is its shadow from ``anchor``.
+def shadow_pieces(anchor: np.ndarray, seeds: list[BaseGeometry], far_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Polygons whose union with the seeds is their shadow from ``anchor``, and for each the index of its seed.
 
-    Only the edges that face away from the light are needed: a point of the shadow outside ``geom`` lies on a
-    ray from the anchor that last leaves ``geom`` through such an edge. A run of consecutive such edges turns
+    Only the edges that face away from the light are needed: a point of the shadow outside a seed lies on a ray
+    from the anchor that last leaves the seed through such an edge. A run of consecutive such edges turns
     monotonically about the anchor, so the run and its far image (each vertex pushed ``far_m`` out along its
-    ray) bound one simple polygon: one piece per run rather than one quadrilateral per edge.
+    ray) bound one simple polygon: one piece per run. All pieces are built in one call.
     """
     a = np.asarray(anchor, dtype=float)
-    out = []
-    for p in polygons_of(geom):
-        for ring in (p.exterior, *p.interiors):
-            c = np.asarray(ring.coords)
-            if not ring.is_ccw if ring is p.exterior else ring.is_ccw:
-                c = c[::-1]  # exterior counter-clockwise, holes clockwise: the outward normal is on the right
-            e0, e1 = c[:-1], c[1:]
-            d = e1 - e0
-            mid = 0.5 * (e0 + e1) - a
-            away = (d[:, 1] * mid[:, 0] - d[:, 0] * mid[:, 1]) > 1e-12  # outward normal (dy, -dx) . ray
-            if not away.any():
-                continue
-            n = len(away)
-            if away.all():
-                runs = [np.arange(n)]
-            else:
-                first = int(np.flatnonzero(~away)[0])  # start the scan after a front-facing edge
-                order = (np.arange(n) + first) % n
-                runs, cur = [], []
-                for i in order:
-                    if away[i]:
-                        cur.append(i)
-                    elif cur:
-                        runs.append(np.asarray(cur))
-                        cur = []
-                if cur:
-                    runs.append(np.asarray(cur))
-            for run in runs:
-                chain = np.vstack([e0[run], e1[run[-1]][None, :]])
-                rays = chain - a
-                far = chain + far_m * rays / np.linalg.norm(rays, axis=1)[:, None]
-                out.append(np.vstack([chain, far[::-1], chain[:1]]))
-    if not out:
-        return np.array([], dtype=object)
-    return np.array([Polygon(ring) for ring in out], dtype=object)
+    rings, owner_of_ring = [], []
+    for k, seed in enumerate(seeds):
+        for p in polygons_of(seed):
+            ext = np.asarray(p.exterior.coords)
+            rings.append(ext if p.exterior.is_ccw else ext[::-1])  # outward normal on the right of each edge
+            owner_of_ring.append(k)
+            for hole in p.interiors:
+                c = np.asarray(hole.coords)
+                rings.append(c[::-1] if hole.is_ccw else c)
+                owner_of_ring.append(k)
+    if not rings:
+        return np.array([], dtype=object), np.zeros(0, dtype=int)
+    lengths = np.array([len(r) for r in rings])
+    V = np.concatenate(rings)
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    R = V - a
+    F = V + far_m * R / np.sqrt((R * R).sum(axis=1))[:, None]
+    d = np.roll(V, -1, axis=0) - V  # edge i runs from vertex i to i + 1 (the last of each ring is its closure)
+    mid = V + 0.5 * d - a
+    away = (d[:, 1] * mid[:, 0] - d[:, 0] * mid[:, 1]) > 1e-12
+    idx_parts, ring_offsets, owners = [], [0], []
+    total = 0
+    for start, n, k in zip(starts, lengths, owner_of_ring):
+        m = n - 1  # edges of the ring
+        mask = away[start: start + m]
+        if not mask.any():
+            continue
+        if mask.all():
+            runs = [np.arange(m)]
+        else:
+            first = int(np.flatnonzero(~mask)[0])
+            order = (np.arange(m) + first) % m
+            flags = mask[order]
+            cuts = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(np.int8), [0]])))
+            runs = [order[b:e] for b, e in zip(cuts[::2], cuts[1::2])]
+        for run in runs:
+            chain = start + np.concatenate([run, [(run[-1] + 1) % m]])
+            # vertices of the chain, then their far images backward, closed: indices into V (near) and F (far)
+            idx_parts.append(np.concatenate([chain, len(V) + chain[::-1], chain[:1]]))
+            total += 2 * len(chain) + 1
+            ring_offsets.append(total)
+            owners.append(k)
+    if not idx_parts:
+        return np.array([], dtype=object), np.zeros(0, dtype=int)
+    coords = np.concatenate([V, F])[np.concatenate(idx_parts)]
+    ring_offsets = np.asarray(ring_offsets)
+    polys = shapely.from_ragged_array(shapely.GeometryType.POLYGON, coords,
+                                      (ring_offsets, np.arange(len(ring_offsets))))
+    return polys, np.asarray(owners)
 
 
 def visibility_polygon(station: Station, anchor_index: int) -> BaseGeometry:
@@ -151,7 +165,9 @@ def visibility_polygon(station: Station, anchor_index: int) -> BaseGeometry:
     walls = np.asarray(station.walls, dtype=float)  # (n, 2, 2)
     p, q = walls[:, 0], walls[:, 1]
     cross = (p[:, 0] - a[0]) * (q[:, 1] - a[1]) - (p[:, 1] - a[1]) * (q[:, 0] - a[0])
-    keep = np.abs(cross) > 1e-12  # walls through the anchor (its own) cast no shadow
+    # walls through the anchor (its own) cast no shadow; every other wall may (also those whose outer side faces
+    # the anchor: a segment that leaves through the anchor's own wall re-enters the station through them)
+    keep = np.abs(cross) > 1e-12
     blockers = []
     for pi, qi in zip(p[keep], q[keep]):
         # split wide walls so that every shadow quadrilateral spans less than 60 degrees
@@ -191,7 +207,8 @@ class RadialCells:
 WEDGE_GAP_RAD = 1e-9  # wedges stop this short of the rays through vertices (see radial_cells)
 
 
-def radial_cells(station: Station, anchor_index: int, free: BaseGeometry, stop_radius_m: float) -> RadialCells:
+def radial_cells(station: Station, anchor_index: int, free: BaseGeometry, stop_radius_m: float,
+                 region: BaseGeometry | None = None) -> RadialCells:
     """Cut the free space that anchor ``anchor_index`` sees into radial cells.
 
     The wedges between consecutive rays through the vertices stop :data:`WEDGE_GAP_RAD` short of those rays: a
@@ -201,10 +218,10 @@ def radial_cells(station: Station, anchor_index: int, free: BaseGeometry, stop_r
     """
     a = station.anchor_positions[anchor_index]
     far = far_distance(station)
-    vis = visibility_polygon(station, anchor_index)
     quad_segs = 16
     disc = shapely.Point(a).buffer(stop_radius_m / math.cos(math.pi / (4 * quad_segs)), quad_segs=quad_segs)
-    region = clean(free.intersection(vis))
+    if region is None:
+        region = seen_free_space(station, anchor_index, free)
     empty = np.array([], dtype=object)
     if region.is_empty:
         return RadialCells(anchor_index, a, region, empty, disc, np.zeros(0, dtype=bool))
@@ -238,6 +255,11 @@ def radial_cells(station: Station, anchor_index: int, free: BaseGeometry, stop_r
     cells = np.array([c for piece in pieces for c in polygons_of(piece)], dtype=object)
     near = shapely.intersects(cells, disc) if len(cells) else np.zeros(0, dtype=bool)
     return RadialCells(anchor_index, a, region, cells, disc, np.asarray(near, dtype=bool))
+
+
+def seen_free_space(station: Station, anchor_index: int, free: BaseGeometry) -> BaseGeometry:
+    """The part of the free space from which a tether reaches the anchor."""
+    return clean(free.intersection(visibility_polygon(station, anchor_index)))
 
 
 def _turning_vertices(region: BaseGeometry, a: np.ndarray) -> np.ndarray:

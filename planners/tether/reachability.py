@@ -44,7 +44,8 @@ from planners.tether.geometry import (
     free_space_polygon,
     pull_segment,
     radial_cells,
-    shadow_quads,
+    seen_free_space,
+    shadow_pieces,
 )
 from planners.tether.plan import Pull, TetherPlan
 
@@ -97,11 +98,12 @@ class ReachabilityPlanner:
         self.stop_m = station.stop_radius_m + self.config.stop_margin_m
         self.anchor_ids = list(range(station.n_anchors)) if anchors is None else sorted(set(anchors))
         self._far = far_distance(station)
+        # the free space each anchor sees; its radial cells are cut the first time a level's frontier is in sight
+        self.seen = {a: seen_free_space(station, a, self.free) for a in self.anchor_ids}
+        self.usable = [a for a in self.anchor_ids if not self.seen[a].is_empty]
+        for a in self.usable:
+            shapely.prepare(self.seen[a])
         self.cells: dict[int, RadialCells] = {}
-        for a in self.anchor_ids:
-            rc = radial_cells(station, a, self.free, self.stop_m)
-            if len(rc.cells):
-                self.cells[a] = rc
         x0, x1, y0, y1 = station.goal_box
         m = self.config.goal_margin_m
         inner = shapely.box(x0 + m, y0 + m, x1 - m, y1 - m) if x1 - x0 > 2 * m and y1 - y0 > 2 * m else None
@@ -115,14 +117,25 @@ class ReachabilityPlanner:
 
     # ----------------------------------------------------------------------------------- levels
     def pre(self, anchor: int, target: BaseGeometry) -> BaseGeometry:
-        """``Pre_a(target)``: the points from which one pull toward ``anchor`` lands in ``target``."""
-        return clean(shapely.union_all(self._pre_pieces(anchor, target)))
+        """``Pre_a(target)``: the points from which one pull toward ``anchor`` lands in ``target`` (those of
+        ``target`` it sees, outside the stop disc, and what lies behind them)."""
+        rc = self._cells(anchor) if anchor in self.seen and not self.seen[anchor].is_empty else None
+        if rc is None or not len(rc.cells):
+            return shapely.Polygon()
+        landing = clean(target.intersection(rc.region).difference(rc.disc))
+        return clean(shapely.union_all([landing, *self._pre_pieces(anchor, target)]))
+
+    def _cells(self, anchor: int) -> RadialCells:
+        if anchor not in self.cells:
+            self.cells[anchor] = radial_cells(self.station, anchor, self.free, self.stop_m, region=self.seen[anchor])
+        return self.cells[anchor]
 
     def _pre_pieces(self, anchor: int, target: BaseGeometry) -> list:
-        """Polygons whose union is ``Pre_a(target)`` (the union is left to the caller, once per level)."""
-        rc = self.cells.get(anchor)
-        if rc is None or target.is_empty:
+        """Polygons whose union with ``target`` is ``target U Pre_a(target)`` (the caller unions, once per level)."""
+        if anchor not in self.seen or self.seen[anchor].is_empty or target.is_empty \
+                or not self.seen[anchor].intersects(target):
             return []
+        rc = self._cells(anchor)
         shapely.prepare(target)
         hit = np.flatnonzero(shapely.intersects(rc.cells, target))
         if not len(hit):
@@ -131,22 +144,22 @@ class ReachabilityPlanner:
         near = rc.near[hit]
         if near.any():  # a pull ends outside the stop radius
             seeds[near] = shapely.difference(seeds[near], rc.disc)
-        pieces, quads, owners = [], [], []
-        for cell, seed in zip(rc.cells[hit], seeds):
+        # the seeds are in the target already; only what lies behind them is new
+        owners_cells, seeds_kept = [], []
+        for cell, seed, near_disc in zip(rc.cells[hit], seeds, near):
             seed = clean(seed)
-            if seed.is_empty:
-                continue
-            pieces.append(seed)
-            q = shadow_quads(rc.position_m, seed, self._far)
-            quads.append(q)
-            owners.append(np.full(len(q), cell, dtype=object))
-        if not pieces:
+            if seed.is_empty or (not near_disc and seed.area >= cell.area - AREA_EPS_M2):
+                continue  # nothing, or the whole cell: nothing behind the seed inside the cell
+            seeds_kept.append(seed)
+            owners_cells.append(cell)
+        if not seeds_kept:
             return []
-        quads = np.concatenate(quads)
-        owners = np.concatenate(owners)
+        shadows, owner = shadow_pieces(rc.position_m, seeds_kept, self._far)
+        if not len(shadows):
+            return []
         # the shadow of a cell's seed, kept inside that cell: farther cells on the same rays are other intervals
-        inside = shapely.intersection(quads, owners) if len(quads) else np.array([], dtype=object)
-        return [*pieces, *inside]
+        inside = shapely.intersection(shadows, np.asarray(owners_cells, dtype=object)[owner])
+        return list(inside)
 
     def _grow(self) -> bool:
         """Add one level; returns False (and marks the fixed point) when it adds no area.
@@ -157,7 +170,7 @@ class ReachabilityPlanner:
         t0 = time.perf_counter()
         last = self.levels[-1]
         frontier = last if len(self.levels) == 1 else clean(last.difference(self.levels[-2]))
-        parts = [last] + [p for a in self.cells for p in self._pre_pieces(a, frontier)]
+        parts = [last] + [p for a in self.usable for p in self._pre_pieces(a, frontier)]
         nxt = clean(shapely.union_all(parts))
         added = nxt.difference(last).area
         self.level_s += time.perf_counter() - t0
@@ -241,7 +254,7 @@ class ReachabilityPlanner:
     def pull_end(self, here: np.ndarray, anchor: int, level: int) -> np.ndarray | None:
         """Where a pull toward ``anchor`` from ``here`` should end to land in level ``level`` (deepest point of
         its segment in that level, as the forward read chooses); None if it misses the level."""
-        if anchor not in self.cells or level >= len(self.levels):
+        if anchor not in self.seen or self.seen[anchor].is_empty or level >= len(self.levels):
             return None
         got = self._best_pull(np.asarray(here, float), self.levels[level], prefer=anchor, only=True)
         return None if got is None else got[1]
@@ -262,7 +275,7 @@ class ReachabilityPlanner:
         ``prefer`` wins whenever it reaches the target at all."""
         best = None
         boundary = target.boundary
-        order = ([prefer] if prefer in self.cells else []) + ([] if only else [a for a in self.cells if a != prefer])
+        order = ([prefer] if prefer in self.usable else []) + ([] if only else [a for a in self.usable if a != prefer])
         for a in order:
             seg = pull_segment(self.station, self.free, here, a, self.stop_m)
             if seg is None:
