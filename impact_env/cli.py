@@ -84,8 +84,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from impact_env.tether_cli import run_station
 
         return run_station(args)
-    if args.fidelity != "kinematic" or args.energy_penalty != 0.0:
-        raise ImpactEnvError("--fidelity and --energy-penalty apply to tether stations, not to impact scenarios")
+    if args.fidelity != "kinematic" or args.energy_penalty != 0.0 or args.pull_speed is not None:
+        raise ImpactEnvError("--fidelity, --energy-penalty and --pull-speed apply to tether stations, not to impact "
+                             "scenarios")
     sc = load_scenario(args.scenario)
     env = TransportEnv(sc, render_mode="rgb_array" if args.video else None, **_env_kwargs(args))
     controller = make_controller(args.controller, sc, plan=args.plan, trust_pickle=True if args.trust_pickle else None)
@@ -160,6 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
                    help="stations only: tether physics (see impact_env.tether_physics)")
     p.add_argument("--energy-penalty", type=float, default=0.0, help="stations only: reward cost per J of winch work")
+    p.add_argument("--pull-speed", type=float, default=None, metavar="MPS",
+                   help="stations only: the winches' real w (default the station's; a mismatch for a planner)")
     p.add_argument("--trust-pickle", action="store_true",
                    help="a controller may unpickle its files (e.g. an old model folder's vecnormalize.pkl); a "
                         "pickle can run any code: only for files you made yourself")

@@ -40,7 +40,7 @@ def run_station(args: argparse.Namespace) -> int:
         if value != default:
             raise ImpactEnvError(f"{flag} applies to impact scenarios, not to station {st.name!r}")
     options = {"fidelity": args.fidelity, "reward_mode": args.reward, "energy_penalty": args.energy_penalty,
-               "initial_position_noise_m": args.init_noise}
+               "initial_position_noise_m": args.init_noise, "pull_speed_mps": args.pull_speed}
     env = TetherEnv(st, render_mode="rgb_array" if args.video else None, **options)
     controller = make_controller(args.controller, st, plan=args.plan)
     results, events = [], []
