@@ -46,16 +46,21 @@ def orthogonal_polygon(rng: np.random.Generator, notches: int, cell_m: float = 3
     raise RuntimeError(f"no orthogonal polygon with {notches} notches after {max_tries} tries")
 
 
-def random_station(seed: int, notches: int, cell_m: float = 3.0, spacing_m: float = 2.5, k: int = 2) -> Station:
-    """A station on a random orthogonal polygon; start and goal at the centres of two different random cells."""
+def random_station(seed: int, notches: int, cell_m: float = 3.0, spacing_m: float = 2.5, k: int = 2,
+                   walls: list[int] | None = None) -> Station:
+    """A station on a random orthogonal polygon; start and goal at the centres of two different random cells.
+
+    ``walls`` restricts the anchors to those walls (indices into the polygon's counter-clockwise walls): the
+    sweeps' infeasible variants put them all on one wall."""
     rng = np.random.default_rng(seed)
     polygon, cells = orthogonal_polygon(rng, notches, cell_m)
     pick = rng.choice(len(cells), size=2, replace=False)
     (si, sj), (gi, gj) = cells[pick[0]], cells[pick[1]]
+    name = f"random_{seed}_{notches}" + ("" if walls is None else "_walls_" + "_".join(map(str, walls)))
     data = {
-        "name": f"random_{seed}_{notches}", "restitution": 0.2, "tf_s": 600.0,
+        "name": name, "restitution": 0.2, "tf_s": 600.0,
         "station": {"polygon": [list(p) for p in polygon]},
-        "anchors": {"spacing_m": spacing_m},
+        "anchors": {"spacing_m": spacing_m} if walls is None else {"spacing_m": spacing_m, "walls": list(walls)},
         "cargo": {"mass_kg": 20.0, "radius_m": 0.3, "start_m": [(si + 0.5) * cell_m, (sj + 0.5) * cell_m]},
         "goal": {"center_m": [(gi + 0.5) * cell_m, (gj + 0.5) * cell_m], "half_size_m": 0.5},
         "robots": {"count": 3, "max_active": k, "pull_speed_mps": 0.1, "winch_force_limit_N": 1.0,
