@@ -84,9 +84,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from impact_env.tether_cli import run_station
 
         return run_station(args)
-    if args.fidelity != "kinematic" or args.energy_penalty != 0.0 or args.pull_speed is not None:
-        raise ImpactEnvError("--fidelity, --energy-penalty and --pull-speed apply to tether stations, not to impact "
-                             "scenarios")
+    if args.fidelity != "kinematic" or args.energy_penalty != 0.0:
+        raise ImpactEnvError("--fidelity and --energy-penalty apply to tether stations, not to impact scenarios")
+    if args.pull_speed is not None:
+        raise ImpactEnvError("--pull-speed applies to tether stations, not to impact scenarios")
     sc = load_scenario(args.scenario)
     env = TransportEnv(sc, render_mode="rgb_array" if args.video else None, **_env_kwargs(args))
     controller = make_controller(args.controller, sc, plan=args.plan, trust_pickle=True if args.trust_pickle else None)

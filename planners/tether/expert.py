@@ -27,7 +27,6 @@ not the winches' real speed: a mismatch in ``w`` is what it must absorb.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -314,12 +313,4 @@ def make_tether_expert(station: Station, plan: str | None = None, **_: Any) -> T
     return TetherExpert(station, plan=TetherPlan.load(plan) if plan else None)
 
 
-def plan_is_feasible(station: Station, start: tuple[float, float]) -> bool:
-    """Whether any plan reaches the goal from ``start`` (a helper for benchmarks)."""
-    try:
-        return ReachabilityPlanner(station).level_of(start) is not None
-    except PlannerError:
-        return False
-
-
-__all__ = ["TetherExpert", "make_tether_expert", "plan_is_feasible", "math"]
+__all__ = ["TetherExpert", "make_tether_expert"]

@@ -1,5 +1,5 @@
 """Geometry the tether planners share, on top of shapely: the conservative free space, an anchor's visibility
-polygon, its radial cells, and shadows.
+polygon, its radial cells, and shadows (:func:`shadow_pieces`).
 
 Free space. The cargo centre may be where the whole disc is inside the station: the polygon eroded by the radius
 ``rho`` (plus a clearance). Here the erosion is taken with mitred joins: along walls and at convex corners this
@@ -10,8 +10,8 @@ keeps the disc in the station) and has as many vertices as the station, which ke
 up ``rho^2 (1 - pi / 4)`` (0.02 m^2 for the 0.3 m cargo) at each right-angle notch.
 
 Visibility. A tether from ``x`` reaches anchor ``a`` when the segment ``[x, a]`` lies in the station polygon
-``P``. ``P`` minus the shadows that its walls cast from ``a`` (:func:`shadow`, a light at ``a``) is the
-visibility polygon: the segment from ``a`` to a point of ``P`` leaves ``P`` exactly when it crosses a wall.
+``P``. ``P`` minus the shadows that its walls cast from ``a`` (a light at ``a``) is the visibility polygon:
+the segment from ``a`` to a point of ``P`` leaves ``P`` exactly when it crosses a wall.
 
 Radial cells. A pull toward ``a`` moves the cargo along the ray to ``a``. The rays from ``a`` through every
 vertex of ``F_a`` (the free space seen from ``a``) cut it into cells that every ray crosses in one interval with
@@ -64,38 +64,6 @@ def far_distance(station: Station) -> float:
     """A length beyond which nothing of the station lies from any of its points (m)."""
     x0, x1, y0, y1 = station.bounds
     return 4.0 * math.hypot(x1 - x0, y1 - y0) + 1.0
-
-
-def shadow(anchor: np.ndarray, geom: BaseGeometry, far_m: float) -> BaseGeometry:
-    """The region behind ``geom`` as seen from a light at ``anchor``: ``{y + t (y - a) : y in geom, t >= 0}``,
-    cut off ``far_m`` from each boundary point (a light outside ``geom``; the edges' quadrilaterals and ``geom``).
-
-    Each quadrilateral spans the edge and its two endpoints pushed ``far_m`` outward along their rays; the
-    callers keep every cone they pass narrower than 60 degrees so that its far side stays farther than the
-    station's extent.
-    """
-    a = np.asarray(anchor, dtype=float)
-    rings = []
-    for p in polygons_of(geom):
-        rings.append(np.asarray(p.exterior.coords))
-        rings.extend(np.asarray(r.coords) for r in p.interiors)
-    if not rings:
-        return Polygon()
-    quads = []
-    for ring in rings:
-        p, q = ring[:-1], ring[1:]
-        cross = (p[:, 0] - a[0]) * (q[:, 1] - a[1]) - (p[:, 1] - a[1]) * (q[:, 0] - a[0])
-        keep = np.abs(cross) > 1e-12
-        p, q = p[keep], q[keep]
-        dp = p - a
-        dq = q - a
-        pf = p + far_m * dp / np.linalg.norm(dp, axis=1)[:, None]
-        qf = q + far_m * dq / np.linalg.norm(dq, axis=1)[:, None]
-        quads.append(np.stack([p, q, qf, pf, p], axis=1))
-    quads = np.concatenate(quads)
-    shapes = shapely.polygons(quads)
-    shapes = shapely.make_valid(shapes[~shapely.is_valid(shapes)]).tolist() + shapes[shapely.is_valid(shapes)].tolist()
-    return shapely.union_all([geom, *shapes])
 
 
 def shadow_pieces(anchor: np.ndarray, seeds: list[BaseGeometry], far_m: float) -> tuple[np.ndarray, np.ndarray]:
