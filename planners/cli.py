@@ -114,7 +114,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 def _check_options(args: argparse.Namespace) -> None:
     """Reject option values the planner would otherwise fail on deep inside, with a one-line message."""
     if args.solver not in SOLVER_NAMES:
-        raise PlannerError(f"unknown solver {args.solver!r}; choose one of: {', '.join(SOLVER_NAMES)}")
+        from impact_env.names import suggestion
+
+        raise PlannerError(f"unknown solver {args.solver!r}{suggestion(args.solver, SOLVER_NAMES)}; choose one of: "
+                           f"{', '.join(SOLVER_NAMES)}")
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         raise PlannerError(f"--time-limit must be a finite number of seconds > 0, got {args.time_limit:g}")
     if not 0.0 <= args.mip_gap < 1.0:
