@@ -36,7 +36,8 @@ EXIT_TIME_LIMIT = 3
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``plan`` subcommand to ``impact-env`` (entry point of the ``impact_env.commands`` group)."""
     p = subparsers.add_parser("plan", help="plan impacts and trajectories with the spatially robust MILP planner",
-                              description=__doc__.split("\n")[0])
+                              description="Plan when, where and with which robot to hit each object, with "
+                                          "maximal STL robustness (a MILP, proved optimal).")
     p.add_argument("scenario", help="shipped name or path to a .toml file")
     # a free string, checked in the handler, so that a typo is a one-line error rather than argparse usage
     p.add_argument("--solver", default="highs", help=f"MILP solver: one of {', '.join(SOLVER_NAMES)} (default highs)")
