@@ -71,7 +71,7 @@ wheel-check: $(VENV)/.dev-installed
 # the site in site/; the tutorial notebook runs at TUTORIAL_SIZE (small: seconds of PPO; full: the real run)
 TUTORIAL_SIZE ?= small
 docs: $(VENV)/.docs-installed
-	TUTORIAL_SIZE=$(TUTORIAL_SIZE) SDL_VIDEODRIVER=dummy MPLBACKEND=Agg $(BIN)/mkdocs build --strict
+	TUTORIAL_SIZE=$(TUTORIAL_SIZE) NO_MKDOCS_2_WARNING=1 SDL_VIDEODRIVER=dummy MPLBACKEND=Agg $(BIN)/mkdocs build --strict
 
 docs-check: docs
 	$(BIN)/python -m pytest -q -p no:cacheprovider tests/docs_site_check.py
