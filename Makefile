@@ -71,6 +71,7 @@ wheel-check: $(VENV)/.dev-installed
 # the site in site/; the tutorial notebook runs at TUTORIAL_SIZE (small: seconds of PPO; full: the real run)
 TUTORIAL_SIZE ?= small
 docs: $(VENV)/.docs-installed
+	rm -rf .cache/mkdocs-jupyter  # the notebook runs on every build
 	TUTORIAL_SIZE=$(TUTORIAL_SIZE) NO_MKDOCS_2_WARNING=1 SDL_VIDEODRIVER=dummy MPLBACKEND=Agg $(BIN)/mkdocs build --strict
 
 docs-check: docs

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from baselines import ALGOS, hyperparams
-from baselines.model_files import NORMALIZATION_FILE, save_normalization
+from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
 from impact_env import GYM_IDS
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario
@@ -255,6 +255,9 @@ def _save(model: Any, venv: Any, run_dir: Path, config: TrainConfig, scenario_na
     model.save(run_dir / "model.zip")
     if isinstance(venv, VecNormalize):
         save_normalization(venv, run_dir / NORMALIZATION_FILE)
+    else:
+        (run_dir / NORMALIZATION_FILE).unlink(missing_ok=True)  # a previous run's statistics are not this model's
+    (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
     (run_dir / "train.json").write_text(json.dumps({
         "algo": config.algo, "scenario": scenario_name,
         "scenario_fingerprint": scenario_fingerprint(load_scenario(config.scenario)), "env_id": env_id,

@@ -98,7 +98,7 @@ def render_page(page: EnvPage) -> str:
         agents = ", ".join(core.possible_agents)
     shown = ", ".join(f"{k}={v!r}" for k, v in kwargs.items())
     doc = sections(cls)
-    lines = [f"# {page.title}", "", f'<figure class="env-gif" markdown>',
+    lines = [f"# {page.title}", "", '<figure class="env-gif" markdown>',
              f'![{page.gif_caption}](../img/envs/{page.gif}.gif){{ width="360" }}',
              f"<figcaption>{page.gif_caption}</figcaption>", "</figure>", "",
              "| | |", "|---|---|", f"| Id | `{page.env_id}` |", f"| Make | `{page.make}` |"]

@@ -68,9 +68,10 @@ class PlannerConfig:
     controller keeps robots off objects instead). acceleration_weight: the L1 acceleration cost is scaled so
     that it can move rho by at most this many metres in stage 1 (a tie-break below the MIP gap).
     impact_weight: the same for the impact count. smooth: run the QP smoothing stage. solver,
-    time_limit_s, mip_gap, threads, verbose, seed, progress: passed to the solver. warm_start: a previous
-    plan on the same grid to start from. bound_propagation: give every robustness variable its exact upper
-    bound (off only to measure what it buys, see benchmarks/planner.py).
+    time_limit_s, mip_gap, threads, verbose, seed, progress: passed to the solver. node_limit:
+    branch-and-bound nodes of the robustness stage (None: no limit; the mission replanner's budget).
+    warm_start: a previous plan on the same grid to start from. bound_propagation: give every robustness
+    variable its exact upper bound (off only to measure what it buys, see benchmarks/planner.py).
     """
 
     intervals: int | None = None
@@ -85,6 +86,7 @@ class PlannerConfig:
     robot_object_separation: bool = False
     solver: str = "highs"
     time_limit_s: float | None = 60.0
+    node_limit: int | None = None
     mip_gap: float = 1e-4
     threads: int | None = None
     verbose: bool = False
@@ -183,7 +185,8 @@ def plan_spatially_robust(scenario: Scenario, config: PlannerConfig | None = Non
     """
     config = config or PlannerConfig()
     built = build_model(scenario, config)
-    options = SolverOptions(time_limit_s=config.time_limit_s, mip_gap=config.mip_gap, threads=config.threads,
+    options = SolverOptions(time_limit_s=config.time_limit_s, node_limit=config.node_limit, mip_gap=config.mip_gap,
+                            threads=config.threads,
                             verbose=config.verbose, progress=config.progress, seed=config.seed,
                             warm_start=_warm_start(built, config.warm_start))
     result = solve(built.model, config.solver, options)

@@ -24,9 +24,12 @@ Optimal control problem (Eq. 31), horizon N, nodes k = 0..N (node 0 is the measu
   parameter, not a rebuild: every node carries a 0/1 parameter that switches (b) on, and the rows of (a)
   are switched on by their bounds (+-inf when off), so one compiled solver serves every impact step and
   "no impact". At s = 0 (impact due at the start of the coming period, not yet measured) only (b) applies.
-- keep-off (:class:`AvoidSpec`): where active, ``n_k . (p_k - c_k) >= d - sigma_k``, the half-plane tangent
-  to the disc ``|p - c_k| >= d`` with the unit normal ``n_k`` from c_k towards the previous plan's p_k
-  (re-linearised every solve, as the horizon recedes), cost ``avoid_penalty * (sigma_k + sigma_k^2)``. The
+- keep-off, up to ``keep_off_rows`` constraints per solve, each a row per node with its own slack. A disc
+  (:class:`AvoidSpec`, an object or another robot): where active, ``n_k . (p_k - c_k) >= d - sigma_k``, the
+  half-plane tangent to the disc ``|p - c_k| >= d`` with the unit normal ``n_k`` from c_k towards the
+  previous plan's p_k (re-linearised every solve, as the horizon recedes); a fixed half-plane
+  (:class:`HalfPlaneSpec`, a wall or an obstacle face): ``n_k . p_k >= b_k - sigma_k``. Cost
+  ``avoid_penalty * (sigma_k + sigma_k^2)`` per row. The
   half-plane lies outside the disc, so meeting it implies ``|p_k - c_k| >= d``. Why not the exact
   ``|p - c|^2 >= d^2``: it is non-convex. Measured over 150-step closed loops past a disc 0-10 cm off the
   reference line (N = 10 and 20), sqpmethod failed in up to 6 % of the solves with it and fatrop in up to
@@ -65,13 +68,13 @@ import numpy as np
 from impact_env.scenario import Body
 from planners.online.freeflyer import _rk4_sx, rk4_step, state_from_sim
 from planners.online.mpc_specs import (
-    _NSA,
     _NSI,
     _WEIGHTS,
     NU,
     NX,
     SOLVERS,
     AvoidSpec,
+    HalfPlaneSpec,
     ImpactSpec,
     MPCConfig,
     MPCInputError,
@@ -80,8 +83,8 @@ from planners.online.mpc_specs import (
     _vector,
 )
 
-__all__ = ["SOLVERS", "AvoidSpec", "FreeflyerMPC", "ImpactSpec", "MPCConfig", "MPCInputError", "MPCResult",
-           "rk4_step", "state_from_sim"]
+__all__ = ["SOLVERS", "AvoidSpec", "FreeflyerMPC", "HalfPlaneSpec", "ImpactSpec", "MPCConfig", "MPCInputError",
+           "MPCResult", "rk4_step", "state_from_sim"]
 
 
 class FreeflyerMPC:
@@ -113,7 +116,6 @@ class FreeflyerMPC:
         self._build(robot, cfg)
         self._p = np.zeros(self._np)
         self._write_weights()
-        self._p[self._pslice["dist"]] = 1.0
         self._solvers = {cfg.solver: self._make_solver(cfg.solver)}
         if cfg.fallback_solver is not None and cfg.fallback_solver != cfg.solver:
             self._solvers[cfg.fallback_solver] = self._make_solver(cfg.fallback_solver)
@@ -125,8 +127,9 @@ class FreeflyerMPC:
     # ------------------------------------------------------------------------------------- building
     def _build(self, robot: Body, cfg: MPCConfig) -> None:
         n = cfg.horizon
+        nk = self._nka = cfg.keep_off_rows
         sizes = {"x0": NX, "ref": 4 * (n + 1), "heading": 1, "select": n + 1, "v_after": 2,
-                 "centers": 2 * (n + 1), "normals": 2 * (n + 1), "dist": 1, "weights": len(_WEIGHTS)}
+                 "normals": 2 * nk * (n + 1), "weights": len(_WEIGHTS)}
         self._pslice, start = {}, 0
         for name, size in sizes.items():
             self._pslice[name] = slice(start, start + size)
@@ -135,8 +138,7 @@ class FreeflyerMPC:
         P = ca.SX.sym("p", start)
         par = {name: P[s] for name, s in self._pslice.items()}
         ref = ca.reshape(par["ref"], 4, n + 1)  # column k = [x, y, vx, vy] at node k
-        centers = ca.reshape(par["centers"], 2, n + 1)
-        normals = ca.reshape(par["normals"], 2, n + 1)
+        normals = ca.reshape(par["normals"], 2, nk * (n + 1))  # column k * nk + j: row j of node k
         sel = par["select"]
         q_pos, q_vel, q_head, q_omega, r_in, term = (par["weights"][i] for i in range(len(_WEIGHTS)))
         scale = 1.0 / self.limits
@@ -173,7 +175,7 @@ class FreeflyerMPC:
             if k < n:
                 us[k] = add_var("u", k, NU, list(-self.bounds), list(self.bounds))
             if k > 0:
-                slacks[k] = add_var("s", k, _NSI + _NSA, [0.0] * (_NSI + _NSA), [inf] * (_NSI + _NSA))
+                slacks[k] = add_var("s", k, _NSI + nk, [0.0] * (_NSI + nk), [inf] * (_NSI + nk))
         for k in range(n + 1):  # constraints of stage k: dynamics k -> k+1, then the path constraints of node k
             x = xs[k]
             if k < n:
@@ -185,34 +187,36 @@ class FreeflyerMPC:
             if k > 0:
                 # Path rows are switched on and off through their bounds in solve() (+-inf when off): rows
                 # multiplied by a 0/1 parameter would leave duplicate "sigma >= 0" rows that stall qrqp.
-                s_imp, s_av = slacks[k][0:_NSI], slacks[k][_NSI]
+                s_imp, s_av = slacks[k][0:_NSI], slacks[k][_NSI:]
                 z = ca.vertcat(x[0:2], x[3:5])
-                # keep-off: half-plane tangent to the disc, normal from the previous plan (m)
-                gap = ca.dot(normals[:, k], x[0:2] - centers[:, k]) - par["dist"]
-                add_con("path", k, ca.vertcat(z - s_imp[0:4] + s_imp[4:8], gap + s_av), [-inf] * 5, [inf] * 5)
+                # keep-off rows n_j . p + sigma_j >= offset_j (the offsets are the rows' bounds, in solve())
+                gaps = [ca.dot(normals[:, k * nk + j], x[0:2]) + s_av[j] for j in range(nk)]
+                add_con("path", k, ca.vertcat(z - s_imp[0:4] + s_imp[4:8], *gaps), [-inf] * (4 + nk),
+                        [inf] * (4 + nk))
                 wk = term if k == n else 1.0
                 node = (q_pos * ca.sumsqr(x[0:2] - ref[0:2, k]) + q_vel * ca.sumsqr(x[3:5] - ref[2:4, k])
                         + q_head * (x[2] - par["heading"]) ** 2 + q_omega * x[5] ** 2)
                 cost += wk * node
                 # the small quadratic terms keep the slack block of the Hessian positive definite
                 cost += cfg.impact_penalty * (ca.sum1(s_imp) + 1e-3 * ca.sumsqr(s_imp))
-                cost += cfg.avoid_penalty * (s_av + s_av ** 2)
+                cost += cfg.avoid_penalty * (ca.sum1(s_av) + ca.sumsqr(s_av))
         self._nlp = {"x": ca.vertcat(*w), "p": P, "f": cost, "g": ca.vertcat(*g)}
         self._nw, self._ng = counts["w"], counts["g"]
         self._lbx, self._ubx = np.array(lbw), np.array(ubw)
         self._lbg, self._ubg = np.array(lbg), np.array(ubg)
         self._stage_sizes = (
             [0] + [NX] * n,  # nx: x_0 is a parameter, not a variable
-            [NU] + [NU + _NSI + _NSA] * (n - 1) + [_NSI + _NSA],  # nu
-            [0] + [5] * n,  # ng: path constraints per stage (impact 4, keep-off 1)
+            [NU] + [NU + _NSI + nk] * (n - 1) + [_NSI + nk],  # nu
+            [0] + [4 + nk] * n,  # ng: path constraints per stage (impact 4, keep-off nk)
         )
         # index maps: shifting the warm start by one stage, reading states and inputs
         self._shift_w = self._shift_map(self._vblocks, self._nw)
         self._shift_g = self._shift_map(self._gblocks, self._ng)
         self._x_idx = np.array([np.arange(self._nw)[self._vblocks[("x", k)]] for k in range(1, n + 1)])
-        self._avoid_rows = np.array([self._gblocks[("path", k)].start + 4 for k in range(1, n + 1)])
+        self._avoid_rows = np.array([[self._gblocks[("path", k)].start + 4 + j for j in range(nk)]
+                                     for k in range(1, n + 1)])  # (N, nk)
         self._slack_idx = np.concatenate([np.arange(self._nw)[self._vblocks[("s", k)]] for k in range(1, n + 1)])
-        self._slack_lam = -np.tile([cfg.impact_penalty] * _NSI + [cfg.avoid_penalty] * _NSA, n)
+        self._slack_lam = -np.tile([cfg.impact_penalty] * _NSI + [cfg.avoid_penalty] * nk, n)
         self._u_idx = np.array([np.arange(self._nw)[self._vblocks[("u", k)]] for k in range(n)])
 
     @staticmethod
@@ -283,7 +287,7 @@ class FreeflyerMPC:
         self._p[self._pslice["weights"]] = [getattr(self.config, name) for name in _WEIGHTS]
 
     def solve(self, state: np.ndarray, reference: np.ndarray, impact: ImpactSpec | None = None,
-              avoid: AvoidSpec | None = None) -> MPCResult:
+              avoid: AvoidSpec | HalfPlaneSpec | list | None = None) -> MPCResult:
         """Solve the MPC problem from the measured ``state`` (6,) tracking ``reference`` (N+1, 4).
 
         ``reference[k] = [x, y, vx, vy]`` (m, m/s) at time t + k * dt_s (row 0 is not penalised).
@@ -311,19 +315,19 @@ class FreeflyerMPC:
             if impact.step > 0:  # node 0 is measured: only the velocity jump applies there
                 row = self._gblocks[("path", impact.step)].start
                 lbg[row:row + 4] = ubg[row:row + 4] = np.r_[impact.position, impact.velocity_before]
-        if avoid is not None:
-            if not isinstance(avoid, AvoidSpec):
-                raise MPCInputError(f"avoid must be an AvoidSpec or None, got {type(avoid).__name__}")
-            centers = _vector(avoid.centers, (n + 1, 2), "AvoidSpec.centers")
-            if avoid.active.shape != (n + 1,):
-                raise MPCInputError(f"AvoidSpec.active must have shape {(n + 1,)}, got {avoid.active.shape}")
-            p[ps["centers"]] = centers.ravel()
-            p[ps["dist"]] = avoid.min_distance
-            lbg[self._avoid_rows[avoid.active[1:]]] = 0.0  # n . (p - c) - d + sigma >= 0
-
+        specs = self._avoid_specs(avoid)
         guess = self._initial_guess(x0, ref) if self._guess is None else self._guess
-        if avoid is not None:
-            p[ps["normals"]] = self._normals(guess, x0, ref, centers).ravel()
+        normals = np.zeros((n + 1, self._nka, 2))
+        normals[:, :, 0] = 1.0  # rows that are off still need a finite normal
+        for j, spec in enumerate(specs):
+            if isinstance(spec, AvoidSpec):
+                normals[:, j] = self._normals(guess, x0, ref, spec.centers)
+                offsets = np.einsum("kd,kd->k", normals[:, j], spec.centers) + spec.min_distance
+            else:
+                normals[:, j], offsets = spec.normals, spec.offsets
+            active = np.flatnonzero(spec.active[1:])
+            lbg[self._avoid_rows[active, j]] = offsets[1:][active]  # n . p + sigma >= offset
+        p[ps["normals"]] = normals.ravel()
         names = [self.config.solver] + [s for s in self._solvers if s != self.config.solver]
         for name in names:
             solver = self._solvers[name]
@@ -355,26 +359,39 @@ class FreeflyerMPC:
             node = predicted[impact.step]
             result.impact_error = float(np.max(np.abs(np.r_[node[0:2] - impact.position,
                                                             node[3:5] - impact.velocity_before])))
-        if avoid is not None and np.any(avoid.active[1:]):
-            dist = np.hypot(*(predicted[:, 0:2] - avoid.centers).T)
-            result.min_clearance_m = float(np.min(dist[1:][avoid.active[1:]]) - avoid.min_distance)
+        clearances = [spec.clearance(predicted[:, 0:2]) for spec in specs if np.any(spec.active[1:])]
+        if clearances:
+            result.min_clearance_m = float(min(clearances))
         result.solve_ms = (time.perf_counter() - start) * 1e3
         return result
 
+    def _avoid_specs(self, avoid) -> list:
+        """The keep-off specs of a solve() call as a checked list (None, one spec, or a list of specs)."""
+        if avoid is None:
+            return []
+        specs = list(avoid) if isinstance(avoid, (list, tuple)) else [avoid]
+        if len(specs) > self._nka:
+            raise MPCInputError(f"{len(specs)} keep-off specs given but MPCConfig.keep_off_rows = {self._nka}")
+        n = self.horizon
+        for spec in specs:
+            if not isinstance(spec, (AvoidSpec, HalfPlaneSpec)):
+                raise MPCInputError(f"avoid must be an AvoidSpec, a HalfPlaneSpec, a list of them or None, "
+                                    f"got {type(spec).__name__}")
+            spec.check(n)
+        return specs
+
     def _normals(self, guess: np.ndarray, x0: np.ndarray, ref: np.ndarray, centers: np.ndarray) -> np.ndarray:
         """Unit normals (N+1, 2) of the keep-off half-planes: from each centre towards the planned position
-        (previous solution shifted), else the current position, else the reference."""
+        (previous solution shifted), else the current position, else the reference, else +x."""
         planned = np.vstack([x0[0:2], guess[self._x_idx[:, 0:2]]])
-        out = np.empty_like(centers)
-        for k in range(self.horizon + 1):
-            for point in (planned[k], x0[0:2], ref[k, 0:2]):
-                v = point - centers[k]
-                norm = math.hypot(v[0], v[1])
-                if norm > 1e-9:
-                    out[k] = v / norm
-                    break
-            else:
-                out[k] = (1.0, 0.0)
+        out = np.tile([1.0, 0.0], (self.horizon + 1, 1))
+        todo = np.ones(self.horizon + 1, dtype=bool)
+        for points in (planned, np.broadcast_to(x0[0:2], planned.shape), ref[:, 0:2]):
+            v = points - centers
+            norm = np.hypot(v[:, 0], v[:, 1])
+            use = todo & (norm > 1e-9)
+            out[use] = v[use] / norm[use, None]
+            todo &= ~use
         return out
 
     def _initial_guess(self, x0: np.ndarray, ref: np.ndarray) -> np.ndarray:

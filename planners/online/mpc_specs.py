@@ -11,7 +11,7 @@ from planners.errors import PlannerError
 
 SOLVERS = ("sqp", "fatrop", "ipopt")
 NX, NU = 6, 3  # state [px, py, theta, vx, vy, omega], input [Fx, Fy, tau]
-_NSI, _NSA = 8, 1  # slacks per node: impact (p, v) positive and negative parts, keep-off
+_NSI = 8  # impact slacks per node: (p, v) positive and negative parts; plus one per keep-off row
 _WEIGHTS = ("q_pos", "q_vel", "q_heading", "q_omega", "r_input", "terminal_factor")
 
 
@@ -28,6 +28,9 @@ class MPCConfig:
     ``fallback_solver`` (None: none) retries a solve the primary ``solver`` failed; ``sqp_max_iter`` caps the
     iterations of the ``"sqp"`` solver (converged solves take <= 27 in ``benchmarks/mpc.py`` and the keep-off
     stress cases, so a solve that needs more is handed to the fallback early); fatrop and ipopt get 100.
+    ``keep_off_rows``: how many keep-off constraints (:class:`AvoidSpec` discs or :class:`HalfPlaneSpec`
+    half-planes) one solve can take, each with its own slack per node (the expert uses one for the nearest
+    object, one per other robot, and one for the nearest wall or obstacle face).
     """
 
     horizon: int = 10
@@ -44,6 +47,7 @@ class MPCConfig:
     solver: str = "sqp"
     fallback_solver: str | None = "ipopt"
     sqp_max_iter: int = 30
+    keep_off_rows: int = 1
 
     def __post_init__(self) -> None:
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 2:
@@ -59,6 +63,8 @@ class MPCConfig:
                                 f"got {self.fallback_solver!r}")
         if isinstance(self.sqp_max_iter, bool) or not isinstance(self.sqp_max_iter, int) or self.sqp_max_iter < 1:
             raise MPCInputError(f"sqp_max_iter must be an integer >= 1, got {self.sqp_max_iter!r}")
+        if isinstance(self.keep_off_rows, bool) or not isinstance(self.keep_off_rows, int) or self.keep_off_rows < 1:
+            raise MPCInputError(f"keep_off_rows must be an integer >= 1, got {self.keep_off_rows!r}")
 
 
 def _check_weight(name: str, value: object, positive: bool = False) -> None:
@@ -124,6 +130,52 @@ class AvoidSpec:
             raise MPCInputError(f"AvoidSpec.min_distance must be a finite number > 0 (m), got {d!r}")
         self.min_distance = float(d)
         self.active = np.asarray(self.active, dtype=bool)
+
+    def check(self, horizon: int) -> None:
+        self.centers = _vector(self.centers, (horizon + 1, 2), "AvoidSpec.centers")
+        if self.active.shape != (horizon + 1,):
+            raise MPCInputError(f"AvoidSpec.active must have shape {(horizon + 1,)}, got {self.active.shape}")
+
+    def clearance(self, positions: np.ndarray) -> float:
+        """min over active nodes 1..N of |p_k - c_k| - min_distance (m)."""
+        dist = np.hypot(*(positions - self.centers).T)
+        return float(np.min(dist[1:][self.active[1:]]) - self.min_distance)
+
+
+@dataclass
+class HalfPlaneSpec:
+    """Keep-out of a half-plane: ``normals[k] . p_k >= offsets[k]`` (m) at the nodes where ``active[k]``.
+
+    For a wall or an obstacle face: the face's outward unit normal and its offset plus the robot's radius
+    (and a margin). ``normals`` (2,) or (N+1, 2), unit; ``offsets`` a number or (N+1,); ``active`` (N+1,) bool.
+    A fixed half-plane is already linear, so nothing is re-linearised.
+    """
+
+    normals: np.ndarray
+    offsets: np.ndarray
+    active: np.ndarray
+
+    def check(self, horizon: int) -> None:
+        shape = (horizon + 1,)
+        normals = np.asarray(self.normals, dtype=float)
+        if normals.shape == (2,):
+            normals = np.tile(normals, (horizon + 1, 1))
+        self.normals = _vector(normals, (horizon + 1, 2), "HalfPlaneSpec.normals")
+        offsets = np.asarray(self.offsets, dtype=float)
+        if offsets.shape == ():
+            offsets = np.full(shape, float(offsets))
+        self.offsets = _vector(offsets, shape, "HalfPlaneSpec.offsets")
+        self.active = np.asarray(self.active, dtype=bool)
+        if self.active.shape != shape:
+            raise MPCInputError(f"HalfPlaneSpec.active must have shape {shape}, got {self.active.shape}")
+        norms = np.hypot(self.normals[:, 0], self.normals[:, 1])
+        if np.any(np.abs(norms - 1.0) > 1e-6):
+            raise MPCInputError("HalfPlaneSpec.normals must be unit vectors")
+
+    def clearance(self, positions: np.ndarray) -> float:
+        """min over active nodes 1..N of normal . p - offset (m)."""
+        gap = np.einsum("kd,kd->k", self.normals, positions) - self.offsets
+        return float(np.min(gap[1:][self.active[1:]]))
 
 
 @dataclass
