@@ -78,3 +78,16 @@ def test_scripted_anchor_rule_delivers_the_cargo_on_every_station():
         env = gym.make(env_id)
         result = run_episode(env, media.ScriptedAnchors(env.unwrapped.station), seed=0)
         assert result.success, (env_id, result.robustness)
+
+
+def test_nothing_points_outside_the_repository():
+    """Facts the code relies on live in docs/ (background.md): no file names a developers-only document."""
+    import subprocess
+
+    tracked = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout.split()
+    if not tracked:
+        pytest.skip("not a git checkout")
+    words = ("paper-scenarios", "shared/" + "reference")
+    hits = [f for f in tracked if f.endswith((".py", ".md", ".toml", ".cfg", ".yml", ".sh"))
+            and (ROOT / f).is_file() and any(w in (ROOT / f).read_text(errors="ignore") for w in words)]
+    assert not hits, hits
