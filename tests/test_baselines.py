@@ -169,7 +169,7 @@ def test_behaviour_cloning_unpickles_nothing_and_writes_no_pickle(demonstrations
     with_malicious_zip_entry(demonstrations, marker, "evil")
     try:
         assert main(["bc", "throw_and_catch_exp", "--dataset", str(demonstrations), "--epochs", "2",
-                     "--out", str(tmp_path / "runs")]) == 0
+                     "--runs-dir", str(tmp_path / "runs")]) == 0
     finally:
         for name in ("vecnormalize.pkl", "model.zip"):
             (demonstrations / name).unlink()
