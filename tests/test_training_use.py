@@ -164,6 +164,21 @@ def test_ctrl_c_saves_the_model_and_resume_continues_it(tiny_yaml, tmp_path):
                  "--hyperparams", str(tiny_yaml), "--out", str(run), "--resume", "--thrust-noise", "0.1"]) == 2
 
 
+def test_resume_needs_a_saved_run(tmp_path, capsys):
+    assert main(["train", "ppo", "throw_and_catch_exp", "--out", str(tmp_path / "nothing"), "--resume"]) == 2
+    assert "has no model.zip to continue" in capsys.readouterr().err
+
+
+def test_effective_timesteps_are_whole_rollouts():
+    from baselines.train import default_eval_freq, effective_timesteps
+
+    assert effective_timesteps("ppo", 5_000, 2, {"n_steps": 4096}) == 8_192
+    assert effective_timesteps("ppo", 8_192, 2, {"n_steps": 4096}) == 8_192
+    assert effective_timesteps("ppo", 1_000, 1, {"n_steps": 64}, multiagent=True, n_agents=2) == 1_024
+    assert effective_timesteps("sac", 1_001, 2, {}) == 1_002
+    assert default_eval_freq(8_192) == 1_638 and default_eval_freq(10_000_000) == 20_000
+
+
 def _with_entry(src: Path, dst: Path, key: str, pickle_bytes: bytes) -> None:
     with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
         for item in zin.infolist():
