@@ -164,10 +164,28 @@ environment's own docstring and constructor, so its arguments table is the code'
 """
 
 
+def cli_page() -> str:
+    """Every subcommand's ``--help``, as the installed ``impact-env`` prints it (COLUMNS fixed for the page)."""
+    import argparse
+    import os
+
+    from impact_env.cli import build_parser
+
+    os.environ["COLUMNS"] = "110"
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    parts = ["# Command line", "", "`impact-env` as `impact-env --help` and `impact-env COMMAND --help` print it "
+             "(generated from the parser when the site is built).", "", "```text", parser.format_help().rstrip(),
+             "```", ""]
+    for name, command in sub.choices.items():
+        parts += [f"## {name}", "", "```text", command.format_help().rstrip(), "```", ""]
+    return "\n".join(parts)
+
+
 def on_files(files, config):
     from mkdocs.structure.files import File
 
-    generated = {"environments/index.md": index_page()}
+    generated = {"environments/index.md": index_page(), "cli.md": cli_page()}
     for page in pages():
         generated[f"environments/{page.slug}.md"] = render_page(page)
     for path, text in generated.items():

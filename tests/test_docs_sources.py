@@ -40,6 +40,12 @@ def test_environment_page_is_written_from_the_environment(page):
     assert "``" not in text and ":class:" not in text
 
 
+def test_cli_page_has_every_subcommand():
+    text = hooks.cli_page()
+    for name in ("scenarios", "show", "run", "train", "bench", "record", "bc", "curves", "plan"):
+        assert f"## {name}\n" in text and f"usage: impact-env {name}" in text
+
+
 def test_every_readme_section_the_site_includes_exists():
     for md in (ROOT / "docs").glob("*.md"):
         for heading in re.findall(r"<!-- readme: (.+?) -->", md.read_text()):
