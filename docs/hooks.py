@@ -147,7 +147,8 @@ environment's own docstring and constructor, so its arguments table is the code'
 ## Conventions
 
 - **Keyword names are the CLI's**: `gym.make(..., reward_mode="sparse")` is `impact-env run ... --reward-mode
-  sparse`; one name each, no aliases.
+  sparse`; one name each, no aliases. Any other keyword is an `EnvConfigError` that names the closest
+  argument (`reward=` -> "did you mean 'reward_mode'?").
 - **Episode length**: the scenario and station ids are registered with `max_episode_steps` equal to the task's
   horizon. The env sets `terminated=True` at the horizon (the task's end; the time left is in the observation,
   so do not bootstrap), and Gymnasium's `TimeLimit` also sets `truncated=True` on that same step: read

@@ -6,11 +6,11 @@ import difflib
 from collections.abc import Iterable
 
 
-def suggestion(word: str, candidates: Iterable[str]) -> str:
+def suggestion(word: str, candidates: Iterable[str], cutoff: float = 0.6) -> str:
     """``" (did you mean 'corridor'?)"`` for the closest candidates (case-insensitive), or ``""``."""
     candidates = list(dict.fromkeys(candidates))
     lowered = {c.lower(): c for c in candidates}
-    matches = difflib.get_close_matches(word.lower(), list(lowered), n=2, cutoff=0.6)
+    matches = difflib.get_close_matches(word.lower(), list(lowered), n=2, cutoff=cutoff)
     if not matches:
         return ""
     return " (did you mean " + " or ".join(repr(lowered[m]) for m in matches) + "?)"

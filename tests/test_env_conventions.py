@@ -60,7 +60,8 @@ def test_make_imports_the_package_itself():
 
 @pytest.mark.parametrize("cls", ENV_CLASSES, ids=lambda c: c.__name__)
 def test_docstring_documents_exactly_the_constructor_keywords(cls):
-    keywords = [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
+    keywords = [p.name for p in inspect.signature(cls.__init__).parameters.values()
+                if p.name != "self" and p.kind is not p.VAR_KEYWORD]
     assert list(documented_arguments(cls)) == keywords
     assert all(a.description for a in arguments(cls))
     assert {"Description", "Action space", "Observation space", "Rewards", "Episode end", "Arguments",
@@ -81,7 +82,7 @@ def test_pettingzoo_entry_points_spell_out_the_constructor(module, cls):
     for name in ("parallel_env", "env", "raw_env"):
         params = inspect.signature(getattr(module, name)).parameters.values()
         assert [(p.name, p.default) for p in params] == expected, name
-        assert all(p.kind is p.POSITIONAL_OR_KEYWORD for p in params)
+        assert all(p.kind in (p.POSITIONAL_OR_KEYWORD, p.VAR_KEYWORD) for p in params)
     assert impact_env.parallel_env is impact_env.transport_v0.parallel_env
 
 
@@ -116,7 +117,7 @@ def _flags(command: str) -> set[str]:
 @pytest.mark.parametrize("cls, command", [(TransportEnv, "run"), (TetherEnv, "run"), (TransportEnv, "train")])
 def test_cli_options_are_the_keyword_names(cls, command):
     """One name per option: ``--reward-mode`` is ``reward_mode=`` (render options have no CLI form)."""
-    skip = {"scenario", "station", "render_mode", "render_width_px"}
+    skip = {"scenario", "station", "render_mode", "render_width_px", "unknown"}
     keywords = [p for p in inspect.signature(cls.__init__).parameters if p not in skip | {"self"}]
     flags = _flags(command)
     missing = [k for k in keywords if "--" + k.replace("_", "-") not in flags]
@@ -130,3 +131,18 @@ def test_renamed_cli_options_say_their_new_name(capsys):
     with pytest.raises(SystemExit):
         main(["run", "corridor", "--init-noise", "0.1"])
     assert "--init-noise is now --initial-position-noise-m" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("make, wrong, right", [
+    (lambda **kw: gym.make("impact_env/Corridor-v0", **kw), "reward", "reward_mode"),
+    (lambda **kw: gym.make("impact_env/Corridor-v0", **kw), "init_noise", "initial_position_noise_m"),
+    (lambda **kw: gym.make("impact_env/Corridor-v0", **kw), "thrust_nosie", "thrust_noise"),
+    (lambda **kw: gym.make("impact_env/TetherL-v0", **kw), "fidelty", "fidelity"),
+    (lambda **kw: impact_env.transport_v0.parallel_env(scenario="corridor", **kw), "max_cycle", "max_cycles"),
+    (lambda **kw: impact_env.tether_v0.env(station="L", **kw), "reward", "reward_mode"),
+])
+def test_an_unknown_keyword_names_the_right_one(make, wrong, right):
+    from impact_env.errors import EnvConfigError
+
+    with pytest.raises(EnvConfigError, match=f"no argument '{wrong}' \\(did you mean '{right}'\\?\\)"):
+        make(**{wrong: 1})

@@ -7,9 +7,15 @@ Gymnasium wrapper does not forward attributes, so read them as ``env.unwrapped.d
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 from impact_env.errors import EnvConfigError
+
+# keywords users reach for that have another name here (the CLI's old option names among them)
+_OTHER_NAMES = {"reward": "reward_mode", "init_noise": "initial_position_noise_m",
+                "initial_noise": "initial_position_noise_m", "position_noise": "initial_position_noise_m",
+                "e": "restitution", "map": "station", "scenario_name": "scenario"}
 
 
 class EpisodeClock:
@@ -50,3 +56,19 @@ def check_render_options(metadata: dict, render_mode: str | None, render_width_p
 def check_max_cycles(max_cycles: int | None) -> None:
     if max_cycles is not None and not (type(max_cycles) is int and max_cycles >= 1):
         raise EnvConfigError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
+
+
+def reject_unknown(unknown: dict[str, Any], cls: type) -> None:
+    """An unknown keyword is a typed error naming the right one (``reward=`` -> ``reward_mode``), not a default."""
+    if not unknown:
+        return
+    from impact_env.names import suggestion
+
+    names = [p.name for p in inspect.signature(cls.__init__).parameters.values()
+             if p.name != "self" and p.kind is not p.VAR_KEYWORD]
+    parts = []
+    for key in unknown:
+        hint = f" (did you mean {_OTHER_NAMES[key]!r}?)" if _OTHER_NAMES.get(key) in names else \
+            suggestion(key, names, cutoff=0.5)
+        parts.append(f"{key!r}{hint}")
+    raise EnvConfigError(f"{cls.__name__} has no argument {', '.join(parts)}; its arguments are {', '.join(names)}")

@@ -9,7 +9,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import EzPickle
 
-from impact_env.envs.clock import EpisodeClock, check_render_options, required
+from impact_env.envs.clock import EpisodeClock, check_render_options, reject_unknown, required
 from impact_env.envs.tether_core import TetherCore
 from impact_env.station import Station
 
@@ -96,7 +96,8 @@ class TetherEnv(EpisodeClock, gym.Env, EzPickle):
     def __init__(self, station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
                  energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
                  initial_position_noise_m: float = 0.0, render_mode: str | None = None,
-                 render_width_px: int = 600) -> None:
+                 render_width_px: int = 600, **unknown: Any) -> None:
+        reject_unknown(unknown, type(self))
         EzPickle.__init__(self, station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
                           initial_position_noise_m, render_mode, render_width_px)
         check_render_options(self.metadata, render_mode, render_width_px)

@@ -15,7 +15,7 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
-from impact_env.envs.clock import EpisodeClock, check_max_cycles, check_render_options, required
+from impact_env.envs.clock import EpisodeClock, check_max_cycles, check_render_options, reject_unknown, required
 from impact_env.envs.tether import STATION_HINT, close_tether, render_tether
 from impact_env.envs.tether_core import KEEP, TetherCore
 from impact_env.station import Station
@@ -70,7 +70,8 @@ class TetherParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
     def __init__(self, station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
                  energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
                  initial_position_noise_m: float = 0.0, max_cycles: int | None = None,
-                 render_mode: str | None = None, render_width_px: int = 600) -> None:
+                 render_mode: str | None = None, render_width_px: int = 600, **unknown: Any) -> None:
+        reject_unknown(unknown, type(self))
         EzPickle.__init__(self, station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
                           initial_position_noise_m, max_cycles, render_mode, render_width_px)
         check_render_options(self.metadata, render_mode, render_width_px)
@@ -153,27 +154,27 @@ class TetherParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
 def parallel_env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
                  energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
                  initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
-                 render_width_px: int = 600) -> TetherParallelEnv:
+                 render_width_px: int = 600, **unknown: Any) -> TetherParallelEnv:
     """The ParallelEnv; the arguments of :class:`TetherParallelEnv`."""
     return TetherParallelEnv(station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
-                             initial_position_noise_m, max_cycles, render_mode, render_width_px)
+                             initial_position_noise_m, max_cycles, render_mode, render_width_px, **unknown)
 
 
 def raw_env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
             energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
             initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
-            render_width_px: int = 600):
+            render_width_px: int = 600, **unknown: Any):
     """The AEC form without the order-enforcing wrapper; the arguments of :class:`TetherParallelEnv`."""
     return parallel_to_aec_wrapper(parallel_env(station, fidelity, reward_mode, energy_penalty, pull_speed_mps,
                                                 max_active, initial_position_noise_m, max_cycles, render_mode,
-                                                render_width_px))
+                                                render_width_px, **unknown))
 
 
 def env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
         energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
         initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
-        render_width_px: int = 600):
+        render_width_px: int = 600, **unknown: Any):
     """The AEC form, order-enforced (what ``pettingzoo.test.api_test`` expects); the arguments of
     :class:`TetherParallelEnv`."""
     return OrderEnforcingWrapper(raw_env(station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
-                                         initial_position_noise_m, max_cycles, render_mode, render_width_px))
+                                         initial_position_noise_m, max_cycles, render_mode, render_width_px, **unknown))

@@ -10,7 +10,7 @@ from gymnasium import spaces
 from gymnasium.utils import EzPickle
 
 from impact_env.envs import render_support
-from impact_env.envs.clock import EpisodeClock, check_render_options, required
+from impact_env.envs.clock import EpisodeClock, check_render_options, reject_unknown, required
 from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
 from impact_env.scenario import Scenario
 
@@ -98,7 +98,8 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     def __init__(self, scenario: Scenario | str | None = None, reward_mode: str = "dense",
                  fuel_penalty: float = 0.0, restitution: float | None = None, thrust_noise: float = 0.0,
                  initial_position_noise_m: float = 0.0, render_mode: str | None = None,
-                 render_width_px: int = 600) -> None:
+                 render_width_px: int = 600, **unknown: Any) -> None:
+        reject_unknown(unknown, type(self))
         EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
                           initial_position_noise_m, render_mode, render_width_px)
         check_render_options(self.metadata, render_mode, render_width_px)

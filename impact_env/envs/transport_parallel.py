@@ -18,7 +18,7 @@ from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from impact_env.envs import render_support
 from impact_env.envs.actions import numbers_of
-from impact_env.envs.clock import EpisodeClock, check_max_cycles, check_render_options, required
+from impact_env.envs.clock import EpisodeClock, check_max_cycles, check_render_options, reject_unknown, required
 from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
 from impact_env.envs.transport import SCENARIO_HINT
 from impact_env.errors import ActionError
@@ -85,7 +85,8 @@ class TransportParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
     def __init__(self, scenario: Scenario | str | None = None, reward_mode: str = "dense",
                  fuel_penalty: float = 0.0, restitution: float | None = None, thrust_noise: float = 0.0,
                  initial_position_noise_m: float = 0.0, max_cycles: int | None = None,
-                 render_mode: str | None = None, render_width_px: int = 600) -> None:
+                 render_mode: str | None = None, render_width_px: int = 600, **unknown: Any) -> None:
+        reject_unknown(unknown, type(self))
         EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
                           initial_position_noise_m, max_cycles, render_mode, render_width_px)
         check_render_options(self.metadata, render_mode, render_width_px)
@@ -179,24 +180,25 @@ class TransportParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
 def parallel_env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
                  restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
                  max_cycles: int | None = None, render_mode: str | None = None,
-                 render_width_px: int = 600) -> TransportParallelEnv:
+                 render_width_px: int = 600, **unknown: Any) -> TransportParallelEnv:
     """The ParallelEnv; the arguments of :class:`TransportParallelEnv`."""
     return TransportParallelEnv(scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
-                                initial_position_noise_m, max_cycles, render_mode, render_width_px)
+                                initial_position_noise_m, max_cycles, render_mode, render_width_px, **unknown)
 
 
 def raw_env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
             restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
-            max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600):
+            max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600, **unknown: Any):
     """The AEC form without the order-enforcing wrapper; the arguments of :class:`TransportParallelEnv`."""
     return parallel_to_aec_wrapper(parallel_env(scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
-                                                initial_position_noise_m, max_cycles, render_mode, render_width_px))
+                                                initial_position_noise_m, max_cycles, render_mode,
+                                                render_width_px, **unknown))
 
 
 def env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
         restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
-        max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600):
+        max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600, **unknown: Any):
     """The AEC form, order-enforced (what ``pettingzoo.test.api_test`` expects); the arguments of
     :class:`TransportParallelEnv`."""
     return OrderEnforcingWrapper(raw_env(scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
-                                         initial_position_noise_m, max_cycles, render_mode, render_width_px))
+                                         initial_position_noise_m, max_cycles, render_mode, render_width_px, **unknown))
