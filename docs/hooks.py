@@ -66,6 +66,20 @@ def rst_to_markdown(text: str) -> str:
     return text.replace("``", "`")
 
 
+def space_text(space) -> str:
+    """A space in one line: Box bounds as scalars when uniform, else the range of its bounds."""
+    import numpy as np
+    from gymnasium import spaces
+
+    if isinstance(space, spaces.Box):
+        low, high = np.asarray(space.low), np.asarray(space.high)
+        if np.all(low == low.flat[0]) and np.all(high == high.flat[0]):
+            return f"Box({low.flat[0]:g}, {high.flat[0]:g}, {space.shape}, {space.dtype})"
+        return (f"Box({space.shape}, {space.dtype}), bounds per entry from {low.min():g} ... {low.max():g} to "
+                f"{high.min():g} ... {high.max():g}")
+    return repr(space).replace("\n", " ")
+
+
 def _cell(text: str) -> str:
     return rst_to_markdown(text).replace("|", "\\|")
 
@@ -83,7 +97,8 @@ def render_page(page: EnvPage) -> str:
         env = gym.make(page.env_id, **({} if page.env_id.split("/")[1][:-3] not in ("Transport", "Tether")
                                         else kwargs))
         core = env.unwrapped
-        spaces = [("Action space", repr(env.action_space)), ("Observation space", repr(env.observation_space))]
+        spaces = [("Action space", space_text(env.action_space)),
+                  ("Observation space", space_text(env.observation_space))]
         length = (f"{core.horizon_steps} steps of {core.dt_s:g} s ({core.horizon_s:g} s); "
                   f"`max_episode_steps` {env.spec.max_episode_steps}")
         agents = None
@@ -91,9 +106,9 @@ def render_page(page: EnvPage) -> str:
         module = impact_env.transport_v0 if page.cls == "TransportParallelEnv" else impact_env.tether_v0
         core = module.parallel_env(**kwargs)
         agent = core.possible_agents[0]
-        spaces = [("Action space (per agent)", repr(core.action_space(agent))),
-                  ("Observation space (per agent)", repr(core.observation_space(agent))),
-                  ("State space", repr(core.state_space))]
+        spaces = [("Action space (per agent)", space_text(core.action_space(agent))),
+                  ("Observation space (per agent)", space_text(core.observation_space(agent))),
+                  ("State space", space_text(core.state_space))]
         length = f"{core.horizon_steps} steps of {core.dt_s:g} s ({core.horizon_s:g} s)"
         agents = ", ".join(core.possible_agents)
     shown = ", ".join(f"{k}={v!r}" for k, v in kwargs.items())

@@ -88,6 +88,7 @@ def test_environment_pages_have_gif_and_arguments_table():
         assert re.search(r'<img[^>]+src="\.\./img/envs/[\w]+\.gif"', html), slug
         assert '<table class="arguments">' in html and "<th>default</th>" in html, slug
         assert "Version history" in html and "max_episode_steps" in html, slug
+        assert "<td>Observation space</td>" in html and "<td>Episode</td>" in html, slug  # the summary table
 
 
 # ------------------------------------------------------------------------------------------------- browser
