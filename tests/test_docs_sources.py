@@ -39,7 +39,8 @@ def test_environment_page_is_written_from_the_environment(page):
         assert section in text, section
     assert "``" not in text and ":class:" not in text
     table = text[text.index("| | |"):text.index("| Spaces shown for")]
-    assert all(line.startswith("|") and line.endswith("|") and line.count("|") == 3 for line in table.splitlines()), table
+    rows = table.splitlines()
+    assert all(row.startswith("|") and row.endswith("|") and row.count("|") == 3 for row in rows), table
 
 
 def test_cli_page_has_every_subcommand():
