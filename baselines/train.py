@@ -58,11 +58,22 @@ class TrainConfig:
     resume: bool = False
 
 
+def load_world(name: str) -> Any:
+    """The Scenario, or for a tether station the Station, that ``name`` (shipped name or file) describes."""
+    from baselines import tether
+
+    if tether.is_station(name):
+        from impact_env.station import load_station
+
+        return load_station(name)
+    return load_scenario(name)
+
+
 def run_dir_for(config: TrainConfig) -> Path:
     """The run folder: ``config.out``, or ``<runs_dir>/<algo>_<scenario>[_ma]_s<seed>``."""
     if config.out is not None:
         return Path(config.out)
-    name = load_scenario(config.scenario).name
+    name = load_world(config.scenario).name
     return Path(config.runs_dir) / f"{config.algo}_{name}{'_ma' if config.multiagent else ''}_s{config.seed}"
 
 
@@ -277,7 +288,7 @@ def _save(model: Any, venv: Any, run_dir: Path, config: TrainConfig, scenario_na
     (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
     (run_dir / "train.json").write_text(json.dumps({
         "algo": config.algo, "scenario": scenario_name,
-        "scenario_fingerprint": scenario_fingerprint(load_scenario(config.scenario)), "env_id": env_id,
+        "scenario_fingerprint": scenario_fingerprint(load_world(config.scenario)), "env_id": env_id,
         "timesteps": timesteps, "timesteps_trained": int(model.num_timesteps), "max_minutes": config.max_minutes,
         "n_envs": n_envs, "seed": config.seed, "multiagent": config.multiagent, "env_options": config.env_options,
         "interrupted": interrupted, "wall_time_s": wall_time_s}, indent=2))

@@ -24,7 +24,7 @@ def test_every_tether_env_id_has_ppo_hyperparameters():
 
 def test_ppo_on_a_station_then_expert_versus_ppo_in_one_bench(tmp_path, capsys):
     runs = tmp_path / "runs"
-    assert main(["train", "ppo", "dead_end", "--timesteps", "512", "--n-envs", "1", "--out", str(runs),
+    assert main(["train", "ppo", "dead_end", "--timesteps", "512", "--n-envs", "1", "--runs-dir", str(runs),
                  "--no-progress", "--eval-freq", "100000", "--fidelity", "reel"]) == 0
     model = runs / "ppo_dead_end_s0" / "model.zip"
     meta = json.loads((runs / "ppo_dead_end_s0" / "train.json").read_text())
