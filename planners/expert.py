@@ -47,7 +47,7 @@ from planners.online.keep_off import boundary_keep_off, object_keep_off, robot_k
 from planners.online.mission import MissionConfig, MissionPlanner
 from planners.online.mpc import FreeflyerMPC, MPCConfig
 from planners.online.reference import ContactStrategy, PlanContact, ReferenceSelector
-from planners.plan import Plan, PlannedImpact
+from planners.plan import Plan
 
 
 @dataclass
@@ -368,4 +368,4 @@ def make_expert(scenario: Scenario, plan: str | None = None, **_: Any) -> Expert
     return Expert(scenario, plan=Plan.load(plan) if plan else None)
 
 
-__all__ = ["Expert", "ExpertConfig", "ExpertStats", "PlannedImpact", "make_expert"]
+__all__ = ["Expert", "ExpertConfig", "ExpertStats", "make_expert"]

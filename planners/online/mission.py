@@ -47,7 +47,6 @@ from impact_env.scenario import Body, Scenario
 from impact_env.stl import progress, robustness, without_constants
 from planners import bezier
 from planners.errors import PlannerError
-from planners.offline.milp.trajectories import allowed_box
 from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
 from planners.online.sampling import PlanSampler
 from planners.plan import BodyPlan, Plan, Segment
@@ -162,8 +161,9 @@ def splice(executed: Plan, remainder: Plan, t: float) -> tuple[Plan, set[int]]:
 def _initial_state(body: Body, position: np.ndarray, velocity: np.ndarray, scenario: Scenario) -> Body:
     """The body with the observed state as its initial state, nudged inside the planner's allowed box and
     with a velocity bound no smaller than its observed speed (else the derived problem starts infeasible)."""
-    x0, x1, y0, y1 = allowed_box(scenario, body)
-    eps = 1e-6
+    xmin, xmax, ymin, ymax = scenario.world_box
+    x0, x1, y0, y1 = xmin + body.radius_m, xmax - body.radius_m, ymin + body.radius_m, ymax - body.radius_m
+    eps = 1e-6  # the planner's box for a centre (the world shrunk by the radius), strictly inside
     p = (float(np.clip(position[0], x0 + eps, x1 - eps)), float(np.clip(position[1], y0 + eps, y1 - eps)))
     v = (float(velocity[0]), float(velocity[1]))
     bound = body.velocity_bound_mps
