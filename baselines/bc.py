@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from baselines.model_files import NORMALIZATION_FILE, save_normalization
+from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
 from baselines.record import dataset_id
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario
@@ -127,6 +127,7 @@ def behaviour_clone(config: BCConfig) -> Path:
     policy.set_training_mode(False)
     model.save(run_dir / "model.zip")
     save_normalization(venv, run_dir / NORMALIZATION_FILE)
+    (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
     (run_dir / "train.json").write_text(json.dumps({
         "algo": "ppo", "method": "behaviour cloning", "scenario": scenario.name,
         "dataset": dataset_id(scenario.name), "episodes_train": len(train_eps), "episodes_validation": len(val_eps),

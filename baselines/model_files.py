@@ -147,10 +147,14 @@ def _unpickle_normalization(path: Path) -> Normalization:
     import pickle
 
     warn_trusted(path)
-    with open(path, "rb") as f:
-        vn = pickle.load(f)  # noqa: S301 - only with --trust-pickle
-    return Normalization(np.asarray(vn.obs_rms.mean, dtype=float), np.asarray(vn.obs_rms.var, dtype=float),
-                         float(vn.obs_rms.count), float(vn.clip_obs), float(vn.epsilon), bool(vn.norm_obs))
+    try:
+        with open(path, "rb") as f:
+            vn = pickle.load(f)  # noqa: S301 - only with --trust-pickle
+        return Normalization(np.asarray(vn.obs_rms.mean, dtype=float), np.asarray(vn.obs_rms.var, dtype=float),
+                             float(vn.obs_rms.count), float(vn.clip_obs), float(vn.epsilon), bool(vn.norm_obs))
+    except Exception as exc:  # noqa: BLE001 - whatever the trusted pickle held, it is not usable statistics
+        raise ModelFileError(f"{path} does not hold VecNormalize statistics: {type(exc).__name__}: "
+                             f"{str(exc)[:200]}") from None
 
 
 def load_normalization(folder: Path, obs_size: int | None = None, trust_pickle: bool = False) -> Normalization | None:

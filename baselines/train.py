@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from baselines import ALGOS, hyperparams
-from baselines.model_files import NORMALIZATION_FILE, save_normalization
+from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
 from impact_env import GYM_IDS
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario
@@ -108,6 +108,9 @@ def train(config: TrainConfig) -> Path:
     model.save(run_dir / "model.zip")
     if isinstance(venv, VecNormalize):
         save_normalization(venv, run_dir / NORMALIZATION_FILE)
+    else:
+        (run_dir / NORMALIZATION_FILE).unlink(missing_ok=True)  # a previous run's statistics are not this model's
+    (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
     (run_dir / "train.json").write_text(json.dumps({
         "algo": config.algo, "scenario": scenario.name, "env_id": env_id, "timesteps": timesteps,
         "timesteps_trained": int(model.num_timesteps), "max_minutes": config.max_minutes,

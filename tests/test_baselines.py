@@ -154,6 +154,32 @@ def test_behaviour_cloning_is_deterministic(demonstrations, tmp_path):
     assert histories[0] == histories[1]
 
 
+def test_behaviour_cloning_unpickles_nothing_and_writes_no_pickle(demonstrations, tmp_path):
+    """Malicious pickles planted in the dataset folder and in bc's output folder (the payload would create a
+    marker file) are never loaded; bc's model folder holds no pickle and flies without --trust-pickle."""
+    import pickle
+
+    from tests.test_model_safety import Payload, with_malicious_zip_entry
+
+    marker = tmp_path / "marker"
+    run_dir = tmp_path / "runs" / "bc_throw_and_catch_exp_s0"
+    run_dir.mkdir(parents=True)
+    for folder in (demonstrations, run_dir):
+        (folder / "vecnormalize.pkl").write_bytes(pickle.dumps(Payload(marker)))
+    shutil.copy(RESULTS / "models" / "bc_throw_and_catch_exp" / "model.zip", demonstrations / "model.zip")
+    with_malicious_zip_entry(demonstrations, marker, "evil")
+    try:
+        assert main(["bc", "throw_and_catch_exp", "--dataset", str(demonstrations), "--epochs", "2",
+                     "--out", str(tmp_path / "runs")]) == 0
+    finally:
+        for name in ("vecnormalize.pkl", "model.zip"):
+            (demonstrations / name).unlink()
+    assert not marker.exists()
+    assert sorted(p.name for p in run_dir.iterdir()) == ["model.zip", "train.json", "vecnormalize.json"]
+    assert main(["run", "throw_and_catch_exp", "--controller", str(run_dir / "model.zip")]) == 0
+    assert not marker.exists()
+
+
 def test_behaviour_cloning_without_a_dataset_is_a_clear_error(tmp_path, capsys):
     pytest.importorskip("minari")
     assert main(["bc", "corridor", "--dataset", str(tmp_path / "empty")]) == 2
