@@ -214,6 +214,7 @@ def plot(cells: list[dict], scenarios, path: str) -> None:
     def success(cell: dict) -> float:
         return 100 * float(np.mean([e["success"] for e in cell["episodes"]]))
 
+    legend_done = False
     for i, name in enumerate(scenarios):
         ax = grid[i, 0]
         combined = {c["stack"]: c for c in cells if c["scenario"] == name and c["axis"] == "combined"}
@@ -239,8 +240,12 @@ def plot(cells: list[dict], scenarios, path: str) -> None:
             ax.set_ylim(-5, 105)
             if i == len(scenarios) - 1:
                 ax.set_xlabel(units[axis], fontsize=8)
-            if i == 0:
+            if not ax.lines:
+                ax.text(0.5, 0.5, "not run", ha="center", va="center", transform=ax.transAxes, fontsize=8)
+                ax.set_xticks([])
+            elif not legend_done:
                 ax.legend(fontsize=7)
+                legend_done = True
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
