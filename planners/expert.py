@@ -154,7 +154,8 @@ class Expert:
         strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
         self.selector = ReferenceSelector(plan, self.grid_dt, self.dt, strategy, cfg.replan_intervals,
                                           disc_offset=cfg.disc_offset, box=self._safe_box)
-        self.mission = MissionPlanner(sc, plan, cfg.mission, planner_config) if cfg.mission_replanning else None
+        self.mission = (MissionPlanner(sc, plan, cfg.mission, planner_config, cfg.aim_final_position)
+                        if cfg.mission_replanning else None)
         self.stats = ExpertStats()
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}
         self._cache: tuple[int, np.ndarray] | None = None
