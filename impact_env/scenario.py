@@ -165,8 +165,10 @@ def _read_source(name_or_path: str | Path) -> tuple[str, str]:
                                 f"{exc.start}); TOML files must be UTF-8") from None
     name = str(name_or_path)
     if name not in scenario_names():
-        raise ScenarioError(f"unknown scenario {name!r}; shipped scenarios: {', '.join(scenario_names())} "
-                            "(or pass a path to a .toml file)")
+        from impact_env.names import shipped_names, suggestion
+
+        raise ScenarioError(f"unknown scenario {name!r}{suggestion(name, shipped_names())}; shipped scenarios: "
+                            f"{', '.join(scenario_names())} (or pass a path to a .toml file)")
     return resources.files(_SCENARIO_PACKAGE).joinpath(f"{name}.toml").read_text(encoding="utf-8"), name
 
 

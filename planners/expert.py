@@ -365,7 +365,15 @@ class Expert:
 
 
 def make_expert(scenario: Scenario, plan: str | None = None, **_: Any) -> Expert:
-    """Factory of the ``impact_env.controllers`` entry point: ``impact-env run SCENARIO --controller expert``."""
+    """Factory of the ``impact_env.controllers`` entry point: ``impact-env run SCENARIO --controller expert``.
+
+    For a tether station it builds the tether expert (:mod:`planners.tether.expert`)."""
+    from impact_env.station import Station
+
+    if isinstance(scenario, Station):
+        from planners.tether.expert import make_tether_expert
+
+        return make_tether_expert(scenario, plan=plan)
     return Expert(scenario, plan=Plan.load(plan) if plan else None)
 
 

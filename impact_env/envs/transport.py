@@ -10,12 +10,16 @@ from gymnasium import spaces
 from gymnasium.utils import EzPickle
 
 from impact_env.envs import render_support
+from impact_env.envs.clock import EpisodeClock, check_render_options, reject_unknown, required
 from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
-from impact_env.errors import EnvConfigError
 from impact_env.scenario import Scenario
 
+SCENARIO_HINT = "a shipped scenario name (impact-env scenarios), a path to a TOML file or a Scenario"
+SCENARIO_EXAMPLE = ("gym.make('impact_env/Transport-v0', scenario='corridor'), or the scenario's own id "
+                    "gym.make('impact_env/Corridor-v0')")
 
-class TransportEnv(gym.Env, EzPickle):
+
+class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     """Robots move passive free-floating objects by impacts, in a 2D frictionless microgravity world.
 
     ## Description
@@ -49,9 +53,17 @@ class TransportEnv(gym.Env, EzPickle):
     objects start uniformly within that radius of their scenario position (drawn from the reset seed).
 
     ## Episode end
-    ``terminated`` when the STL formula's horizon is reached (e.g. 100 s = 1000 steps for the corridor);
-    the final ``info["robustness"]`` is then the trace's exact robustness and ``info["is_success"]``
-    says whether it is positive. There is no truncation of its own (use ``max_episode_steps``).
+    ``terminated`` when the STL formula's horizon is reached (``env.unwrapped.horizon_steps`` steps of
+    ``env.unwrapped.dt_s``: 1000 steps of 0.1 s for the corridor); the final ``info["robustness"]`` is then the
+    trace's exact robustness and ``info["is_success"]`` says whether it is positive. The horizon is part of the
+    task and the time left is in the observation, so this is a true termination (do not bootstrap).
+
+    ``gym.make`` registers each shipped scenario with ``max_episode_steps`` equal to its horizon, so
+    ``env.spec.max_episode_steps`` tells the episode length; on the last step Gymnasium's ``TimeLimit`` then
+    also sets ``truncated=True``. Read ``terminated`` as the authoritative signal (stable-baselines3 does:
+    its ``TimeLimit.truncated`` is ``truncated and not terminated``). A smaller ``max_episode_steps`` passed to
+    ``gym.make`` cuts episodes short with ``truncated`` only. ``impact_env/Transport-v0`` cannot know the
+    horizon of a scenario given at ``make`` time, so it registers none.
 
     ## Info
     ``robustness`` (current estimate, m), ``is_success`` (robustness > 0), ``impacts`` (contacts that ended
@@ -59,28 +71,39 @@ class TransportEnv(gym.Env, EzPickle):
     ``fuel_Ns`` (cumulative), ``time_s``.
 
     ## Arguments
-    ``scenario`` (name, path or Scenario; default ``"corridor"``), ``reward_mode``, ``fuel_penalty``,
-    ``restitution`` (simulate with another e than the scenario's), ``thrust_noise`` (std of multiplicative
-    thrust noise), ``initial_position_noise_m``, ``render_mode`` (``"rgb_array"`` or ``"human"``),
-    ``render_width_px``.
+    Each keyword has the name of its ``impact-env run``/``train`` option (``reward_mode`` is
+    ``--reward-mode``).
+
+    * ``scenario``: a shipped name (``impact-env scenarios``), a path to a TOML file or a
+      :class:`~impact_env.scenario.Scenario`. Required by ``impact_env/Transport-v0``; the scenario ids
+      (``impact_env/Corridor-v0`` ...) set it.
+    * ``reward_mode``: ``"dense"``, ``"sparse"`` or ``"conjuncts"`` (see Rewards).
+    * ``fuel_penalty``: reward cost per N s of fuel (>= 0).
+    * ``restitution``: simulate with this restitution instead of the scenario's ``e`` (a model mismatch for the
+      planner); None keeps the scenario's.
+    * ``thrust_noise``: standard deviation of multiplicative thrust noise (0.05 = 5 %), re-clipped to the limits.
+    * ``initial_position_noise_m``: objects start uniformly within this radius (m) of their scenario position.
+    * ``render_mode``: ``"rgb_array"`` (an ``(H, W, 3)`` uint8 frame per ``render()``), ``"human"`` (a pygame
+      window) or None.
+    * ``render_width_px``: width of the rendered frame; the height follows the world's aspect ratio.
 
     ## Version history
-    * v0: initial release.
+    * v0: initial release (impact_env 0.1.0). In 0.2.0 the ids got ``max_episode_steps``, ``scenario`` became
+      required and the episode clock (``dt_s``, ``horizon_steps``, ``horizon_s``) moved onto the env; dynamics,
+      reward and observations are unchanged, so the version stays v0.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
-    def __init__(self, scenario: Scenario | str = "corridor", reward_mode: str = "dense", fuel_penalty: float = 0.0,
-                 restitution: float | None = None, thrust_noise: float = 0.0,
+    def __init__(self, scenario: Scenario | str | None = None, reward_mode: str = "dense",
+                 fuel_penalty: float = 0.0, restitution: float | None = None, thrust_noise: float = 0.0,
                  initial_position_noise_m: float = 0.0, render_mode: str | None = None,
-                 render_width_px: int = 600) -> None:
+                 render_width_px: int = 600, **unknown: Any) -> None:
+        reject_unknown(unknown, type(self))
         EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
                           initial_position_noise_m, render_mode, render_width_px)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise EnvConfigError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
-                                 f"got {render_mode!r}")
-        if not (type(render_width_px) is int and 16 <= render_width_px <= 8192):
-            raise EnvConfigError(f"render_width_px must be an integer in 16..8192, got {render_width_px!r}")
+        check_render_options(self.metadata, render_mode, render_width_px)
+        scenario = required(scenario, "scenario", SCENARIO_HINT, SCENARIO_EXAMPLE)
         self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
                                   restitution=restitution, thrust_noise=thrust_noise,
                                   initial_position_noise_m=initial_position_noise_m)
