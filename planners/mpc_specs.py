@@ -7,16 +7,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planners.errors import PlannerError
+from planners.errors import MPCInputError  # noqa: F401 - MPCInputError is imported from here too
 
 SOLVERS = ("sqp", "fatrop", "ipopt")
 NX, NU = 6, 3  # state [px, py, theta, vx, vy, omega], input [Fx, Fy, tau]
 _NSI, _NSA = 8, 1  # slacks per node: impact (p, v) positive and negative parts, keep-off
 _WEIGHTS = ("q_pos", "q_vel", "q_heading", "q_omega", "r_input", "terminal_factor")
-
-
-class MPCInputError(PlannerError, ValueError):
-    """A configuration value or a solve() input has the wrong shape, range or is not finite."""
 
 
 @dataclass

@@ -82,6 +82,8 @@ def test_pettingzoo_missing_and_none_actions_are_zero_thrust(pz_env):
     ({"initial_position_noise_m": 1e300}, r"only 0\.0% of the starts"),
     ({"initial_position_noise_m": math.nan}, "initial_position_noise_m"),
     ({"thrust_noise": math.inf}, "thrust_noise"),
+    ({"thrust_noise": 1e308}, r"thrust_noise must be a finite number in \[0, 10\]"),  # found by the fuzzers
+    ({"fuel_penalty": 1e300}, r"fuel_penalty must be a finite number in \[0, 1e\+06\]"),
 ])
 def test_bad_options_are_env_config_errors(kwargs, message):
     with pytest.raises(EnvConfigError, match=message):
