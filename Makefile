@@ -1,7 +1,8 @@
 # Two entry points from a fresh clone (only Python 3.11 needed):
 #   make demo   - create .venv, install the package, run the main demo (video + JSON + plots in out/)
 #   make test   - create .venv, install with the [rl,dev] extras, run the default (fast) test suite
-# Further targets: make test-slow (long checks), make bench (benchmarks), make lint,
+# Further targets: make test-slow (long checks), make fuzz (10 minutes of property-based fuzzing),
+#   make bench (benchmarks), make lint,
 #   make results (retrain the RL baselines and rerun the expert-vs-learned benchmark: ~3 h).
 
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
@@ -9,7 +10,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 OUT := out
 
-.PHONY: demo test test-slow bench bench-expert results lint clean
+.PHONY: demo test test-slow fuzz bench bench-expert results lint clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -43,6 +44,15 @@ test: $(VENV)/.dev-installed
 
 test-slow: $(VENV)/.dev-installed
 	$(BIN)/python -m pytest -q -n 2 -m slow --timeout 3600
+
+# The fuzzers of tests/fuzz/ drawing fresh inputs for FUZZ_SECONDS per fuzzer (7 fuzzers on 2 processes:
+# 170 s each is about 10 minutes), then a table of the inputs tried.
+FUZZ_SECONDS ?= 170
+fuzz: $(VENV)/.dev-installed
+	mkdir -p $(OUT)
+	rm -f $(OUT)/fuzz_report.jsonl
+	IMPACT_ENV_FUZZ_SECONDS=$(FUZZ_SECONDS) IMPACT_ENV_FUZZ_REPORT=$(OUT)/fuzz_report.jsonl \
+		$(BIN)/python -m pytest -q -n 2 -m slow tests/fuzz --timeout 3600
 
 bench-expert: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/expert.py --episodes 50

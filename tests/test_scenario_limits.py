@@ -255,3 +255,10 @@ def test_robustness_over_an_interval_far_longer_than_the_trace():
     assert far == robustness(parse("F[0,3] in(O1, goal)"), trace, regions, dt=0.1) == pytest.approx(0.75)
     late = robustness(parse("G[5,1e20] in(O1, goal)"), trace, regions, dt=0.1)
     assert late == pytest.approx(regions["goal"].signed_distance_xy(1.0, 8.0))
+
+
+def test_a_subnormal_radius_is_a_scenario_error():
+    data = corridor()
+    data["robots"][0]["radius_m"] = 5e-324
+    with pytest.raises(ScenarioError, match=r"even the maximum of 1000 substeps is too few"):
+        scenario_from_dict(data)

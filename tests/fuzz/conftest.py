@@ -19,7 +19,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
             totals[row["fuzzer"]][key] += row.get(key) or 0
     write = terminalreporter.write_line
     write("")
-    write("| fuzzer | inputs | accepted | rejected with a typed error | CPU-bounded seconds |")
+    write("| fuzzer | inputs | accepted | rejected with a typed error | seconds |")
     write("|---|---:|---:|---:|---:|")
     for name in sorted(totals):
         t = totals[name]

@@ -10,7 +10,7 @@ so it is fast and the same on every machine. The slow run keeps drawing fresh in
 
     IMPACT_ENV_FUZZ_SECONDS=120 .venv/bin/python -m pytest -m slow tests/fuzz -n 2
 
-(``make fuzz`` runs it for 10 minutes on two processes.)
+(``make fuzz`` runs it for about 10 minutes on two processes and prints the table of inputs tried.)
 """
 
 from __future__ import annotations
