@@ -188,13 +188,32 @@ def numpy_actions(draw) -> np.ndarray:
             return np.array(data, dtype=object).reshape(shape)
 
 
+_finite = st.one_of(st.floats(-1e300, 1e300), st.sampled_from([-1.0, 0.0, 1.0, 0.5, 1e300, -1e300, 5e-324]))
+# actions of the right shape: the simulator runs (values beyond [-1, 1] are clipped)
+well_formed_actions = st.one_of(
+    st.lists(_finite, min_size=6, max_size=6).map(np.array),
+    st.lists(_finite, min_size=6, max_size=6).map(lambda v: np.array(v).reshape(2, 3)),
+    st.lists(st.floats(-2, 2), min_size=6, max_size=6).map(lambda v: np.array(v, dtype=np.float32)),
+    st.lists(st.integers(-5, 5), min_size=6, max_size=6))
+well_formed_agent_actions = st.dictionaries(st.sampled_from(["R1", "R2"]),
+                                            st.one_of(st.none(), st.lists(_finite, min_size=3, max_size=3)),
+                                            max_size=2)
 python_actions = st.recursive(st.one_of(numbers, st.text(max_size=4), st.booleans(), st.none()),
                               lambda inner: st.lists(inner, max_size=7), max_leaves=14)
-actions = st.one_of(numpy_actions(), python_actions, st.dictionaries(st.text(max_size=3), python_actions, max_size=3))
-agent_actions = st.one_of(
+
+
+def _mostly(good: st.SearchStrategy, bad: st.SearchStrategy) -> st.SearchStrategy:
+    """``good`` in about half of the draws (st.one_of alone drew the well-formed branch far less often)."""
+    return st.integers(0, 1).flatmap(lambda k: good if k else bad)
+
+
+malformed_actions = st.one_of(numpy_actions(), python_actions,
+                              st.dictionaries(st.text(max_size=3), python_actions, max_size=3))
+actions = _mostly(well_formed_actions, malformed_actions)
+agent_actions = _mostly(well_formed_agent_actions, st.one_of(
     st.dictionaries(st.sampled_from(["R1", "R2", "R3", "", "O1"]), st.one_of(numpy_actions(), python_actions),
                     max_size=3),
-    actions)
+    malformed_actions, well_formed_actions))
 
 
 # ----------------------------------------------------------------------------------------------- options

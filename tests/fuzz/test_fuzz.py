@@ -39,8 +39,8 @@ from tests.fuzz.invariant import COUNTS, assert_finite, assert_inside, attempt, 
 
 _TMP = Path(tempfile.mkdtemp(prefix="impact_env_fuzz_"))
 STEPS = 12  # control periods flown per accepted scenario or option set
-DEFAULT_EXAMPLES = {"scenario_bytes": 60, "scenario_tree": 80, "stl_text": 150, "plan_file": 60, "gym_action": 120,
-                    "pettingzoo_action": 120, "env_options": 40}
+DEFAULT_EXAMPLES = {"scenario_bytes": 150, "scenario_tree": 200, "stl_text": 400, "plan_file": 150, "gym_action": 300,
+                    "pettingzoo_action": 300, "env_options": 100}
 _TRACE = {"O1": np.linspace([1.0, 2.0], [1.0, 8.0], 31), "R1": np.tile([1.0, 1.0], (31, 1)),
           "R2": np.tile([1.0, 9.0], (31, 1))}
 _REGIONS = load_scenario("corridor").region_map()
