@@ -15,16 +15,16 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
     totals: dict[str, dict[str, float]] = defaultdict(lambda: defaultdict(float))
     for line in Path(path).read_text().splitlines():
         row = json.loads(line)
-        for key in ("inputs", "accepted", "rejected", "seconds"):
+        for key in ("inputs", "worked", "rejected", "seconds"):
             totals[row["fuzzer"]][key] += row.get(key) or 0
     write = terminalreporter.write_line
     write("")
-    write("| fuzzer | inputs | accepted | rejected with a typed error | seconds |")
+    write("| fuzzer | inputs | checks that worked | checks rejected with a typed error | seconds |")
     write("|---|---:|---:|---:|---:|")
     for name in sorted(totals):
         t = totals[name]
-        write(f"| {name} | {int(t['inputs']):,} | {int(t['accepted']):,} | {int(t['rejected']):,} | "
+        write(f"| {name} | {int(t['inputs']):,} | {int(t['worked']):,} | {int(t['rejected']):,} | "
               f"{t['seconds']:.0f} |")
     write(f"| all | {int(sum(t['inputs'] for t in totals.values())):,} | "
-          f"{int(sum(t['accepted'] for t in totals.values())):,} | "
+          f"{int(sum(t['worked'] for t in totals.values())):,} | "
           f"{int(sum(t['rejected'] for t in totals.values())):,} | |")

@@ -28,7 +28,9 @@ from planners.errors import PLANNER_ERRORS
 
 ACCEPTED: tuple[type[Exception], ...] = TYPED_ERRORS + PLANNER_ERRORS
 DEADLINE_S = 10.0
-COUNTS: dict[str, Counter] = {}  # fuzzer -> Counter(inputs=..., accepted=..., rejected=...)
+# fuzzer -> Counter: inputs (examples drawn), and the outcomes of their checks: one input can be checked
+# several ways (an STL text is parsed, evaluated on a trace and used as a task), each "worked" or "rejected"
+COUNTS: dict[str, Counter] = {}
 
 
 class InputTimeout(AssertionError):
@@ -56,7 +58,6 @@ def cpu_deadline(seconds: float = DEADLINE_S) -> Iterator[None]:
 def attempt(fuzzer: str, fn: Callable[[], Any]) -> Any | None:
     """Run ``fn`` under the deadline: its result, or None if it raised an accepted typed error."""
     counts = COUNTS.setdefault(fuzzer, Counter())
-    counts["inputs"] += 1
     with cpu_deadline():
         try:
             result = fn()
@@ -64,7 +65,7 @@ def attempt(fuzzer: str, fn: Callable[[], Any]) -> Any | None:
             assert str(exc), f"{type(exc).__name__} without a message"
             counts["rejected"] += 1
             return None
-    counts["accepted"] += 1
+    counts["worked"] += 1
     return result
 
 

@@ -20,6 +20,7 @@ import os
 import shutil
 import tempfile
 import time
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -161,8 +162,13 @@ FUZZERS: dict[str, tuple[st.SearchStrategy, Callable[[Any], None]]] = {
 
 def hypothesis_test(name: str, max_examples: int, seed_value: int | None = None) -> Callable[[], None]:
     strategy, prop = FUZZERS[name]
+
+    def counted(value: Any) -> None:
+        COUNTS.setdefault(name, Counter())["inputs"] += 1
+        prop(value)
+
     test = settings(max_examples=max_examples, deadline=None, database=None, derandomize=seed_value is None,
-                    suppress_health_check=list(HealthCheck), print_blob=True)(given(strategy)(prop))
+                    suppress_health_check=list(HealthCheck), print_blob=True)(given(strategy)(counted))
     return test if seed_value is None else seed(seed_value)(test)
 
 
