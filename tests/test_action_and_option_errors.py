@@ -119,3 +119,13 @@ def test_noisy_starts_are_deterministic_in_the_seed():
         a.reset(seed=seed)
         b.reset(seed=seed)
         assert a.core._state == b.core._state
+
+
+def test_deeply_nested_and_huge_actions_are_action_errors(gym_env):
+    deep = [0.0] * 6
+    for _ in range(5000):
+        deep = [deep]
+    with pytest.raises(ActionError, match="a list, which is ragged or nested too deeply"):
+        gym_env.step(deep)
+    with pytest.raises(ActionError, match="too large for a float"):
+        gym_env.step([10 ** 5000] * 6)
