@@ -109,7 +109,7 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
     for name in scenarios:
         plan_paths[name] = None
         if any(c.name == "expert" for c in controllers):
-            from planners.sr_planner import plan_spatially_robust
+            from planners.offline.sr_planner import plan_spatially_robust
 
             plan_paths[name] = str(plan_spatially_robust(load_scenario(name)).save(out / "plans" / f"{name}.json"))
     jobs = [(s, c, seed, plan_paths[s], env_options)

@@ -8,11 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from impact_env.envs.core import REWARD_MODES
-
 # Nothing from the [rl] extra is imported here: `impact-env` loads this module at start-up, also in a base
 # install (make demo), so stable-baselines3, yaml and minari are imported only by the command handlers.
-ALGOS = ("ppo", "sac")
+from baselines import ALGOS
+from impact_env.envs.core import REWARD_MODES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

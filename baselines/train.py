@@ -19,8 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from baselines import hyperparams
-from baselines.cli import ALGOS  # the one list (cli.py must stay importable without the [rl] extra)
+from baselines import ALGOS, hyperparams
 from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
 from impact_env import GYM_IDS
 from impact_env.errors import ImpactEnvError

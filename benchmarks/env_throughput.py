@@ -2,24 +2,35 @@
 
 All three simulate the same scenario with the same bodies and substeps, one process, one core, in the same
 run; the bare loop is the floor (physics only: set forces, step, read bodies). Prints a markdown table with
-each row's ratio to the bare loop. Usage:
+each row's ratio to the bare loop. A second table does the same for the tether environments of a station:
+the bare loop there is the cargo disc, the wall segments and two slide joints reeled in every substep (the
+``reel`` physics without line-of-sight checks, STL, observations or rules); each env row pulls with two
+tethers the same way (two attaches, then keeps), and every loop starts a fresh world every 60 steps.
+Usage:
 
-    python benchmarks/env_throughput.py [--scenario corridor] [--steps 20000] [--repeats 3]
+    python benchmarks/env_throughput.py [--scenario corridor] [--station L] [--steps 20000] [--repeats 3]
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import time
 
 import numpy as np
+import pymunk
 
 import impact_env  # noqa: F401  (registers the environments)
+from impact_env.envs.tether import TetherEnv
+from impact_env.envs.tether_parallel import TetherParallelEnv
 from impact_env.envs.transport import TransportEnv
 from impact_env.envs.transport_parallel import TransportParallelEnv
 from impact_env.physics import World
 from impact_env.scenario import load_scenario
+from impact_env.station import load_station
+
+TETHER_EPISODE_STEPS = 60  # a fresh world this often, so that both tethers pull through every measured step
 
 
 def bare_pymunk(scenario, steps: int, actions: np.ndarray) -> float:
@@ -65,11 +76,88 @@ def pettingzoo_env(scenario, steps: int, actions: np.ndarray) -> float:
     return steps / (time.perf_counter() - start)
 
 
+def _two_visible_anchors(station) -> tuple[int, int]:
+    """The two anchors in line of sight of the start that are farthest from it (long pulls)."""
+    start = np.array(station.cargo.start_m)
+    visible = np.flatnonzero(station.line_of_sight(station.cargo.start_m))
+    far = sorted(visible, key=lambda j: -np.linalg.norm(station.anchor_positions[j] - start))
+    return int(far[0]), int(far[1])
+
+
+def bare_tether_loop(station, steps: int) -> float:
+    """Steps/s of pymunk alone: cargo disc, wall segments, two slide joints whose length shrinks every substep."""
+    anchors = [tuple(station.anchor_positions[j]) for j in _two_visible_anchors(station)]
+    dt = station.control_period_s / station.substeps
+    w = station.pull_speed_mps
+    start = time.perf_counter()
+    for k in range(steps):
+        if k % TETHER_EPISODE_STEPS == 0:
+            space = pymunk.Space()
+            space.damping = 1.0
+            space.iterations = 30
+            cargo = pymunk.Body(station.cargo.mass_kg, pymunk.moment_for_circle(station.cargo.mass_kg, 0.0,
+                                                                                station.cargo.radius_m))
+            cargo.position = station.cargo.start_m
+            space.add(cargo, pymunk.Circle(cargo, station.cargo.radius_m),
+                      *[pymunk.Segment(space.static_body, a, b, 0.0) for a, b in station.walls])
+            joints = []
+            for a in anchors:
+                joint = pymunk.SlideJoint(space.static_body, cargo, a, (0.0, 0.0), 0.0, 1e9)
+                joint.max_force = station.winch_force_limit_N
+                joint.error_bias = 0.0
+                joints.append(joint)
+            space.add(*joints)
+        for _ in range(station.substeps):
+            p, v = cargo.position, cargo.velocity
+            q = (p.x + v.x * dt, p.y + v.y * dt)
+            for joint, (ax, ay) in zip(joints, anchors):
+                joint.max = max(0.0, math.hypot(ax - q[0], ay - q[1]) - w * dt)
+            space.step(dt)
+        state = (cargo.position, cargo.velocity)  # read the body, as the env does
+    del state
+    return steps / (time.perf_counter() - start)
+
+
+def tether_gym(station, steps: int, fidelity: str) -> float:
+    env = TetherEnv(station, fidelity=fidelity, max_active=2)
+    a, b = _two_visible_anchors(station)
+    attach, keep = [2 + a, 2 + b] + [0] * (station.n_robots - 2), [0] * station.n_robots
+    start = time.perf_counter()
+    for k in range(steps):
+        if k % TETHER_EPISODE_STEPS == 0:
+            env.reset(seed=k)
+        env.step(attach if k % TETHER_EPISODE_STEPS == 0 else keep)
+    return steps / (time.perf_counter() - start)
+
+
+def tether_pettingzoo(station, steps: int, fidelity: str) -> float:
+    env = TetherParallelEnv(station, fidelity=fidelity, max_active=2)
+    a, b = _two_visible_anchors(station)
+    attach = {"robot_0": 2 + a, "robot_1": 2 + b}
+    start = time.perf_counter()
+    for k in range(steps):
+        if k % TETHER_EPISODE_STEPS == 0:
+            env.reset(seed=k)
+        env.step(attach if k % TETHER_EPISODE_STEPS == 0 else {})
+    return steps / (time.perf_counter() - start)
+
+
+def _table(cases, repeats: int) -> None:
+    print("| loop | env-steps/s | us/step | vs bare pymunk |")
+    print("|---|---:|---:|---:|")
+    base = None
+    for label, fn in cases:
+        rate = statistics.median(fn() for _ in range(repeats))
+        base = base or rate
+        print(f"| {label} | {rate:,.0f} | {1e6 / rate:.1f} | {rate / base:.2f} |", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scenario", default="corridor")
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--station", default="L", help="tether station of the second table")
     args = parser.parse_args()
     scenario = load_scenario(args.scenario)
     rng = np.random.default_rng(0)
@@ -83,13 +171,19 @@ def main() -> None:
     ]
     print(f"scenario {scenario.name}: {len(scenario.bodies)} bodies, {scenario.substeps} substeps per env step, "
           f"{args.steps} steps x {args.repeats} repeats (median)\n")
-    print("| loop | env-steps/s | us/step | vs bare pymunk |")
-    print("|---|---:|---:|---:|")
-    base = None
-    for label, fn in cases:
-        rate = statistics.median(fn() for _ in range(args.repeats))
-        base = base or rate
-        print(f"| {label} | {rate:,.0f} | {1e6 / rate:.1f} | {rate / base:.2f} |", flush=True)
+    _table(cases, args.repeats)
+
+    station = load_station(args.station)
+    tether_steps = max(TETHER_EPISODE_STEPS, args.steps // 4)
+    cases = [
+        ("bare pymunk loop (cargo, walls, 2 slide joints reeled in)", lambda: bare_tether_loop(station, tether_steps)),
+        *[(f"Tether Gymnasium env, {fid}, 2 tethers", lambda fid=fid: tether_gym(station, tether_steps, fid))
+          for fid in ("kinematic", "reel", "force")],
+        ("Tether PettingZoo env, reel, 2 tethers", lambda: tether_pettingzoo(station, tether_steps, "reel")),
+    ]
+    print(f"\nstation {station.name}: {station.n_anchors} anchors, {station.n_robots} robots, {station.substeps} "
+          f"substeps per env step, {tether_steps} steps x {args.repeats} repeats (median)\n")
+    _table(cases, args.repeats)
 
 
 if __name__ == "__main__":

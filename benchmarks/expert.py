@@ -12,6 +12,14 @@ robot per step (median, p99), replans per episode, and the episode's wall time a
 time (simulated seconds per wall second). Episodes run in parallel worker processes. Usage:
 
     python benchmarks/expert.py [--scenarios corridor,throw_and_catch_exp] [--episodes 50] [--workers 2]
+
+``--timing`` instead measures the time of one ``Expert.act`` (both robots) against the stack before this
+package's online layer was reworked (``--baseline-ref``, a git commit: its ``impact_env`` and ``planners``
+are exported to a temporary folder and imported by the baseline's workers). The stacks' episodes are
+interleaved in one pool, so machine load hits all of them alike; the load average is printed with the
+table. Mission replan steps are reported apart (a replan is a MILP solve inside one act).
+
+    python benchmarks/expert.py --timing [--scenarios throw_and_catch_exp] [--episodes 10]
 """
 
 from __future__ import annotations
@@ -19,16 +27,22 @@ from __future__ import annotations
 import argparse
 import multiprocessing
 import os
+import shutil
 import statistics
+import subprocess
+import sys
+import tarfile
+import tempfile
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 import numpy as np
 
 from impact_env.envs.transport import TransportEnv
 from impact_env.rollout import robot_object_impacts, run_episode
 from impact_env.scenario import load_scenario, scenario_names
+from planners.offline.sr_planner import plan_spatially_robust
 from planners.plan import Plan
-from planners.sr_planner import plan_spatially_robust
 
 _WORKER: dict = {}
 
@@ -76,12 +90,117 @@ def rows(scenario_name: str, episodes: int, workers: int) -> list[str]:
     return out
 
 
+BASELINE_REF = "c30bf61"  # main before the online layer was split and sped up (issue 9)
+_BASELINE_PATH: list[str] = []
+
+
+def _baseline_init(path: str) -> None:
+    _BASELINE_PATH.append(path)
+
+
+def _timed_episode(args: tuple) -> dict:
+    scenario_name, plan_dict, stack, seed, mismatch, baseline_dir = args
+    if stack == "baseline":
+        # a separate process per stack kind: the baseline's packages shadow the current ones
+        sys.path.insert(0, baseline_dir)
+        for name in [m for m in sys.modules if m.split(".")[0] in ("planners", "impact_env")]:
+            del sys.modules[name]
+    from impact_env.envs.transport import TransportEnv
+    from impact_env.rollout import run_episode
+    from impact_env.scenario import load_scenario
+    from planners.expert import Expert
+    from planners.plan import Plan
+
+    key = ("timed", scenario_name, stack)
+    if key not in _WORKER:
+        kwargs = {}
+        if stack != "baseline":
+            from planners.expert import ExpertConfig
+
+            kwargs["config"] = ExpertConfig.paper() if stack == "paper" else ExpertConfig()
+        _WORKER[key] = Expert(load_scenario(scenario_name), plan=Plan.from_dict(plan_dict), **kwargs)
+    expert = _WORKER[key]
+    scenario = expert.scenario
+    options = {}
+    if mismatch:
+        options = {"restitution": float(np.clip(scenario.restitution + (0.1 if seed % 2 else -0.1), 0, 1)),
+                   "initial_position_noise_m": 0.05, "thrust_noise": 0.05}
+    res = run_episode(TransportEnv(scenario, **options), expert, seed=seed)
+    replan_steps = []
+    if stack == "all":
+        records = expert.report().get("mission", {}).get("records", [])
+        replan_steps = [round(r["time_s"] / scenario.control_period_s) for r in records]
+    return {"stack": stack, "act_ms": res.controller_ms, "replan_steps": replan_steps, "success": res.success}
+
+
+def _export(ref: str) -> str:
+    """The ref's impact_env/ and planners/ in a temporary folder (git archive), for the baseline workers."""
+    out = tempfile.mkdtemp(prefix="impact_env_baseline_")
+    root = Path(__file__).resolve().parents[1]
+    archive = subprocess.run(["git", "-C", str(root), "archive", ref, "impact_env", "planners"], check=True,
+                             capture_output=True).stdout
+    with tempfile.TemporaryFile() as f:
+        f.write(archive)
+        f.seek(0)
+        with tarfile.open(fileobj=f) as tar:
+            tar.extractall(out, filter="data")
+    return out
+
+
+def timing(scenarios: list[str], episodes: int, workers: int, ref: str) -> None:
+    baseline_dir = _export(ref)
+    stacks = ("baseline", "paper", "all")
+    print(f"Expert.act wall time per step (ms), two robots; baseline = {ref}; {episodes} episodes per stack and "
+          f"condition, interleaved over {workers} workers; load average before: "
+          f"{' '.join(f'{x:.1f}' for x in os.getloadavg())}\n")
+    print("| scenario | simulator | stack | steps | median ms | p99 ms | max ms | success |")
+    print("|---|---|---|---:|---:|---:|---:|---:|")
+    ctx = multiprocessing.get_context("spawn")
+    for name in scenarios:
+        plan = plan_spatially_robust(load_scenario(name)).to_dict()
+        for mismatch in (False, True):
+            # one pool per stack kind would let them run at different times; instead every worker gets
+            # jobs of all three stacks in turn (a baseline job re-imports its packages, so it goes first
+            # in a fresh pool of its own only when workers cannot be shared: here each job decides)
+            jobs = [(name, plan, stack, seed, mismatch, baseline_dir) for seed in range(episodes) for stack in stacks]
+            results: dict[str, list[dict]] = {s: [] for s in stacks}
+            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, max_tasks_per_child=1) as pool:
+                for r in pool.map(_timed_episode, jobs):
+                    results[r["stack"]].append(r)
+            for stack in stacks:
+                rs = results[stack]
+                ms = np.concatenate([r["act_ms"] for r in rs])
+                replan = np.zeros(len(ms), dtype=bool)
+                offset = 0
+                for r in rs:
+                    for k in r["replan_steps"]:
+                        if k < len(r["act_ms"]):
+                            replan[offset + k] = True
+                    offset += len(r["act_ms"])
+                steady = ms[~replan]
+                label = "e +-0.1, 5 cm, 5 % thrust" if mismatch else "nominal"
+                print(f"| {name} | {label} | {stack} | {len(steady)} | {np.median(steady):.2f} | "
+                      f"{np.percentile(steady, 99):.2f} | {steady.max():.1f} | "
+                      f"{100 * np.mean([r['success'] for r in rs]):.0f}% |", flush=True)
+                if replan.any():
+                    print(f"| {name} | {label} | {stack}: mission replan steps | {int(replan.sum())} | "
+                          f"{np.median(ms[replan]):.0f} | | {ms[replan].max():.0f} | |", flush=True)
+    print(f"\nload average after: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
+    shutil.rmtree(baseline_dir, ignore_errors=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scenarios", default=",".join(scenario_names()))
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    parser.add_argument("--timing", action="store_true", help="act time against --baseline-ref (see the doc)")
+    parser.add_argument("--baseline-ref", default=BASELINE_REF)
     args = parser.parse_args()
+    if args.timing:
+        names = args.scenarios.split(",") if args.scenarios != ",".join(scenario_names()) else ["throw_and_catch_exp"]
+        timing(names, args.episodes, args.workers, args.baseline_ref)
+        return
     print(f"{args.episodes} episodes per row, {args.workers} worker processes; planned rho in the planner table\n")
     print("| scenario | simulator | episodes | success | robustness mean (min) | impacts | fuel N s | "
           "MPC ms median / p99 | replans | speed vs real time |")

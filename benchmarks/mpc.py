@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from impact_env.scenario import load_scenario
-from planners.mpc import SOLVERS, AvoidSpec, FreeflyerMPC, ImpactSpec, MPCConfig, rk4_step
+from planners.online.mpc import SOLVERS, AvoidSpec, FreeflyerMPC, ImpactSpec, MPCConfig, rk4_step
 
 DT = 0.1
 EPISODE = 60

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario, scenario_names
 from planners.errors import PlanTimeoutError
-from planners.solvers import available_solvers
-from planners.sr_planner import PlannerConfig, build_model, plan_spatially_robust
+from planners.offline.solvers import available_solvers
+from planners.offline.sr_planner import PlannerConfig, build_model, plan_spatially_robust
 
 
 @dataclass

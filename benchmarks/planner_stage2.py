@@ -20,7 +20,7 @@ import sys
 from contextlib import contextmanager
 
 from impact_env.scenario import load_scenario, scenario_names
-from planners.sr_planner import PlannerConfig, plan_spatially_robust
+from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
 
 CUTS = {
     "nodes": ("20 nodes (default)", PlannerConfig()),

@@ -5,7 +5,9 @@
     impact-env run SCENARIO --controller zero|random [--seed N] [--episodes K]
                    [--video out.mp4] [--json result.json] [--plot run.png]
 
-SCENARIO is a shipped name (``impact-env scenarios``) or a path to a TOML file. Subcommands defined in
+SCENARIO is a shipped name (``impact-env scenarios``) or a path to a TOML file. Tether stations (a shipped
+station name, or a TOML file with a ``[station]`` table) work in the same places; ``run`` then takes
+``--fidelity kinematic|reel|force`` and ``--energy-penalty``. Subcommands defined in
 other packages (e.g. ``plan`` in ``planners/``) join through the ``impact_env.commands`` entry points.
 """
 
@@ -36,13 +38,25 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     print(f"{'name':<22}{'robots':>7}{'objects':>8}{'e':>6}{'tf_s':>7}  description")
     for name, nr, no, e, tf, desc in rows:
         print(f"{name:<22}{nr:>7}{no:>8}{e:>6.2f}{tf:>7.0f}  {desc}")
+    from impact_env.station import load_station, station_names
+
+    print(f"\n{'station':<22}{'robots':>7}{'k':>3}{'anchors':>8}{'w_mps':>7}{'tf_s':>6}  description")
+    for name in station_names():
+        st = load_station(name)
+        print(f"{name:<22}{st.n_robots:>7}{st.k:>3}{st.n_anchors:>8}{st.pull_speed_mps:>7.2f}{st.tf_s:>6.0f}  "
+              f"{st.description}")
     return 0
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
     from impact_env.plotting import save_scenario_figure
     from impact_env.scenario import load_scenario
+    from impact_env.station import is_station_file
 
+    if is_station_file(args.scenario):
+        from impact_env.tether_cli import show_station
+
+        return show_station(args)
     sc = load_scenario(args.scenario)
     path = save_scenario_figure(sc, args.out)
     print(f"wrote {path}")
@@ -60,11 +74,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode, write_video
     from impact_env.scenario import load_scenario
+    from impact_env.station import is_station_file
 
     if args.episodes < 1:
         raise ImpactEnvError(f"--episodes must be >= 1, got {args.episodes}")
     if args.seed < 0:
         raise ImpactEnvError(f"--seed must be >= 0, got {args.seed}")
+    if is_station_file(args.scenario):
+        from impact_env.tether_cli import run_station
+
+        return run_station(args)
+    if args.fidelity != "kinematic" or args.energy_penalty != 0.0:
+        raise ImpactEnvError("--fidelity and --energy-penalty apply to tether stations, not to impact scenarios")
     sc = load_scenario(args.scenario)
     env = TransportEnv(sc, render_mode="rgb_array" if args.video else None, **_env_kwargs(args))
     controller = make_controller(args.controller, sc, plan=args.plan, trust_pickle=True if args.trust_pickle else None)
@@ -114,7 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="impact-env", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("scenarios", help="list the shipped scenarios")
+    p = sub.add_parser("scenarios", help="list the shipped scenarios and tether stations")
     p.set_defaults(func=_cmd_scenarios)
 
     p = sub.add_parser("show", help="draw a scenario (world, obstacles, regions, bodies, start/end markers)")
@@ -136,6 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--restitution", type=float, default=None, help="simulate with this e (model mismatch)")
     p.add_argument("--thrust-noise", type=float, default=0.0, help="std of multiplicative thrust noise")
     p.add_argument("--init-noise", type=float, default=0.0, help="objects' initial position noise radius (m)")
+    p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
+                   help="stations only: tether physics (see impact_env.tether_physics)")
+    p.add_argument("--energy-penalty", type=float, default=0.0, help="stations only: reward cost per J of winch work")
     p.add_argument("--trust-pickle", action="store_true",
                    help="a controller may unpickle its files (e.g. an old model folder's vecnormalize.pkl); a "
                         "pickle can run any code: only for files you made yourself")

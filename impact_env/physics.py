@@ -1,6 +1,6 @@
 """The pymunk world of a scenario: frictionless discs in microgravity, exact restitution, impact log.
 
-Design choices (each measured or taken from the reference notes in ``shared/reference``):
+Design choices (each measured or taken from docs/background.md):
 
 - no gravity and ``space.damping = 1.0``: in pymunk damping is a velocity *retention* factor, so 1.0
   means no damping at all (0.0 would stop every body);

@@ -29,6 +29,7 @@ class EpisodeResult:
     positions: np.ndarray | None = None
     frames: list[np.ndarray] | None = None
     extra: dict[str, Any] | None = None  # the controller's own report, if it has one
+    final_info: dict[str, Any] | None = None  # the environment's info after the last step
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready dict (no arrays)."""
@@ -50,7 +51,11 @@ def robot_object_impacts(scenario, impacts: list[dict[str, Any]]) -> list[dict[s
 
 def run_episode(env: TransportEnv, controller: Controller, seed: int | None = None,
                 record_frames: bool = False) -> EpisodeResult:
-    """Reset with ``seed``, let the controller act until the episode ends, return its summary."""
+    """Reset with ``seed``, let the controller act until the episode ends, return its summary.
+
+    Works for the tether environments too (:class:`~impact_env.envs.tether.TetherEnv`): their one body is the
+    cargo, and they report no impacts and no fuel.
+    """
     start = time.perf_counter()
     obs, info = env.reset(seed=seed)
     controller.reset(env, seed)
@@ -67,7 +72,7 @@ def run_episode(env: TransportEnv, controller: Controller, seed: int | None = No
         ms.append(1e3 * (time.perf_counter() - t0))
         obs, reward, terminated, truncated, info = env.step(action)
         total += reward
-        impacts.extend(info["impacts"])
+        impacts.extend(info.get("impacts", ()))  # the tether environments have no impacts
         positions.append([s[:2] for s in core._state])
         if record_frames:
             frames.append(env.render())
@@ -75,8 +80,9 @@ def run_episode(env: TransportEnv, controller: Controller, seed: int | None = No
     steps = len(positions) - 1
     return EpisodeResult(
         seed=seed, success=bool(info["is_success"]), robustness=float(info["robustness"]), impacts=impacts,
-        fuel_Ns=float(info["fuel_Ns"]), steps=steps, return_=total, wall_time_s=time.perf_counter() - start,
+        fuel_Ns=float(info.get("fuel_Ns", 0.0)), steps=steps, return_=total, wall_time_s=time.perf_counter() - start,
         controller_ms=ms, times_s=np.arange(steps + 1) * core.dt_s, positions=np.array(positions), frames=frames,
+        final_info=info,
     )
 
 

@@ -24,11 +24,11 @@ from typing import TYPE_CHECKING
 
 from impact_env.scenario import MAX_PLANNER_INTERVALS, MAX_ROBOT_DEGREE, MIN_ROBOT_DEGREE
 from planners.errors import PlannerError, PlanTimeoutError
-from planners.solvers import SOLVERS as SOLVER_NAMES
+from planners.offline.solvers import SOLVERS as SOLVER_NAMES
 
 if TYPE_CHECKING:
+    from planners.offline.solvers.base import Progress
     from planners.plan import Plan
-    from planners.solvers.base import Progress
 
 EXIT_TIME_LIMIT = 3
 
@@ -64,7 +64,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _cmd_plan(args: argparse.Namespace) -> int:
     from impact_env.scenario import load_scenario
-    from planners.sr_planner import PlannerConfig, build_model, plan_spatially_robust
+    from planners.offline.sr_planner import PlannerConfig, build_model, plan_spatially_robust
 
     _check_options(args)
     scenario = load_scenario(args.scenario)

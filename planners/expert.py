@@ -1,25 +1,31 @@
-"""The expert controller: offline plan + online two-body replanner + impact-aware MPC (paper Sec. IV-VII).
+"""The expert controller: offline plan + online two-body replanner + impact-aware MPC (paper Sec. IV-VII),
+and what goes beyond the paper so that it still delivers when the world is not the model.
 
     expert = Expert(load_scenario("corridor"))           # plans with the MILP planner (or pass plan=)
     obs, info = env.reset(seed=0); expert.reset()
     action = expert.act(obs, info)                          # the Gymnasium env's normalised action
 
-Each control step, for each robot:
+This module composes the online layer (``planners/online/``); each part has its own module:
 
-1. if one of its planned impacts is less than two grid intervals away (and the robot's previous impact is
-   over), the replanner (Eq. 29) recomputes
-   its pre- and post-impact segments from its current state: the object's state at the impact time is
-   predicted from its observed position and velocity (free flight), the velocity the object must leave
-   with is the one that takes it to where the plan needs it at its next impact (or the planned one after
-   its last impact), and the circular impact model's closed-form inverse (Eq. 6-7) gives the contact
-   position and the robot's pre- and post-impact velocities; after the impact it rejoins the plan;
-2. otherwise the reference is the offline plan;
-3. the MPC (Eq. 30-31) tracks the reference over its horizon, with the planned impact as a node
-   constraint when it is inside the horizon and a keep-off constraint around the objects' predicted
-   paths everywhere else.
+- impact bookkeeping (:mod:`~planners.online.bookkeeping`): which planned impacts the env has reported,
+  and every contact nobody planned, per pair;
+- identification (:mod:`~planners.online.identification`): each reported robot-object impact updates the
+  pair's restitution estimate, which the contact inverse uses for the next impacts;
+- mission replanning (:mod:`~planners.online.mission`): the predicted outcome of the plan's remainder is
+  monitored, and when it leaves the plan's tolerance the offline planner is re-run from the current state
+  over the remaining horizon, with the task progressed to now;
+- reference selection (:mod:`~planners.online.reference`): the replanner (Eq. 29) around each planned
+  impact, the plan elsewhere; its :class:`~planners.online.reference.ContactStrategy` is the plug-in point
+  for other plans (e.g. an impact-robust plan's robot copies);
+- safe segments (:mod:`~planners.online.keep_off`): replanned segments inside the world box, off the
+  obstacles and the other robots; MPC keep-offs for the nearest object, the other robots and the nearest
+  wall or obstacle face;
+- the MPC (:mod:`~planners.online.mpc`, Eq. 30-31) tracks the reference.
 
-The expert uses only what the environment exposes: the observation (positions, velocities, headings,
-time left) and the episode's fixed facts from the scenario file (masses, radii, limits, restitution).
+Each part beyond the paper can be switched off in :class:`ExpertConfig`; ``ExpertConfig.paper()`` is the
+paper's stack (local replanning only). The expert uses only what the environment exposes: the observation
+(positions, velocities, headings, time left), the env's documented ``info["impacts"]``, and the episode's
+fixed facts from the scenario file (masses, radii, limits, the nominal restitution).
 """
 
 from __future__ import annotations
@@ -32,30 +38,70 @@ from typing import Any
 import numpy as np
 
 from impact_env.envs.core import ACTION_PER_ROBOT, OBS_PER_BODY
-from impact_env.scenario import Scenario, load_scenario
+from impact_env.scenario import Body, Scenario, load_scenario
 from planners.errors import PlannerError
-from planners.impact_model import required_contact
-from planners.mpc import AvoidSpec, FreeflyerMPC, ImpactSpec, MPCConfig
-from planners.plan import Plan, PlannedImpact, Segment
-from planners.replanner import replan_around_impact, replan_segment
-from planners.sr_planner import PlannerConfig, plan_spatially_robust
-
-KEEP_OFF_MARGIN_M = 0.03  # extra clearance around objects' discs away from planned impacts
-REPLAN_INTERVALS = 2  # replanning starts this many grid intervals before an impact (after the previous one)
-CONTACT_WINDOW_S = 0.5  # from this long before a pending impact the keep-off constraint is lifted
-LATE_GRACE_S = 0.5  # a planned impact not yet observed is still approached this long after its time
+from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
+from planners.online.bookkeeping import ImpactBook
+from planners.online.identification import IdentificationConfig, ImpactIdentifier
+from planners.online.keep_off import boundary_keep_off, object_keep_off, robot_keep_off, segment_limits
+from planners.online.mission import MissionConfig, MissionPlanner
+from planners.online.mpc import FreeflyerMPC, MPCConfig
+from planners.online.reference import ContactStrategy, PlanContact, ReferenceSelector
+from planners.plan import Plan, PlannedImpact
 
 
 @dataclass
-class _Replanned:
-    impact: PlannedImpact
-    pre: Segment
-    post: Segment
+class ExpertConfig:
+    """Which parts of the expert run, and their margins.
+
+    ``identification``: estimate restitution online and use it in the contact inverse (else the scenario
+    file's value). ``mission_replanning``: monitor the plan's predicted outcome and re-plan the rest of the
+    mission when it leaves the tolerance (:class:`~planners.online.mission.MissionConfig`). ``safe_segments``:
+    replanned segments respect the world box, obstacles and other robots, and the MPC keeps off the other
+    robots and the nearest wall or obstacle face (else only the nearest object, as in the paper).
+    ``aim_final_position``: after an object's last planned impact, send it to its planned end position
+    rather than only at its planned velocity (:class:`~planners.online.reference.PlanContact`).
+    ``disc_offset``: before each approach, fly the plan shifted to where a disc (not the planner's point)
+    meets the object (:meth:`~planners.online.reference.ReferenceSelector._offset_toward`).
+    Margins (m) are added to the radii. ``replan_intervals``: the local replanner starts this many grid
+    intervals before an impact. ``contact_window_s``: from this long before a pending impact the keep-off on
+    its object is lifted. ``late_grace_s``: a planned impact not yet observed is still approached this long
+    after its time.
+    """
+
+    identification: bool = True
+    mission_replanning: bool = True
+    safe_segments: bool = True
+    aim_final_position: bool = True
+    disc_offset: bool = True
+    object_margin_m: float = 0.03
+    robot_margin_m: float = 0.05
+    wall_margin_m: float = 0.03
+    replan_intervals: int = 2
+    contact_window_s: float = 0.5
+    late_grace_s: float = 0.5
+    identification_config: IdentificationConfig = field(default_factory=IdentificationConfig)
+    mission: MissionConfig = field(default_factory=MissionConfig)
+
+    @classmethod
+    def paper(cls, **overrides: Any) -> ExpertConfig:
+        """The paper's stack: local replanning at planned impacts only."""
+        return cls(**{"identification": False, "mission_replanning": False, "safe_segments": False,
+                      "aim_final_position": False, "disc_offset": False, **overrides})
+
+    def __post_init__(self) -> None:
+        for name in ("object_margin_m", "robot_margin_m", "wall_margin_m", "contact_window_s", "late_grace_s"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise PlannerError(f"ExpertConfig.{name} must be a finite number >= 0, got {value!r}")
+        if isinstance(self.replan_intervals, bool) or not isinstance(self.replan_intervals, int) \
+                or self.replan_intervals < 1:
+            raise PlannerError(f"ExpertConfig.replan_intervals must be an integer >= 1, got {self.replan_intervals!r}")
 
 
 @dataclass
 class ExpertStats:
-    """Per-episode numbers: MPC solve times (ms, per robot per step), replans, MPC failures."""
+    """Per-episode numbers: MPC solve times (ms, per robot per step), act times (ms), replans, failures."""
 
     mpc_ms: list[float] = field(default_factory=list)
     act_ms: list[float] = field(default_factory=list)
@@ -64,48 +110,68 @@ class ExpertStats:
 
 
 class Expert:
-    """The paper's planning and control stack as a policy for :class:`impact_env.envs.TransportEnv`.
+    """The planning and control stack as a policy for :class:`impact_env.envs.TransportEnv`.
 
     Args:
         scenario: the scenario (or its name/path) the environment runs.
         plan: an offline plan for it (e.g. ``Plan.load("plan.json")``); planned with the MILP if None.
         planner_config / mpc_config: options of the planner and of the MPC.
+        config: which parts run (:class:`ExpertConfig`; default all).
+        strategy: the contact strategy of the reference selection (default: the SR plan's).
     """
 
     name = "expert"
 
     def __init__(self, scenario: Scenario | str, plan: Plan | None = None,
-                 planner_config: PlannerConfig | None = None, mpc_config: MPCConfig | None = None) -> None:
+                 planner_config: PlannerConfig | None = None, mpc_config: MPCConfig | None = None,
+                 config: ExpertConfig | None = None, strategy: ContactStrategy | None = None) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         sc = self.scenario
+        self.config = cfg = config or ExpertConfig()
         if plan is None:
             plan = plan_spatially_robust(sc, planner_config)
         elif plan.scenario != sc.name:
             raise PlannerError(f"the plan is for scenario {plan.scenario!r}, not {sc.name!r}")
         plan.check(sc, tol=1e-5)
-        self.plan = plan
+        self.offline_plan = self.plan = plan
         self.dt = sc.control_period_s
         self.horizon_steps = round(sc.formula.horizon_s / self.dt)
         self.grid_dt = min(s.duration_s for b in plan.bodies.values() for s in b.segments)
         self.names = [b.name for b in sc.bodies]
+        self._index = {n: i for i, n in enumerate(self.names)}
         self.robots = list(sc.robots)
         self.objects = list(sc.objects)
-        self.mpc_config = mpc_config or MPCConfig(dt_s=self.dt)
+        self._robot_names = {r.name for r in self.robots}
+        self._object_names = {o.name for o in self.objects}
+        keep_off_rows = 1 + (len(self.robots) if cfg.safe_segments else 0)
+        self.mpc_config = mpc_config or MPCConfig(dt_s=self.dt, keep_off_rows=keep_off_rows)
         self.mpcs = {r.name: FreeflyerMPC(r, self.mpc_config, heading_ref=r.heading_rad) for r in self.robots}
         self.limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in self.robots])
+        self.book = ImpactBook(plan.impacts, tolerance_s=0.5 * self.grid_dt)
+        self.identifier = ImpactIdentifier(sc.restitution, {b.name: b.mass_kg for b in sc.bodies},
+                                           frozenset(self._robot_names), frozenset(self._object_names),
+                                           cfg.identification_config)
+        strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
+        self.selector = ReferenceSelector(plan, self.grid_dt, self.dt, strategy, cfg.replan_intervals,
+                                          disc_offset=cfg.disc_offset, box=self._safe_box)
+        self.mission = MissionPlanner(sc, plan, cfg.mission, planner_config) if cfg.mission_replanning else None
         self.stats = ExpertStats()
-        self._replanned: dict[str, _Replanned] = {}
-        self._done: set[int] = set()  # indices into plan.impacts of the impacts observed
+        self._predicted: dict[str, tuple[int, np.ndarray]] = {}
         self._cache: tuple[int, np.ndarray] | None = None
 
     # ------------------------------------------------------------------------------------------ API
     def reset(self, env: Any = None, seed: int | None = None) -> None:
-        """Start a new episode: forget warm starts, replans and statistics."""
+        """Start a new episode: forget warm starts, replans, estimates, statistics; fly the offline plan."""
         for mpc in self.mpcs.values():
             mpc.reset()
         self.stats = ExpertStats()
-        self._replanned = {}
-        self._done = set()
+        self._set_plan(self.offline_plan, set())
+        self.book.reset()
+        self.identifier.reset()
+        self.selector.reset()
+        if self.mission is not None:
+            self.mission.reset(self.offline_plan)
+        self._predicted = {}
         self._cache = None
 
     def act(self, observation: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
@@ -117,17 +183,32 @@ class Expert:
             raise ValueError(f"observation must have shape ({expected},) for scenario {self.scenario.name!r}, "
                              f"got {obs.shape}")
         step = round((1.0 - obs[-1]) * self.horizon_steps)
+        if self._cache is not None and self._cache[0] == step and np.array_equal(self._cache_obs, obs):
+            return self._cache[1].copy()  # the same observation again (e.g. PettingZoo agents, then act)
         t = step * self.dt
-        states = obs[:-1].reshape(len(self.names), OBS_PER_BODY)
-        self._observe_impacts((info or {}).get("impacts", []))
-        actions = [self._robot_action(i, robot, t, states) for i, robot in enumerate(self.robots)]
+        rows = obs[:-1].reshape(len(self.names), OBS_PER_BODY)
+        states = np.column_stack([rows[:, 0:2], np.arctan2(rows[:, 5], rows[:, 4]), rows[:, 2:4], rows[:, 6]])
+        events = (info or {}).get("impacts", [])
+        completed = self.book.observe(events, self._robot_names, self._object_names)
+        if self.config.identification:
+            self.identifier.observe(events)
+        if self.mission is not None:
+            new = self.mission.step(t, states, self._index, self.plan, self.book, bool(completed), self._model)
+            if new is not None:
+                plan, done = new
+                self._set_plan(plan, done)
+        actions = [self._robot_action(i, robot, t, step, states) for i, robot in enumerate(self.robots)]
         action = np.clip(np.concatenate(actions), -1.0, 1.0).astype(np.float32)
         self._cache = (step, action)
+        self._cache_obs = obs
+        self.stats.replans = self.selector.replans
         self.stats.act_ms.append(1e3 * (time.perf_counter() - start))
         return action
 
-    def agent_action(self, agent: str, observation: np.ndarray) -> np.ndarray:
-        """The action of one PettingZoo agent (robot name) from its own observation (own body first)."""
+    def agent_action(self, agent: str, observation: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
+        """The action of one PettingZoo agent (robot name) from its own observation (own body first) and, for
+        identification, its ``info`` (each agent's info carries the same contact reports; the first agent
+        to ask in a step computes every robot's action)."""
         idx = [r.name for r in self.robots].index(agent)
         obs = np.asarray(observation, dtype=float)
         bodies = obs[:-1].reshape(len(self.names), OBS_PER_BODY)
@@ -136,171 +217,143 @@ class Expert:
         central[order] = bodies
         step = round((1.0 - obs[-1]) * self.horizon_steps)
         if self._cache is None or self._cache[0] != step:
-            self.act(np.append(central.reshape(-1), obs[-1]))
+            self.act(np.append(central.reshape(-1), obs[-1]), info)
         return self._cache[1][ACTION_PER_ROBOT * idx: ACTION_PER_ROBOT * (idx + 1)]
 
     # ---------------------------------------------------------------------------------- internals
-    def _observe_impacts(self, events: list[dict]) -> None:
-        """Mark planned impacts as done when the env reports a contact of that robot and object near them."""
-        for ev in events:
-            pair = {ev["a"], ev["b"]}
-            candidates = [(abs(imp.time_s - ev["time"]), k) for k, imp in enumerate(self.plan.impacts)
-                          if k not in self._done and pair == {imp.robot, imp.object}
-                          and abs(imp.time_s - ev["time"]) <= 0.5 * self.grid_dt]
-            if candidates:
-                self._done.add(min(candidates)[1])
+    def _set_plan(self, plan: Plan, done: set[int]) -> None:
+        self.plan = plan
+        self.book.replace(plan.impacts, done)
+        self.selector.set_plan(plan)
+        self._impacts_by_robot = {r.name: [(k, i) for k, i in enumerate(plan.impacts) if i.robot == r.name]
+                                  for r in self.robots}
 
-    def _pending(self, name: str, t: float) -> list[PlannedImpact]:
-        return [imp for k, imp in enumerate(self.plan.impacts)
-                if imp.robot == name and k not in self._done and imp.time_s > t - LATE_GRACE_S]
+    def _safe_box(self, robot: Body) -> tuple[float, float, float, float]:
+        """The box a robot's centre stays in: the world box shrunk by its radius and the wall margin."""
+        xmin, xmax, ymin, ymax = self.scenario.world_box
+        r = robot.radius_m + self.config.wall_margin_m
+        return xmin + r, xmax - r, ymin + r, ymax - r
 
-    def _body_state(self, states: np.ndarray, name: str) -> np.ndarray:
-        """[x, y, theta, vx, vy, omega] of a body from its observation row."""
-        x, y, vx, vy, c, s, om = states[self.names.index(name)]
-        return np.array([x, y, math.atan2(s, c), vx, vy, om])
+    def _model(self, robot: str, obj: str) -> tuple[float, tuple[float, float]]:
+        """(restitution, (m_robot, m_object)) of the pair: identified, or the scenario file's."""
+        if self.config.identification:
+            return self.identifier.restitution_for(robot, obj), self.identifier.masses_for(robot, obj)
+        sc = self.scenario
+        return sc.restitution, (sc.body(robot).mass_kg, sc.body(obj).mass_kg)
 
-    def _object_prediction(self, name: str, states: np.ndarray, t: float, t_target: float
-                           ) -> tuple[np.ndarray, np.ndarray]:
-        """Object position and velocity at ``t_target``: free flight from the observation, unless another
-        planned impact on it comes first, in which case the plan's state just before ``t_target``."""
-        pending = [i for i in self.plan.impacts_of(name) if t < i.time_s < t_target - 1e-9]
-        if pending:
-            body = self.plan.bodies[name]
-            return body.position(t_target), body.velocity(t_target - 1e-6)
-        s = self._body_state(states, name)
-        return s[:2] + s[3:5] * (t_target - t), s[3:5].copy()
+    def _object_prediction(self, states: np.ndarray, t: float):
+        plan, sampler = self.plan, self.selector.sampler
 
-    def _desired_object_velocity(self, impact: PlannedImpact, position_at_impact: np.ndarray) -> np.ndarray:
-        """Leave the impact so as to be where the plan needs the object at its next impact."""
-        later = [i for i in self.plan.impacts_of(impact.object) if i.time_s > impact.time_s + 1e-9]
-        if not later:
-            return np.asarray(impact.object_velocity_after, float)
-        nxt = min(later, key=lambda i: i.time_s)
-        return (np.asarray(nxt.position) - position_at_impact) / (nxt.time_s - impact.time_s)
+        def predict(name: str, t_target: float) -> tuple[np.ndarray, np.ndarray]:
+            """Object position and velocity at ``t_target``: free flight from the observation, unless another
+            planned impact on it comes first, in which case the plan's state just before ``t_target``."""
+            if any(t < i.time_s < t_target - 1e-9 for i in plan.impacts_of(name)):
+                return sampler.position(name, t_target), sampler.velocity(name, t_target - 1e-6)
+            s = states[self._index[name]]
+            return s[:2] + s[3:5] * (t_target - t), s[3:5].copy()
 
-    def _replan(self, robot, t: float, state: np.ndarray, impact: PlannedImpact, states: np.ndarray
-                ) -> _Replanned | None:
-        obj = self.scenario.body(impact.object)
-        x_o, v_o = self._object_prediction(impact.object, states, t, impact.time_s)
-        v_des = self._desired_object_velocity(impact, x_o)
-        contact = required_contact(x_o, v_o, v_des, robot.mass_kg, robot.radius_m, obj.mass_kg, obj.radius_m,
-                                   self.scenario.restitution)
-        if contact is None:
-            return None
-        t_rejoin = min(impact.time_s + self.grid_dt, self.plan.tf_s)
-        if t_rejoin <= impact.time_s + 1e-9:
-            t_rejoin = impact.time_s + self.grid_dt
-        plan_body = self.plan.bodies[robot.name]
-        pre, post = replan_around_impact(t, state[:2], state[3:5], impact.time_s, contact, t_rejoin,
-                                         plan_body.position(t_rejoin), plan_body.velocity(t_rejoin),
-                                         robot.velocity_bound_mps)
-        self.stats.replans += 1
-        return _Replanned(impact, pre, post)
+        return predict
 
-    def _robot_action(self, index: int, robot, t: float, states: np.ndarray) -> np.ndarray:
-        state = self._body_state(states, robot.name)
+    def _robot_action(self, index: int, robot: Body, t: float, step: int, states: np.ndarray) -> np.ndarray:
         name = robot.name
-        pending = self._pending(name, t)
+        state = states[self._index[name]]
+        cfg = self.config
+        pending = [imp for k, imp in self._impacts_by_robot[name]
+                   if k not in self.book.done and imp.time_s > t - cfg.late_grace_s]
         nxt = min(pending, key=lambda i: i.time_s) if pending else None
-        past = [i.time_s for i in self.plan.impacts if i.robot == name and i.time_s <= t + 1e-9 and i is not nxt]
-        window_start = max([nxt.time_s - REPLAN_INTERVALS * self.grid_dt] + [p + self.dt for p in past]) if nxt else 0
-        current = self._replanned.get(name)
-        approaching = nxt is not None and t >= window_start - 1e-9
-        if approaching and nxt.time_s > t + 1e-9:
-            replanned = self._replan(robot, t, state, nxt, states)
-            if replanned is not None:
-                self._replanned[name] = current = replanned
-        elif approaching:
-            pass  # late: keep the last approach, continued straight at the contact velocity (see _reference)
-        elif current is not None and t < current.post.t1_s:
-            # after the impact: rejoin the plan from where the robot really is
-            plan_body = self.plan.bodies[name]
-            t1 = current.post.t1_s
-            current.post = replan_segment(state[:2], state[3:5], plan_body.position(t1), plan_body.velocity(t1),
-                                          t, t1, robot.velocity_bound_mps)
-        elif current is not None:
-            del self._replanned[name]
-            current = None
-        approaching = approaching and current is not None and current.impact is nxt
-
+        past = [i.time_s for _, i in self._impacts_by_robot[name] if i.time_s <= t + 1e-9 and i is not nxt]
         n = self.mpc_config.horizon
         times = t + self.dt * np.arange(n + 1)
-        reference = self._reference(name, times, current, approaching)
-        impact_spec = None
-        if approaching and current.pre.t1_s > t:
-            k = round((current.pre.t1_s - t) / self.dt)
-            if 1 <= k <= n:
-                impact_spec = ImpactSpec(step=k, position=current.pre.control_points[-1],
-                                         velocity_before=current.pre.velocity(current.pre.t1_s)[0],
-                                         velocity_after=current.post.velocity(current.post.t0_s)[0])
-        avoid = self._avoid(robot, t, times, states, nxt if approaching else None)
-        result = self.mpcs[name].solve(state, reference, impact=impact_spec, avoid=avoid)
+        limits = None
+        if cfg.safe_segments:
+            speed = float(np.hypot(*(robot.velocity_bound_mps or (1.0, 1.0))))
+            reach = speed * self.grid_dt * (cfg.replan_intervals + 1)
+            # only robots that either robot could reach within a replanned segment can meet it
+            others = [self._planned_path(o.name) for o in self.robots if o.name != name
+                      and np.hypot(*(states[self._index[o.name]][:2] - state[:2])) < 2 * reach + 2 * robot.radius_m]
+            limits = segment_limits(self.scenario, robot, state[:2], others,
+                                    2 * robot.radius_m + cfg.robot_margin_m, reach)
+        ref = self.selector.robot_reference(robot, self.scenario.body, t, state, nxt, past, times,
+                                            self._object_prediction(states, t), self._model, limits)
+        object_states = {o.name: states[self._index[o.name]][[0, 1, 3, 4]] for o in self.objects}
+        avoid = [object_keep_off(robot, self.objects, t, times, state[:2], object_states, self.plan.impacts,
+                                 ref.approaching, cfg.object_margin_m, cfg.contact_window_s)]
+        if cfg.safe_segments:
+            a_max = float(np.hypot(*robot.thrust_limit_N)) / robot.mass_kg
+            speed = float(np.hypot(*state[3:5]))
+            reach = speed * n * self.dt + 0.5 * a_max * (n * self.dt) ** 2  # how far it can get in the horizon
+            for other in self.robots:
+                if other.name != name:
+                    centers = self._other_centers(other.name, step, states, n)
+                    gap = float(np.min(np.hypot(*(centers - state[:2]).T)))
+                    if gap < 2 * reach + robot.radius_m + other.radius_m + cfg.robot_margin_m:
+                        avoid.append(robot_keep_off(robot, other, centers, cfg.robot_margin_m))
+            wall = boundary_keep_off(self.scenario, robot, state[:2], n + 1, reach, cfg.wall_margin_m)
+            if wall is not None:
+                avoid.append(wall)
+        avoid = [a for a in avoid if a is not None]
+        result = self.mpcs[name].solve(state, ref.reference, impact=ref.impact_spec, avoid=avoid or None)
+        self._predicted[name] = (step, result.predicted[:, 0:2])
         self.stats.mpc_ms.append(result.solve_ms)
         if not result.success:
             self.stats.mpc_failures += 1
         return np.asarray(result.wrench, float) / self.limits[index]
 
-    def _reference(self, name: str, times: np.ndarray, current: _Replanned | None, approaching: bool
-                   ) -> np.ndarray:
-        """[x, y, vx, vy] at the horizon's nodes: the replanned segments where they apply, else the plan.
+    def _planned_path(self, name: str):
+        """Callable times -> (N, 2): robot ``name``'s planned centres, with its replanned segments."""
+        sampler, replanned = self.selector.sampler, self.selector.replanned
 
-        While an impact is still to come, the approach continues past the planned time straight at the
-        contact velocity (a late contact is met at full speed, not braked for)."""
-        body = self.plan.bodies[name]
-        tf = self.plan.tf_s
-        tt = np.minimum(times, tf)
-        ref = np.hstack([body.position(tt), body.velocity(tt)])
-        ref[times > tf, 2:] = 0.0
-        if current is not None and approaching:
-            pre = current.pre
-            mask = times <= pre.t1_s + 1e-9
-            ref[mask, :2] = pre.position(times[mask])
-            ref[mask, 2:] = pre.velocity(times[mask])
-            late = ~mask
-            p_c, v_c = pre.control_points[-1], pre.velocity(pre.t1_s)[0]
-            ref[late, :2] = p_c + np.outer(times[late] - pre.t1_s, v_c)
-            ref[late, 2:] = v_c
-        elif current is not None:
-            seg = current.post
-            mask = (times >= seg.t0_s - 1e-9) & (times <= seg.t1_s + 1e-9)
-            if np.any(mask):
-                ref[mask, :2] = seg.position(times[mask])
-                ref[mask, 2:] = seg.velocity(times[mask])
-        return ref
+        def path(times: np.ndarray) -> np.ndarray:
+            out = sampler.state(name, np.minimum(times, self.selector.tf))[:, :2]
+            current = replanned.get(name)
+            if current is not None:
+                for seg in (current.pre, current.post):
+                    mask = (times >= seg.t0_s) & (times <= seg.t1_s)
+                    if np.any(mask):
+                        out[mask] = seg.position(times[mask])
+            return out
 
-    def _avoid(self, robot, t: float, times: np.ndarray, states: np.ndarray, pending: PlannedImpact | None
-               ) -> AvoidSpec | None:
-        """Keep off the nearest object's predicted (free-flight) path, except around this robot's planned
-        impacts on it and, while an impact is pending, from shortly before it on (the object's motion after
-        the impact is the planned one, not the free flight)."""
-        if not self.objects:
-            return None
-        me = self._body_state(states, robot.name)
-        obj = min(self.objects, key=lambda o: np.linalg.norm(self._body_state(states, o.name)[:2] - me[:2]))
-        s = self._body_state(states, obj.name)
-        centers = s[:2] + np.outer(times - t, s[3:5])
-        active = np.ones(len(times), dtype=bool)
-        for imp in self.plan.impacts:
-            if imp.robot == robot.name and imp.object == obj.name:
-                active &= np.abs(times - imp.time_s) > CONTACT_WINDOW_S
-        if pending is not None and pending.object == obj.name:
-            active &= times < pending.time_s - CONTACT_WINDOW_S
-        return AvoidSpec(centers=centers, min_distance=robot.radius_m + obj.radius_m + KEEP_OFF_MARGIN_M,
-                         active=active)
+        return path
+
+    def _other_centers(self, name: str, step: int, states: np.ndarray, n: int) -> np.ndarray:
+        """Another robot's predicted centres at the horizon's nodes: its latest MPC prediction shifted to this
+        step (held at its end), or its current position if it has none yet."""
+        if name in self._predicted:
+            at, pred = self._predicted[name]
+            shift = step - at
+            idx = np.clip(np.arange(n + 1) + shift, 0, len(pred) - 1)
+            return pred[idx]
+        return np.tile(states[self._index[name]][:2], (n + 1, 1))
 
     # ------------------------------------------------------------------------------------ reports
     def report(self) -> dict[str, Any]:
         """Planned-versus-executed numbers for the JSON summary of ``impact-env run``."""
         ms = np.asarray(self.stats.mpc_ms) if self.stats.mpc_ms else np.zeros(1)
-        return {
-            "planned_robustness": self.plan.robustness,
+        act = np.asarray(self.stats.act_ms) if self.stats.act_ms else np.zeros(1)
+        out = {
+            "planned_robustness": self.offline_plan.robustness,
             "planned_impacts": [{"time": i.time_s, "robot": i.robot, "object": i.object,
                                  "position": list(i.position)} for i in self.plan.impacts],
-            "replans": self.stats.replans,
+            "replans": self.selector.replans,
             "mpc_failures": self.stats.mpc_failures,
             "mpc_ms": {"median": float(np.median(ms)), "p99": float(np.percentile(ms, 99))},
+            "act_ms": {"median": float(np.median(act)), "p99": float(np.percentile(act, 99))},
+            "unplanned_contacts": dict(sorted(self.book.unplanned.items())),
+            "config": {"identification": self.config.identification,
+                       "mission_replanning": self.config.mission_replanning,
+                       "safe_segments": self.config.safe_segments,
+                       "aim_final_position": self.config.aim_final_position,
+                       "disc_offset": self.config.disc_offset},
         }
+        if self.config.identification:
+            out["identification"] = self.identifier.report()
+        if self.mission is not None:
+            out["mission"] = self.mission.report()
+        return out
 
+    @property
+    def replans(self) -> int:
+        return self.selector.replans
 
     def plot_episode(self, result, path) -> None:
         """Fig. 6 of the paper for an episode run by ``impact_env.rollout.run_episode``."""
@@ -313,3 +366,6 @@ class Expert:
 def make_expert(scenario: Scenario, plan: str | None = None, **_: Any) -> Expert:
     """Factory of the ``impact_env.controllers`` entry point: ``impact-env run SCENARIO --controller expert``."""
     return Expert(scenario, plan=Plan.load(plan) if plan else None)
+
+
+__all__ = ["Expert", "ExpertConfig", "ExpertStats", "PlannedImpact", "make_expert"]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from planners import bezier
-from planners.milp.model import LinExpr, Model
+from planners.offline.milp.model import LinExpr, Model
 
 
 def _direct(cp: np.ndarray, s: float) -> np.ndarray:

@@ -12,7 +12,7 @@ from impact_env.cli import main
 from impact_env.envs.transport import TransportEnv
 from impact_env.scenario import load_scenario
 from planners.expert import Expert
-from planners.sr_planner import plan_spatially_robust
+from planners.offline.sr_planner import plan_spatially_robust
 from planners.wrappers import ExpertActionInfo
 
 

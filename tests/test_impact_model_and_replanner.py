@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from impact_env.physics import World
-from planners.impact_model import disc_impact, required_contact
-from planners.replanner import bounded_segment, hermite, replan_around_impact, replan_segment
+from planners.online.impact_model import disc_impact, required_contact
+from planners.online.replanner import bounded_segment, hermite, replan_around_impact, replan_segment
 from tests.helpers import two_body
 
 

@@ -1,4 +1,4 @@
-"""The impact-aware MPC (planners/mpc.py): its RK4 model against closed forms and pymunk, closed-loop tracking
+"""The impact-aware MPC (planners/online/mpc.py): its RK4 model against closed forms and pymunk, closed-loop tracking
 in the simulator, the impact node, the keep-off constraint, warm start, failure handling and input checks."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 
 from impact_env.physics import World
 from impact_env.scenario import Body, Scenario, scenario_from_dict
-from planners.mpc import (
+from planners.online.mpc import (
     AvoidSpec,
     FreeflyerMPC,
     ImpactSpec,
@@ -365,6 +365,7 @@ def test_an_object_is_not_a_robot() -> None:
 
 def test_runs_next_to_highspy() -> None:
     """The planner's highspy and CasADi share a process: the MPC must not load CasADi's own libhighs."""
-    code = ("import highspy, numpy as np; from tests.test_mpc import solo; from planners.mpc import FreeflyerMPC; "
+    code = ("import highspy, numpy as np; from tests.test_mpc import solo; "
+            "from planners.online.mpc import FreeflyerMPC; "
             "r = FreeflyerMPC(solo().robots[0]).solve(np.zeros(6), np.zeros((11, 4))); assert r.success")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120, cwd=Path(__file__).resolve().parents[1])

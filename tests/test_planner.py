@@ -13,8 +13,8 @@ import pytest
 
 from impact_env.scenario import load_scenario, scenario_from_dict
 from planners.errors import InfeasiblePlanError, PlanCheckError, PlannerError, PlanTimeoutError, UnsupportedSpecError
+from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
 from planners.plan import Plan
-from planners.sr_planner import PlannerConfig, plan_spatially_robust
 from tests.replay import replay
 
 # The geometric optimum of each shipped task, derived by hand.

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from planners.errors import InfeasiblePlanError, SolverNotAvailableError
-from planners.milp.model import Constraint, LinExpr, Model
-from planners.solvers import SOLVERS, available_solvers, solve
-from planners.solvers.base import Progress, SolverOptions, Status
-from planners.solvers.diagnose import conflicting_groups, explain_infeasible
+from planners.offline.milp.model import Constraint, LinExpr, Model
+from planners.offline.solvers import SOLVERS, available_solvers, solve
+from planners.offline.solvers.base import Progress, SolverOptions, Status
+from planners.offline.solvers.diagnose import conflicting_groups, explain_infeasible
 
 
 @functools.cache
@@ -187,7 +187,7 @@ def test_convex_qp_matches_kkt_solution(solver: str) -> None:
 
 
 def test_highs_hessian_reproduces_the_models_quadratic() -> None:
-    from planners.solvers.highs import hessian_csc
+    from planners.offline.solvers.highs import hessian_csc
 
     m = Model()
     for _ in range(3):
@@ -341,6 +341,6 @@ def test_available_solvers_lists_highs_without_importing_it() -> None:
     names = available_solvers()
     assert "highs" in names and set(names) <= set(SOLVERS)
     # importing the package must not load libhighs (it clashes with CasADi's HiGHS plugin)
-    code = ("import sys, planners.solvers as s; s.available_solvers(); "
+    code = ("import sys, planners.offline.solvers as s; s.available_solvers(); "
             "assert not {'highspy', 'pyscipopt', 'gurobipy'} & set(sys.modules)")
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -5,7 +5,9 @@ sub-formulas, empty for leaves), so the robustness evaluator, the online monitor
 the same tree; the tree itself knows nothing about solvers or traces. Interval bounds are in seconds;
 :func:`interval_steps` and :func:`horizon_steps` turn them into sample indices for a control period ``dt``.
 
-``str(formula)`` prints text that :func:`impact_env.stl.parse` reads back into an equal tree.
+``str(formula)`` prints text that :func:`impact_env.stl.parse` reads back into an equal tree, for every node
+but :class:`Constant`, the leaf that STL progression (:mod:`impact_env.stl.progression`) leaves behind for
+the past: it has no syntax of its own (its text ``const(0.25)`` is for reading only).
 """
 
 from __future__ import annotations
@@ -126,6 +128,34 @@ class FalseFormula(Formula):
 
     def _text(self) -> str:
         return "false"
+
+
+@dataclass(frozen=True, eq=True)
+class Constant(Formula):
+    """A leaf of known robustness ``value`` (m) at every time: what a part of a formula that the past already
+    decided contributes (see :mod:`impact_env.stl.progression`). Not part of the text syntax."""
+
+    value: float
+
+    def __post_init__(self) -> None:
+        try:
+            value = float(self.value)
+        except (TypeError, ValueError):
+            raise STLError(f"Constant(value) must be a number of metres, got {self.value!r}") from None
+        if math.isnan(value):
+            raise STLError("Constant(value) must not be NaN")
+        object.__setattr__(self, "value", value)
+
+    @property
+    def children(self) -> tuple[Formula, ...]:
+        return ()
+
+    @property
+    def horizon_s(self) -> float:
+        return 0.0
+
+    def _text(self) -> str:
+        return f"const({self.value!r})"
 
 
 @dataclass(frozen=True, eq=True)

@@ -25,6 +25,7 @@ from impact_env.geometry import ConvexPolygon
 from impact_env.stl.formula import (
     Always,
     And,
+    Constant,
     Eventually,
     FalseFormula,
     Formula,
@@ -125,6 +126,8 @@ def _signal(f: Formula, pos: Mapping[str, np.ndarray], regions: Mapping[str, Con
         return np.asarray(regions[f.region].signed_distance(pos[f.body]), dtype=float)
     if isinstance(f, TrueFormula):
         return np.full(n, math.inf)
+    if isinstance(f, Constant):
+        return np.full(n, f.value)
     if isinstance(f, FalseFormula):
         return np.full(n, -math.inf)
     if isinstance(f, Not):

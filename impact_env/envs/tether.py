@@ -1,0 +1,135 @@
+"""Gymnasium environment of anchor-pull (tether) transport: robots pull the cargo toward wall anchors."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import EzPickle
+
+from impact_env.envs.tether_core import TetherCore
+from impact_env.station import Station
+
+
+class TetherEnv(gym.Env, EzPickle):
+    """Robots carry a free-floating cargo through a space station by pulling it toward anchors on the walls.
+
+    ## Description
+    A station (``impact_env/stations/*.toml`` or your own file, see ``docs/station_format.md``) is a polygon
+    with anchor points on its walls, a cargo disc, a goal box and a fleet of robots. A robot attaches a tether to
+    the cargo and to an anchor and reels it in: with one tether the cargo moves straight toward the anchor at the
+    pulling speed ``w``, with several along the sum of their directions (the thesis's Eq. 5). At most ``k``
+    robots hold anchors at once, each on a distinct anchor. A tether needs line of sight: when a wall comes
+    between cargo and anchor it snags (is released), and it is released when the cargo comes within the stop
+    radius of its anchor. How the cargo moves depends on ``fidelity`` (``kinematic``: exactly Eq. 5, no
+    inertia; ``reel``: pymunk slide joints reeled in at ``w`` with the winch force limit, the cargo keeps its
+    momentum; ``force``: saturating winch tension), see :mod:`impact_env.tether_physics`.
+
+    ## Action space
+    ``MultiDiscrete([n_anchors + 2] * n_robots)``: per robot, ``0`` keep, ``1`` release, ``2 + j`` attach to
+    anchor ``j`` (``station.anchors[j]``); attaching takes ``t_switch`` (the station's ``switch_time_s``) before
+    the tether pulls. Attaches that break a rule (anchor not in line of sight, inside its stop radius, held by
+    another robot, ``k`` other robots already holding anchors) are ignored and reported in ``info["rejected"]``;
+    commands outside ``0 .. n_anchors + 1``, non-integers, NaN or the wrong count raise
+    :class:`~impact_env.errors.ActionError`. Robots are served in order within a step.
+
+    ## Observation space
+    ``Box(float32)`` of size ``4 + n_robots * (n_anchors + 2) + n_anchors + 1``, fixed per station:
+    cargo ``x, y`` (m, within the station's bounding box) and ``vx, vy`` (m/s, within ``+- v_max``: ``k w``
+    under ``kinematic``; an energy bound under ``reel`` and ``force``); then per robot a one-hot of the anchor it
+    holds (all zeros for none), the fraction of ``t_switch`` left before its tether pulls (0 when pulling or
+    free) and the tether length (m, cargo centre to anchor, 0 for none); then the line-of-sight mask of the
+    anchors from the cargo centre (1 visible); last, the fraction of the episode's time left.
+
+    ## Rewards
+    The spatial robustness (m) of the station's STL task (by default ``F[0,tf] in(cargo, goal)``).
+    ``reward_mode="dense"`` (default): the per-step increment of the online robustness estimate, so an episode's
+    rewards sum to its final robustness; ``"sparse"``: the final robustness on the last step. Both subtract
+    ``energy_penalty`` times the step's winch work (J).
+
+    ## Starting state
+    The cargo at rest at the station's start, no tethers. With ``initial_position_noise_m > 0`` the cargo starts
+    uniformly within that radius of the start (drawn from the reset seed, the disc kept inside the station).
+
+    ## Episode end
+    ``terminated`` when the task's horizon is reached (600 steps of 1 s on the shipped maps); the final
+    ``info["robustness"]`` is then the trace's exact robustness and ``info["is_success"]`` says whether it is
+    positive. No truncation of its own (use ``max_episode_steps``).
+
+    ## Info
+    ``robustness`` (m), ``is_success``, ``time_s``, ``switches`` (accepted attach commands), ``snags``,
+    ``path_length_m`` (of the cargo centre), ``winch_work_J``, ``wall_contacts`` (all cumulative), ``events``
+    (this step's tether events: dicts with ``time``, ``kind`` in attached / released / arrived / snagged /
+    blocked, ``robot``, ``anchor``) and ``rejected`` (this step's ignored attaches with the reason).
+
+    ## Arguments
+    ``station`` (name, path or Station; default ``"L"``), ``fidelity`` (``"kinematic"``, ``"reel"``,
+    ``"force"``), ``reward_mode``, ``energy_penalty``, ``pull_speed_mps`` (the winches' real ``w``, default the
+    station's), ``max_active`` (``k``, default the station's), ``initial_position_noise_m``, ``render_mode``
+    (``"rgb_array"`` or ``"human"``), ``render_width_px``.
+
+    ## Version history
+    * v0: initial release.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(self, station: Station | str = "L", fidelity: str = "kinematic", reward_mode: str = "dense",
+                 energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
+                 initial_position_noise_m: float = 0.0, render_mode: str | None = None,
+                 render_width_px: int = 600) -> None:
+        EzPickle.__init__(self, station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
+                          initial_position_noise_m, render_mode, render_width_px)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        self.core = TetherCore(station, fidelity=fidelity, reward_mode=reward_mode, energy_penalty=energy_penalty,
+                               pull_speed_mps=pull_speed_mps, max_active=max_active,
+                               initial_position_noise_m=initial_position_noise_m)
+        self.station = self.core.station
+        self.render_mode = render_mode
+        self.render_width_px = render_width_px
+        self.action_space = spaces.MultiDiscrete([self.core.n_commands] * self.core.n_robots)
+        self.observation_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
+        self._renderer = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        self.core.reset(self.np_random)
+        if self.render_mode == "human":
+            self.render()
+        return self.core.observation(), self.core.info()
+
+    def step(self, action):
+        reward, terminated, info = self.core.step(action)
+        if self.render_mode == "human":
+            self.render()
+        return self.core.observation(), reward, terminated, False, info
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        if self.core.world is None:
+            raise gym.error.ResetNeeded("call reset() before render()")
+        return render_tether(self)
+
+    def close(self) -> None:
+        close_tether(self)
+
+
+def render_tether(env) -> object:
+    """Shared ``render()`` of both tether environments: builds the pygame renderer on first use, draws a frame."""
+    from impact_env.tether_rendering import TetherRenderer, frame_of
+
+    if env._renderer is None:
+        env._renderer = TetherRenderer(env.station, env.render_mode, width_px=env.render_width_px,
+                                       fps=env.metadata["render_fps"])
+    return env._renderer.render(frame_of(env.core))
+
+
+def close_tether(env) -> None:
+    if env._renderer is not None:
+        env._renderer.close()
+        env._renderer = None

@@ -1,0 +1,132 @@
+"""PettingZoo environment of tether transport: one agent per robot, a shared team reward.
+
+Entry points follow PettingZoo's convention: :func:`parallel_env` (the ParallelEnv), :func:`raw_env` (its AEC
+form without wrappers) and :func:`env` (the AEC form, order-enforced).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import EzPickle, seeding
+from pettingzoo import ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
+
+from impact_env.envs.tether import close_tether, render_tether
+from impact_env.envs.tether_core import KEEP, TetherCore
+from impact_env.station import Station
+
+
+class TetherParallelEnv(ParallelEnv, EzPickle):
+    """Tether transport with one agent per robot (agents ``robot_0 .. robot_{n-1}``).
+
+    Every agent has the same spaces: action ``Discrete(n_anchors + 2)`` (its own command: ``0`` keep, ``1``
+    release, ``2 + j`` attach to anchor ``j``; rules and errors as in :class:`~impact_env.envs.tether.TetherEnv`,
+    robots served in index order) and an observation with the central layout of ``TetherEnv`` but with the
+    agent's own robot block first and the others after it in order, so one shared policy can drive every robot.
+    ``state()`` returns the central observation. All agents receive the same team reward and terminate together
+    at the task's horizon; ``max_cycles`` truncates earlier if given. A missing agent action means keep.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10, "name": "impact_env_tether_v0",
+                "is_parallelizable": True}
+
+    def __init__(self, station: Station | str = "L", fidelity: str = "kinematic", reward_mode: str = "dense",
+                 energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
+                 initial_position_noise_m: float = 0.0, max_cycles: int | None = None,
+                 render_mode: str | None = None, render_width_px: int = 600) -> None:
+        EzPickle.__init__(self, station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
+                          initial_position_noise_m, max_cycles, render_mode, render_width_px)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        if max_cycles is not None and (not isinstance(max_cycles, int) or max_cycles < 1):
+            raise ValueError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
+        self.core = TetherCore(station, fidelity=fidelity, reward_mode=reward_mode, energy_penalty=energy_penalty,
+                               pull_speed_mps=pull_speed_mps, max_active=max_active,
+                               initial_position_noise_m=initial_position_noise_m)
+        self.station = self.core.station
+        self.max_cycles = max_cycles
+        self.render_mode = render_mode
+        self.render_width_px = render_width_px
+        self.possible_agents = [f"robot_{i}" for i in range(self.core.n_robots)]
+        self.agents: list[str] = []
+        obs_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
+        act_space = spaces.Discrete(self.core.n_commands)
+        self.observation_spaces = {a: obs_space for a in self.possible_agents}
+        self.action_spaces = {a: act_space for a in self.possible_agents}
+        self.state_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
+        self._renderer = None
+        self.np_random, _ = seeding.np_random(None)
+
+    def observation_space(self, agent: str) -> spaces.Box:
+        return self.observation_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Discrete:
+        return self.action_spaces[agent]
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
+        if seed is not None or not hasattr(self, "_seeded"):
+            self.np_random, _ = seeding.np_random(seed)
+            self._seeded = True
+        self.core.reset(self.np_random)
+        self.agents = list(self.possible_agents)
+        self._cycles = 0
+        if self.render_mode == "human":
+            self.render()
+        info = self.core.info()
+        return self._observations(), {a: dict(info) for a in self.agents}
+
+    def _observations(self) -> dict[str, np.ndarray]:
+        return {a: self.core.agent_observation(i) for i, a in enumerate(self.possible_agents) if a in self.agents}
+
+    def state(self) -> np.ndarray:
+        return self.core.observation()
+
+    def step(self, actions: dict[str, Any]):
+        unknown = set(actions) - set(self.possible_agents)
+        if unknown:
+            raise KeyError(f"actions for unknown agents {sorted(unknown)}; agents are {self.possible_agents}")
+        joint = [KEEP if actions.get(a) is None else np.asarray(actions[a]).reshape(-1)[0]
+                 for a in self.possible_agents]
+        reward, terminated, info = self.core.step(joint)
+        self._cycles += 1
+        truncated = not terminated and self.max_cycles is not None and self._cycles >= self.max_cycles
+        agents = self.agents
+        obs = self._observations()
+        rewards = {a: reward for a in agents}
+        terminations = {a: terminated for a in agents}
+        truncations = {a: truncated for a in agents}
+        infos = {a: dict(info) for a in agents}
+        if terminated or truncated:
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terminations, truncations, infos
+
+    def render(self):
+        if self.render_mode is None:
+            return None
+        if self.core.world is None:
+            raise RuntimeError("call reset() before render()")
+        return render_tether(self)
+
+    def close(self) -> None:
+        close_tether(self)
+
+
+def parallel_env(**kwargs) -> TetherParallelEnv:
+    """The ParallelEnv; keyword arguments as :class:`TetherParallelEnv`."""
+    return TetherParallelEnv(**kwargs)
+
+
+def raw_env(**kwargs):
+    """The AEC form without the order-enforcing wrapper."""
+    return parallel_to_aec_wrapper(TetherParallelEnv(**kwargs))
+
+
+def env(**kwargs):
+    """The AEC form, order-enforced: what ``pettingzoo.test.api_test`` expects."""
+    return OrderEnforcingWrapper(raw_env(**kwargs))

@@ -1,0 +1,80 @@
+"""Keep-off constraints of the MPC and limits of the replanned segments ("safe segments").
+
+The offline planner keeps robots apart (Eq. 26) and out of obstacles with their radii, but the online layer
+re-solves segments and tracks them with an MPC, and the paper's controller keeps a robot off the nearest
+object only. Here every robot, every control step, also gets:
+
+- in the MPC, a disc keep-off around each other robot's predicted path (its previous MPC prediction:
+  the robots are controlled together, so the prediction is the best guess of where it will be) and a fixed
+  half-plane for the nearest wall or obstacle face within reach, with the robot's radius and a margin;
+- in the replanner, :class:`SegmentLimits`: the world box shrunk by the radius, the face of every obstacle
+  within reach that the robot is beyond, and the other robots' planned paths.
+
+Near a planned impact the object's keep-off is lifted (the contact needs the radii to touch), as before.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from impact_env.scenario import Body, Scenario
+from planners.online.mpc import AvoidSpec, HalfPlaneSpec
+from planners.online.replanner import SegmentLimits, obstacle_half_planes
+from planners.plan import PlannedImpact
+
+_BOX_NORMALS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+
+
+def object_keep_off(robot: Body, objects: list[Body], t: float, times: np.ndarray, position: np.ndarray,
+                    object_states: dict[str, np.ndarray], impacts: list[PlannedImpact],
+                    pending: PlannedImpact | None, margin_m: float, contact_window_s: float) -> AvoidSpec | None:
+    """Keep off the nearest object's predicted (free-flight) path, except around this robot's planned
+    impacts on it and, while an impact is pending, from shortly before it on (the object's motion after
+    the impact is the planned one, not the free flight). ``object_states``: name -> [x, y, vx, vy]."""
+    if not objects:
+        return None
+    obj = min(objects, key=lambda o: float(np.hypot(*(object_states[o.name][:2] - position))))
+    s = object_states[obj.name]
+    centers = s[:2] + np.outer(times - t, s[2:4])
+    active = np.ones(len(times), dtype=bool)
+    for imp in impacts:
+        if imp.robot == robot.name and imp.object == obj.name:
+            active &= np.abs(times - imp.time_s) > contact_window_s
+    if pending is not None and pending.object == obj.name:
+        active &= times < pending.time_s - contact_window_s
+    return AvoidSpec(centers=centers, min_distance=robot.radius_m + obj.radius_m + margin_m, active=active)
+
+
+def robot_keep_off(robot: Body, other: Body, centers: np.ndarray, margin_m: float) -> AvoidSpec:
+    """Keep off another robot's predicted centres (N+1, 2) by both radii plus a margin."""
+    return AvoidSpec(centers=centers, min_distance=robot.radius_m + other.radius_m + margin_m,
+                     active=np.ones(len(centers), dtype=bool))
+
+
+def boundary_keep_off(scenario: Scenario, robot: Body, position: np.ndarray, n_nodes: int, reach_m: float,
+                      margin_m: float) -> HalfPlaneSpec | None:
+    """The nearest wall of the world box or face of an obstacle, if within ``reach_m``, as a half-plane that
+    keeps the robot's disc (plus a margin) out of it."""
+    xmin, xmax, ymin, ymax = scenario.world_box
+    r = robot.radius_m + margin_m
+    p = np.asarray(position, float)
+    # inward normals of the walls: n . p >= offset keeps the centre r inside
+    candidates = [(p[0] - xmin, _BOX_NORMALS[0], xmin + r), (xmax - p[0], _BOX_NORMALS[1], -xmax + r),
+                  (p[1] - ymin, _BOX_NORMALS[2], ymin + r), (ymax - p[1], _BOX_NORMALS[3], -ymax + r)]
+    for n, b in obstacle_half_planes([o.polygon for o in scenario.obstacles], p, robot.radius_m, reach_m):
+        candidates.append((float(n @ p - b) + robot.radius_m, n, b + margin_m))
+    dist, normal, offset = min(candidates, key=lambda c: c[0])
+    if dist > reach_m + robot.radius_m:
+        return None
+    return HalfPlaneSpec(normals=normal, offsets=offset, active=np.ones(n_nodes, dtype=bool))
+
+
+def segment_limits(scenario: Scenario, robot: Body, position: np.ndarray, others: list,
+                   separation_m: float, reach_m: float) -> SegmentLimits:
+    """The replanner's :class:`SegmentLimits` for a robot at ``position``; ``others`` are callables
+    ``times -> (N, 2)`` of the other robots' planned centres."""
+    xmin, xmax, ymin, ymax = scenario.world_box
+    r = robot.radius_m
+    half_planes = obstacle_half_planes([o.polygon for o in scenario.obstacles], position, r, reach_m)
+    return SegmentLimits(box=(xmin + r, xmax - r, ymin + r, ymax - r), half_planes=half_planes, others=others,
+                         separation_m=separation_m)

@@ -1,0 +1,364 @@
+"""Mission-level replanning: monitor the predicted outcome of the plan's remainder and re-plan the rest of the
+mission from the current state when it leaves the plan's tolerance.
+
+The paper's stack is open loop at the mission level: the local replanner (Eq. 29) re-aims each planned
+impact, but once an impact goes wrong (a restitution that is not the model's, a stop that leaves the object
+drifting) nothing re-decides the impacts that follow. Here, at every observed robot-object impact and every
+``check_period_s``:
+
+1. **Prediction.** The rest of the episode is predicted from the observed states: each object flies freely
+   to its next planned impact, leaves it toward the position the plan needs at the impact after (which is
+   what the local replanner aims for), and follows the plan after that; an object with no impact left flies
+   freely to the end. Robots follow the plan. The task's robustness is evaluated on the executed trace so
+   far followed by this prediction.
+2. **Test** (documented, configurable): re-plan when the predicted robustness is below
+   ``robustness_fraction`` times the robustness the flown plan was made with (default 0.5) or below
+   ``min_robustness_m`` (default 0: a predicted failure).
+3. **Re-plan.** A derived scenario is built (``dataclasses.replace``): the bodies' observed positions and
+   velocities as initial conditions, the remaining time as ``tf_s``, the task progressed to now
+   (:func:`impact_env.stl.progress`) and shifted to start at 0 with its decided parts dropped
+   (:func:`impact_env.stl.without_constants`), and a grid of proportionally fewer intervals. The offline
+   planner (:func:`planners.offline.sr_planner.plan_spatially_robust`, untouched) solves it, warm-started
+   from the current plan resampled onto the new grid (:func:`resample_plan`). The new plan may add impacts,
+   e.g. a trimming impact that stops a drifting object. It is shifted back to absolute time and spliced
+   after the executed part (:func:`splice`). If the derived problem is infeasible, it is tried once more
+   without the bodies' end states (robots home, objects at rest at tf): late in a mission they can be
+   what stands in the way, and the task outranks them. A re-plan that fails, is infeasible, or predicts
+   no better than the current plan keeps the current plan.
+
+Determinism. The compute budget is a number of branch-and-bound nodes (``node_limit`` for the robustness
+stage, ``refine_nodes`` for the second stage), so the same observations give the same plan on an idle and
+on a busy machine. ``time_limit_s`` is only a safety net, set far above the measured replan times: if it
+ever fires, the re-plan is DISCARDED (the current plan is kept, never a partial result) and counted in the
+report's ``timeouts``, so a run whose report shows 0 timeouts flew exactly what the node budget decided.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from impact_env.scenario import Body, Scenario
+from impact_env.stl import progress, robustness, without_constants
+from planners import bezier
+from planners.errors import PlannerError
+from planners.offline.milp.trajectories import allowed_box
+from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
+from planners.online.sampling import PlanSampler
+from planners.plan import BodyPlan, Plan, Segment
+
+
+@dataclass
+class MissionConfig:
+    """When and how the mission is re-planned (see the module docstring).
+
+    ``check_period_s``: prediction period between impacts (s); ``robustness_fraction`` and
+    ``min_robustness_m``: the test; ``node_limit`` / ``refine_nodes``: the planner's node budget for the
+    robustness stage and the second stage; ``time_limit_s``: safety net per planner stage (s);
+    ``max_replans``: per episode; ``min_remaining_s``: no re-plan closer than this to the end;
+    ``quiet_s``: no re-plan within this time of a pending planned impact (the local replanner owns it).
+    """
+
+    check_period_s: float = 1.0
+    robustness_fraction: float = 0.5
+    min_robustness_m: float = 0.0
+    node_limit: int = 200
+    refine_nodes: int = 0
+    time_limit_s: float = 60.0
+    max_replans: int = 3
+    min_remaining_s: float = 2.0
+    quiet_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("check_period_s", "time_limit_s", "min_remaining_s", "quiet_s"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise PlannerError(f"MissionConfig.{name} must be a finite number > 0, got {value!r}")
+        if not 0.0 <= self.robustness_fraction <= 1.0:
+            raise PlannerError(f"MissionConfig.robustness_fraction must be in [0, 1], got {self.robustness_fraction}")
+        for name in ("node_limit", "refine_nodes", "max_replans"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise PlannerError(f"MissionConfig.{name} must be an integer >= 0, got {value!r}")
+
+
+@dataclass
+class ReplanRecord:
+    """One mission re-plan: when, why, what it gave, how long it took."""
+
+    time_s: float
+    predicted_robustness: float
+    threshold_m: float
+    status: str  # "accepted", "kept: <reason>"
+    new_robustness: float | None = None
+    solve_s: float = 0.0
+    intervals: int = 0
+    impacts_added: int = 0
+    task: str = ""
+
+
+# ------------------------------------------------------------------------------------------- plans
+def resample_plan(plan: Plan, t0: float, tf: float, intervals: int, degree: int) -> Plan:
+    """The plan's motion on [t0, tf] expressed on a new grid of ``intervals`` equal intervals (time 0 = t0):
+    robots as degree-``degree`` Bezier segments (least-squares fit of the old curve), objects as straight
+    segments between their old positions at the new knots, impacts moved to the nearest new knot. A warm
+    start for the planner, not a flyable plan."""
+    sampler = PlanSampler(plan)
+    knots = np.linspace(t0, tf, intervals + 1)
+    m = 3 * (degree + 1)
+    phases = np.linspace(0.0, 1.0, m)
+    fit = np.linalg.pinv(bezier.bernstein(degree, phases))  # (d+1, m)
+    bodies = {}
+    for name, body in plan.bodies.items():
+        segments = []
+        for a, b in zip(knots[:-1], knots[1:]):
+            if body.kind == "robot":
+                pts = sampler.state(name, a + phases * (b - a))[:, :2]
+                cp = fit @ pts
+            else:
+                cp = sampler.state(name, np.array([a, b]))[:, :2]
+            segments.append(Segment(a - t0, b - t0, cp))
+        bodies[name] = BodyPlan(name, body.kind, segments)
+    dt = (tf - t0) / intervals
+    impacts = [dataclasses.replace(i, time_s=round((i.time_s - t0) / dt) * dt) for i in plan.impacts
+               if t0 < i.time_s <= tf and 1 <= round((i.time_s - t0) / dt) <= intervals]
+    return Plan(plan.scenario, plan.planner, plan.robustness, bodies, impacts)
+
+
+def _clip_segment(seg: Segment, t: float) -> Segment | None:
+    """The part of ``seg`` before time ``t`` (None if none)."""
+    if t <= seg.t0_s + 1e-12:
+        return None
+    if t >= seg.t1_s:
+        return seg
+    left, _ = bezier.split(seg.control_points, (t - seg.t0_s) / seg.duration_s)
+    return Segment(seg.t0_s, t, left)
+
+
+def splice(executed: Plan, remainder: Plan, t: float) -> tuple[Plan, set[int]]:
+    """``executed`` on [0, t] followed by ``remainder`` (planned from time 0 = t) shifted to absolute time.
+
+    Returns the spliced plan and the indices of its impacts that lie in the past (they count as done: the
+    ones that happened were observed, the ones that did not will not be flown any more)."""
+    bodies = {}
+    for name, body in executed.bodies.items():
+        past = [s for s in (_clip_segment(seg, t) for seg in body.segments) if s is not None]
+        future = [Segment(s.t0_s + t, s.t1_s + t, np.asarray(s.control_points, float).copy())
+                  for s in remainder.bodies[name].segments]
+        bodies[name] = BodyPlan(name, body.kind, past + future)
+    old = [i for i in executed.impacts if i.time_s <= t + 1e-9]
+    new = [dataclasses.replace(i, time_s=i.time_s + t) for i in remainder.impacts]
+    spliced = Plan(executed.scenario, remainder.planner, remainder.robustness, bodies, old + new,
+                   remainder.solver, remainder.solve_time_s, remainder.build_time_s, remainder.mip_gap,
+                   {**remainder.stats, "spliced_at_s": t})
+    return spliced, set(range(len(old)))
+
+
+def _initial_state(body: Body, position: np.ndarray, velocity: np.ndarray, scenario: Scenario) -> Body:
+    """The body with the observed state as its initial state, nudged inside the planner's allowed box and
+    with a velocity bound no smaller than its observed speed (else the derived problem starts infeasible)."""
+    x0, x1, y0, y1 = allowed_box(scenario, body)
+    eps = 1e-6
+    p = (float(np.clip(position[0], x0 + eps, x1 - eps)), float(np.clip(position[1], y0 + eps, y1 - eps)))
+    v = (float(velocity[0]), float(velocity[1]))
+    bound = body.velocity_bound_mps
+    if bound is not None:
+        bound = (max(bound[0], abs(v[0]) * 1.01), max(bound[1], abs(v[1]) * 1.01))
+    return dataclasses.replace(body, position_m=p, velocity_mps=v, velocity_bound_mps=bound)
+
+
+def _without_end_states(scenario: Scenario) -> Scenario:
+    """The scenario with no final position or velocity for any body (only the task is left)."""
+    def free(body: Body) -> Body:
+        return dataclasses.replace(body, final_position_m=None, final_velocity_mps=None)
+
+    return dataclasses.replace(scenario, robots=tuple(free(b) for b in scenario.robots),
+                               objects=tuple(free(b) for b in scenario.objects))
+
+
+# ---------------------------------------------------------------------------------------- planner
+class MissionPlanner:
+    """Monitors the plan's predicted outcome and re-plans the rest of the mission (see the module doc).
+
+    Args:
+        scenario: the episode's scenario (the nominal model: the planner's).
+        plan: the offline plan.
+        config: :class:`MissionConfig`.
+        planner_config: options of the offline planner that re-plans keep (thrust fraction, solver, ...).
+    """
+
+    def __init__(self, scenario: Scenario, plan: Plan, config: MissionConfig | None = None,
+                 planner_config: PlannerConfig | None = None) -> None:
+        self.scenario = scenario
+        self.config = config or MissionConfig()
+        self.planner_config = planner_config or PlannerConfig()
+        self.dt = scenario.control_period_s
+        self.formula = scenario.formula
+        self.regions = scenario.region_map()
+        self.names = [b.name for b in scenario.bodies]
+        self.intervals = int(plan.stats.get("intervals") or len(next(iter(plan.bodies.values())).segments))
+        self.degree = int(plan.stats.get("robot_degree") or
+                          len(plan.bodies[scenario.robots[0].name].segments[0].control_points) - 1)
+        self.grid_dt = scenario.tf_s / self.intervals
+        self.reset(plan)
+
+    def reset(self, plan: Plan) -> None:
+        self.plan_robustness = plan.robustness
+        self.trace: list[np.ndarray] = []
+        self.records: list[ReplanRecord] = []
+        self.checks = 0
+        self.timeouts = 0
+        self._last_check = -math.inf
+        self._sampler: PlanSampler | None = None
+        self._sampler_plan: Plan | None = None
+
+    # ------------------------------------------------------------------------------------ monitor
+    def predicted_trace(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan,
+                        done: set[int]) -> dict[str, np.ndarray]:
+        """Predicted positions (samples at t, t + dt, ..., the task's horizon) of every body: see step 1."""
+        if self._sampler_plan is not plan:
+            self._sampler, self._sampler_plan = PlanSampler(plan), plan
+        sampler = self._sampler
+        horizon = self.formula.horizon_s
+        times = t + self.dt * np.arange(max(1, round((horizon - t) / self.dt)) + 1)
+        out = {}
+        for body in self.scenario.robots:
+            out[body.name] = sampler.state(body.name, np.minimum(times, plan.tf_s))[:, :2]
+        for body in self.scenario.objects:
+            s = states[index[body.name]]
+            pos = s[:2] + np.outer(times - t, s[3:5])
+            pending = sorted((i for k, i in enumerate(plan.impacts)
+                              if i.object == body.name and k not in done and i.time_s > t), key=lambda i: i.time_s)
+            if pending:
+                first = pending[0]
+                hit = s[:2] + s[3:5] * (first.time_s - t)
+                after = times >= first.time_s
+                if len(pending) > 1:
+                    second = pending[1]
+                    v = (np.asarray(second.position) - hit) / (second.time_s - first.time_s)
+                    between = after & (times < second.time_s)
+                    pos[between] = hit + np.outer(times[between] - first.time_s, v)
+                    later = times >= second.time_s
+                    pos[later] = sampler.state(body.name, np.minimum(times[later], plan.tf_s))[:, :2]
+                else:
+                    v = np.asarray(first.object_velocity_after, float)
+                    pos[after] = hit + np.outer(times[after] - first.time_s, v)
+            out[body.name] = pos
+        return out
+
+    def predicted_robustness(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan,
+                             done: set[int]) -> float:
+        """The task's robustness on the executed trace followed by the prediction."""
+        pred = self.predicted_trace(t, states, index, plan, done)
+        past = np.array(self.trace)  # (k + 1, n_bodies, 2), the last sample is now
+        trace = {name: np.vstack([past[:-1, i], pred[name]]) for i, name in enumerate(self.names)}
+        return float(robustness(self.formula, trace, self.regions, self.dt))
+
+    def step(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan, book, impact_observed: bool,
+             model) -> tuple[Plan, set[int]] | None:
+        """Record this step's observation; maybe re-plan. Returns (spliced plan, done impacts) or None."""
+        self.trace.append(states[[index[n] for n in self.names], 0:2].copy())
+        cfg = self.config
+        if not impact_observed and t - self._last_check < cfg.check_period_s - 1e-9:
+            return None
+        self._last_check = t
+        if len(self.records) >= cfg.max_replans or self.scenario.tf_s - t < cfg.min_remaining_s:
+            return None
+        pending = [i for k, i in enumerate(plan.impacts) if k not in book.done]
+        if any(abs(i.time_s - t) < cfg.quiet_s for i in pending):
+            return None
+        self.checks += 1
+        predicted = self.predicted_robustness(t, states, index, plan, book.done)
+        threshold = max(cfg.min_robustness_m, cfg.robustness_fraction * self.plan_robustness)
+        if predicted >= threshold:
+            return None
+        return self._replan(t, states, index, plan, predicted, threshold)
+
+    # ------------------------------------------------------------------------------------ re-plan
+    def derived_scenario(self, t: float, states: np.ndarray, index: dict[str, int]) -> tuple[Scenario, int] | None:
+        """The scenario of the rest of the mission (see step 3) and its grid size; None if nothing is left
+        to plan for (the past decided the task)."""
+        k = len(self.trace) - 1
+        trace = {name: np.array(self.trace)[:, i] for i, name in enumerate(self.names)}
+        task = without_constants(progress(self.formula, trace, self.regions, self.dt, k))
+        if task is None:
+            return None
+        sc = self.scenario
+        remaining = sc.tf_s - t
+        intervals = max(2, round(remaining / self.grid_dt))
+
+        def moved(body: Body) -> Body:
+            s = states[index[body.name]]
+            return _initial_state(body, s[:2], s[3:5], sc)
+
+        derived = dataclasses.replace(sc, tf_s=remaining, task=str(task), robots=tuple(moved(b) for b in sc.robots),
+                                      objects=tuple(moved(b) for b in sc.objects), planner_intervals=intervals,
+                                      planner_robot_degree=self.degree)
+        return derived, intervals
+
+    def _replan(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan, predicted: float,
+                threshold: float) -> tuple[Plan, set[int]] | None:
+        from planners.errors import InfeasiblePlanError, PlanTimeoutError
+
+        record = ReplanRecord(t, predicted, threshold, "kept")
+        self.records.append(record)
+        built = self.derived_scenario(t, states, index)
+        if built is None:
+            record.status = "kept: the past decided the task"
+            return None
+        derived, intervals = built
+        record.intervals, record.task = intervals, derived.task
+        cfg = self.config
+        warm = resample_plan(plan, t, self.scenario.tf_s, intervals, self.degree)
+        config = dataclasses.replace(self.planner_config, intervals=intervals, robot_degree=self.degree,
+                                     node_limit=cfg.node_limit, refine_nodes=cfg.refine_nodes,
+                                     time_limit_s=cfg.time_limit_s, refine_time_s=cfg.time_limit_s,
+                                     warm_start=warm, diagnose_infeasibility=False, progress=None)
+        start = time.perf_counter()
+        try:
+            try:
+                remainder = plan_spatially_robust(derived, config)
+            except InfeasiblePlanError:
+                # the task outranks the end states: late in the mission, going home (or the object's rest at
+                # tf) can be what makes the rest infeasible; try once more without them
+                record.status = "relaxed end states"
+                remainder = plan_spatially_robust(_without_end_states(derived), config)
+        except PlanTimeoutError:
+            record.solve_s = time.perf_counter() - start
+            if record.solve_s >= cfg.time_limit_s * 0.99:
+                self.timeouts += 1
+                record.status = "kept: time limit (safety net)"
+            else:
+                record.status = "kept: no plan within the node budget"
+            return None
+        except PlannerError as exc:
+            record.solve_s = time.perf_counter() - start
+            record.status = f"kept: {type(exc).__name__}"
+            return None
+        record.solve_s = time.perf_counter() - start
+        if remainder.stats.get("refine_status") == "time_limit":
+            self.timeouts += 1
+            record.status = "kept: time limit (safety net)"
+            return None
+        record.new_robustness = remainder.robustness
+        if remainder.robustness <= predicted:
+            record.status = "kept: no better than the current plan"
+            return None
+        spliced, done = splice(plan, remainder, t)
+        record.status = "accepted" + (" (end states relaxed)" if record.status == "relaxed end states" else "")
+        record.impacts_added = len(remainder.impacts) - sum(1 for i in plan.impacts if i.time_s > t)
+        self.plan_robustness = remainder.robustness
+        return spliced, done
+
+    def report(self) -> dict[str, Any]:
+        return {"checks": self.checks, "replans": sum(r.status.startswith("accepted") for r in self.records),
+                "attempts": len(self.records), "timeouts": self.timeouts,
+                "records": [dataclasses.asdict(r) for r in self.records]}
+
+
+__all__ = ["MissionConfig", "MissionPlanner", "ReplanRecord", "resample_plan", "splice"]

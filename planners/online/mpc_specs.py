@@ -1,0 +1,196 @@
+"""Configuration, inputs and outputs of the impact-aware MPC (the controller is planners/online/mpc.py)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planners.errors import MPCInputError  # noqa: F401 - MPCInputError is imported from here too
+
+SOLVERS = ("sqp", "fatrop", "ipopt")
+NX, NU = 6, 3  # state [px, py, theta, vx, vy, omega], input [Fx, Fy, tau]
+_NSI = 8  # impact slacks per node: (p, v) positive and negative parts; plus one per keep-off row
+_WEIGHTS = ("q_pos", "q_vel", "q_heading", "q_omega", "r_input", "terminal_factor")
+
+
+@dataclass
+class MPCConfig:
+    """Structure (horizon, dt, solver) is fixed at construction; weights can change via ``update_weights``.
+
+    Weights: q_pos in 1/m^2, q_vel in s^2/m^2, q_heading in 1/rad^2, q_omega in s^2/rad^2, r_input per
+    (input / limit)^2; penalties per m or m/s of impact-state violation and per m of keep-off violation.
+    ``fallback_solver`` (None: none) retries a solve the primary ``solver`` failed; ``sqp_max_iter`` caps the
+    iterations of the ``"sqp"`` solver (converged solves take <= 27 in ``benchmarks/mpc.py`` and the keep-off
+    stress cases, so a solve that needs more is handed to the fallback early); fatrop and ipopt get 100.
+    ``keep_off_rows``: how many keep-off constraints (:class:`AvoidSpec` discs or :class:`HalfPlaneSpec`
+    half-planes) one solve can take, each with its own slack per node (the expert uses one for the nearest
+    object, one per other robot, and one for the nearest wall or obstacle face).
+    """
+
+    horizon: int = 10
+    dt_s: float = 0.1
+    q_pos: float = 100.0
+    q_vel: float = 10.0
+    q_heading: float = 100.0
+    q_omega: float = 10.0
+    r_input: float = 0.1
+    terminal_factor: float = 10.0
+    thrust_fraction: float = 1.0
+    impact_penalty: float = 3e3
+    avoid_penalty: float = 3e3
+    solver: str = "sqp"
+    fallback_solver: str | None = "ipopt"
+    sqp_max_iter: int = 30
+    keep_off_rows: int = 1
+
+    def __post_init__(self) -> None:
+        if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 2:
+            raise MPCInputError(f"horizon must be an integer >= 2, got {self.horizon!r}")
+        for name in ("dt_s", "impact_penalty", "avoid_penalty") + _WEIGHTS:
+            _check_weight(name, getattr(self, name), positive=name in ("dt_s", "impact_penalty", "avoid_penalty"))
+        if not (isinstance(self.thrust_fraction, (int, float)) and 0.0 < self.thrust_fraction <= 1.0):
+            raise MPCInputError(f"thrust_fraction must be in (0, 1], got {self.thrust_fraction!r}")
+        if self.solver not in SOLVERS:
+            raise MPCInputError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+        if self.fallback_solver is not None and self.fallback_solver not in SOLVERS:
+            raise MPCInputError(f"fallback_solver must be None or one of {', '.join(SOLVERS)}, "
+                                f"got {self.fallback_solver!r}")
+        if isinstance(self.sqp_max_iter, bool) or not isinstance(self.sqp_max_iter, int) or self.sqp_max_iter < 1:
+            raise MPCInputError(f"sqp_max_iter must be an integer >= 1, got {self.sqp_max_iter!r}")
+        if isinstance(self.keep_off_rows, bool) or not isinstance(self.keep_off_rows, int) or self.keep_off_rows < 1:
+            raise MPCInputError(f"keep_off_rows must be an integer >= 1, got {self.keep_off_rows!r}")
+
+
+def _check_weight(name: str, value: object, positive: bool = False) -> None:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or value < 0 or (positive and value == 0):
+        raise MPCInputError(f"{name} must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
+
+
+def _vector(value: object, shape: tuple[int, ...], name: str) -> np.ndarray:
+    """``value`` as a finite float array of ``shape``, or MPCInputError naming ``name``."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise MPCInputError(f"{name} must be numbers of shape {shape}, got {value!r}") from None
+    if arr.shape != shape:
+        raise MPCInputError(f"{name} must have shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise MPCInputError(f"{name} contains NaN or infinite values: {arr.tolist()}")
+    return arr
+
+
+@dataclass
+class ImpactSpec:
+    """A planned impact at horizon node ``step`` (0..N, i.e. at t + step * dt_s).
+
+    ``position`` (2,) m and ``velocity_before`` (2,) m/s: the robot's planned pre-impact state, enforced at
+    that node; ``velocity_after`` (2,) m/s: its planned post-impact velocity, from which the prediction
+    continues after the node. ``step = 0`` means "the impact happens at the start of the coming control
+    period" (contact due now, not yet in the measured state): node 0 is the measurement, so nothing is
+    enforced there and only the velocity jump applies; the wrench is then chosen for the post-impact motion.
+    """
+
+    step: int
+    position: np.ndarray
+    velocity_before: np.ndarray
+    velocity_after: np.ndarray
+
+    def __post_init__(self) -> None:
+        if isinstance(self.step, bool) or not isinstance(self.step, (int, np.integer)):
+            raise MPCInputError(f"ImpactSpec.step must be an integer node index, got {self.step!r}")
+        self.step = int(self.step)
+        for name in ("position", "velocity_before", "velocity_after"):
+            setattr(self, name, _vector(getattr(self, name), (2,), f"ImpactSpec.{name}"))
+
+
+@dataclass
+class AvoidSpec:
+    """Keep-off constraint: ``|p_k - centers[k]| >= min_distance`` (m) at the nodes where ``active[k]``.
+
+    ``centers`` (N+1, 2) m: predicted centre of the body to avoid at each node; ``active`` (N+1,) bool;
+    ``min_distance``: centre to centre, so the two radii plus a margin. Node 0 (the measured state) is never
+    constrained. Deactivate the nodes around a planned impact with the same body: there the impact position
+    (radii apart) contradicts the keep-off distance and the two soft constraints would meet half-way.
+    """
+
+    centers: np.ndarray
+    min_distance: float
+    active: np.ndarray
+
+    def __post_init__(self) -> None:
+        d = self.min_distance
+        if not (isinstance(d, (int, float, np.floating)) and math.isfinite(d) and d > 0):
+            raise MPCInputError(f"AvoidSpec.min_distance must be a finite number > 0 (m), got {d!r}")
+        self.min_distance = float(d)
+        self.active = np.asarray(self.active, dtype=bool)
+
+    def check(self, horizon: int) -> None:
+        self.centers = _vector(self.centers, (horizon + 1, 2), "AvoidSpec.centers")
+        if self.active.shape != (horizon + 1,):
+            raise MPCInputError(f"AvoidSpec.active must have shape {(horizon + 1,)}, got {self.active.shape}")
+
+    def clearance(self, positions: np.ndarray) -> float:
+        """min over active nodes 1..N of |p_k - c_k| - min_distance (m)."""
+        dist = np.hypot(*(positions - self.centers).T)
+        return float(np.min(dist[1:][self.active[1:]]) - self.min_distance)
+
+
+@dataclass
+class HalfPlaneSpec:
+    """Keep-out of a half-plane: ``normals[k] . p_k >= offsets[k]`` (m) at the nodes where ``active[k]``.
+
+    For a wall or an obstacle face: the face's outward unit normal and its offset plus the robot's radius
+    (and a margin). ``normals`` (2,) or (N+1, 2), unit; ``offsets`` a number or (N+1,); ``active`` (N+1,) bool.
+    A fixed half-plane is already linear, so nothing is re-linearised.
+    """
+
+    normals: np.ndarray
+    offsets: np.ndarray
+    active: np.ndarray
+
+    def check(self, horizon: int) -> None:
+        shape = (horizon + 1,)
+        normals = np.asarray(self.normals, dtype=float)
+        if normals.shape == (2,):
+            normals = np.tile(normals, (horizon + 1, 1))
+        self.normals = _vector(normals, (horizon + 1, 2), "HalfPlaneSpec.normals")
+        offsets = np.asarray(self.offsets, dtype=float)
+        if offsets.shape == ():
+            offsets = np.full(shape, float(offsets))
+        self.offsets = _vector(offsets, shape, "HalfPlaneSpec.offsets")
+        self.active = np.asarray(self.active, dtype=bool)
+        if self.active.shape != shape:
+            raise MPCInputError(f"HalfPlaneSpec.active must have shape {shape}, got {self.active.shape}")
+        norms = np.hypot(self.normals[:, 0], self.normals[:, 1])
+        if np.any(np.abs(norms - 1.0) > 1e-6):
+            raise MPCInputError("HalfPlaneSpec.normals must be unit vectors")
+
+    def clearance(self, positions: np.ndarray) -> float:
+        """min over active nodes 1..N of normal . p - offset (m)."""
+        gap = np.einsum("kd,kd->k", self.normals, positions) - self.offsets
+        return float(np.min(gap[1:][self.active[1:]]))
+
+
+@dataclass
+class MPCResult:
+    """One solve. ``wrench`` (3,): body-frame [Fx, Fy, tau] (N, N m) to apply now, within bounds, never NaN.
+
+    ``predicted`` (N+1, 6): predicted states at nodes 0..N (node 0 = measured state); ``inputs`` (N, 3):
+    the planned wrenches; ``impact_error``: max |predicted - planned| pre-impact [p, v] at the impact node
+    (m or m/s; 0 without impact or at step 0); ``min_clearance_m``: min over active keep-off nodes of distance minus
+    min_distance (inf without); ``solver``: which solver produced the result.
+    """
+
+    wrench: np.ndarray
+    success: bool
+    solve_ms: float
+    predicted: np.ndarray
+    inputs: np.ndarray = field(default_factory=lambda: np.zeros((0, NU)))
+    status: str = ""
+    iterations: int = 0
+    solver: str = ""
+    impact_error: float = 0.0
+    min_clearance_m: float = math.inf
