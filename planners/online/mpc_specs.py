@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planners.errors import MPCInputError  # noqa: F401 - MPCInputError is imported from here too
+from planners.errors import MPCInputError
 
 SOLVERS = ("sqp", "fatrop", "ipopt")
 NX, NU = 6, 3  # state [px, py, theta, vx, vy, omega], input [Fx, Fy, tau]
