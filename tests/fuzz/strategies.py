@@ -13,16 +13,18 @@ from typing import Any
 import numpy as np
 from hypothesis import strategies as st
 
+from impact_env.scenario import scenario_names
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
 
-SCENARIOS = ("corridor", "obstacle_avoidance", "throw_and_catch_exp")
+SCENARIOS = tuple(scenario_names())  # every shipped scenario
 TEXTS = {name: resources.files("impact_env.scenarios").joinpath(f"{name}.toml").read_text() for name in SCENARIOS}
 DICTS = {name: tomllib.loads(text) for name, text in TEXTS.items()}
 PLANS_DIR = Path(__file__).resolve().parents[2] / "baselines" / "results" / "plans"
-PLANS = {name: json.loads((PLANS_DIR / f"{name}.json").read_text()) for name in SCENARIOS}
+PLANS = {path.stem: json.loads(path.read_text()) for path in sorted(PLANS_DIR.glob("*.json"))}  # the published
 
 # numbers that sit on the edges of what a float, a TOML integer or a physical quantity can be
 EXTREME_NUMBERS = [0, 0.0, -0.0, 1, -1, 2, 1e-300, 5e-324, -5e-324, 1e-9, 1e6, 1e7, 1e9, 1e300, 1e308, -1e308,
