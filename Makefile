@@ -1,7 +1,8 @@
 # Two entry points from a fresh clone (only Python 3.11 needed):
 #   make demo   - create .venv, install the package, run the main demo (video + JSON + plots in out/)
 #   make test   - create .venv, install with the [rl,dev] extras, run the default (fast) test suite
-# Further targets: make test-slow (long checks), make bench (benchmarks), make lint,
+# Further targets: make test-slow (long checks), make fuzz (10 minutes of property-based fuzzing),
+#   make bench (benchmarks), make lint,
 #   make wheel-check (sdist + wheel, smoke test of the wheel in a fresh venv), make docs (the documentation
 #   site, warnings as errors), make docs-check (its links and a headless-Chromium look at an environment page),
 #   make docs-media (re-make the GIFs and figures the site shows),
@@ -12,7 +13,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 OUT := out
 
-.PHONY: demo test test-slow bench bench-expert results lint clean wheel-check docs docs-check docs-media
+.PHONY: demo test test-slow fuzz bench bench-expert results lint clean wheel-check docs docs-check docs-media
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -46,6 +47,15 @@ test: $(VENV)/.dev-installed
 
 test-slow: $(VENV)/.dev-installed
 	$(BIN)/python -m pytest -q -n 2 -m slow --timeout 3600
+
+# The fuzzers of tests/fuzz/ drawing fresh inputs for FUZZ_SECONDS per fuzzer (7 fuzzers on 2 processes:
+# 170 s each is about 10 minutes), then a table of the inputs tried.
+FUZZ_SECONDS ?= 170
+fuzz: $(VENV)/.dev-installed
+	mkdir -p $(OUT)
+	rm -f $(OUT)/fuzz_report.jsonl
+	IMPACT_ENV_FUZZ_SECONDS=$(FUZZ_SECONDS) IMPACT_ENV_FUZZ_REPORT=$(OUT)/fuzz_report.jsonl \
+		$(BIN)/python -m pytest -q -n 2 -m slow tests/fuzz --timeout 3600
 
 bench-expert: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/expert.py --episodes 50

@@ -119,17 +119,17 @@ def test_record_writes_a_minari_dataset(demonstrations):
 
 def test_behaviour_cloning_fits_the_expert_and_flies(demonstrations, tmp_path):
     runs = tmp_path / "runs"
-    assert main(["bc", "throw_and_catch_exp", "--dataset", str(demonstrations), "--epochs", "40",
+    # 80 epochs: the robust expert's actions are smaller and smoother (zero-action error 0.069), and 40 epochs
+    # only got to a third of it (0.023); 80 get to an eighth (0.008)
+    assert main(["bc", "throw_and_catch_exp", "--dataset", str(demonstrations), "--epochs", "80",
                  "--runs-dir", str(runs)]) == 0
     meta = json.loads((runs / "bc_throw_and_catch_exp_s0" / "train.json").read_text())
     assert meta["episodes_train"] == 2 and meta["episodes_validation"] == 1 and meta["samples"] == 400
-    assert 1 <= meta["kept_epoch"] <= 40
+    assert 1 <= meta["kept_epoch"] <= 80
     first, last = meta["history"][0], meta["history"][-1]
     assert last["nll"] < first["nll"]
-    # the fitted policy reproduces the expert's actions far better than doing nothing would (measured: a third
-    # of the zero-action error; the full expert's keep-offs and disc offsets make its actions harder to fit
-    # than the paper stack's, for which a quarter held)
-    assert last["train_mse"] < 0.4 * meta["zero_action_mse"]
+    # the fitted policy reproduces the expert's actions far better than doing nothing would
+    assert last["train_mse"] < 0.25 * meta["zero_action_mse"]
     out = tmp_path / "run.json"
     assert main(["run", "throw_and_catch_exp", "--controller", str(runs / "bc_throw_and_catch_exp_s0" / "model.zip"),
                  "--json", str(out)]) == 0

@@ -32,7 +32,8 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     ``Box(-1, 1, (3 * n_robots,), float32)``: per robot, in scenario order, body-frame force x, force y
     and torque, as fractions of the robot's ``thrust_limit_N`` (per body axis) and ``torque_limit_Nm``.
     Values outside [-1, 1] are clipped; NaN or infinite values raise
-    :class:`~impact_env.errors.ActionError`. The wrench is held for one control period
+    :class:`~impact_env.errors.ActionError`, and so do non-numbers, ragged lists and any shape other than
+    ``(3 * n_robots,)`` or ``(n_robots, 3)``. The wrench is held for one control period
     (``control_period_s``, 0.1 s by default) of several physics substeps.
 
     ## Observation space
@@ -46,11 +47,15 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     ``reward_mode="sparse"``: the final robustness on the last step, 0 before.
     ``reward_mode="conjuncts"``: the per-step increment of the mean robustness of the task's conjuncts, so
     each conjunct (e.g. each wall clearance) is credited when it changes (see impact_env.envs.core). All subtract
-    ``fuel_penalty * sum_robots |F| * dt`` (N s) if ``fuel_penalty > 0``.
+    ``fuel_penalty * sum_robots |F| * dt`` (N s) if ``fuel_penalty > 0``. A robustness of +-inf (a task that
+    holds or fails whatever happens, e.g. ``F[0,20] true``) is reported clipped to +- the diagonal of the box
+    around the world and every region, so rewards stay finite.
 
     ## Starting state
     The scenario's initial positions, velocities and headings. With ``initial_position_noise_m > 0``,
-    objects start uniformly within that radius of their scenario position (drawn from the reset seed).
+    objects start uniformly within that radius of their scenario position (drawn from the reset seed); a
+    draw whose disc would leave the world, overlap an obstacle or another body is drawn again from the same
+    generator, and a radius for which fewer than 5 % of the draws are clear is refused at construction.
 
     ## Episode end
     ``terminated`` when the STL formula's horizon is reached (``env.unwrapped.horizon_steps`` steps of
@@ -81,7 +86,8 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     * ``fuel_penalty``: reward cost per N s of fuel (>= 0).
     * ``restitution``: simulate with this restitution instead of the scenario's ``e`` (a model mismatch for the
       planner); None keeps the scenario's.
-    * ``thrust_noise``: standard deviation of multiplicative thrust noise (0.05 = 5 %), re-clipped to the limits.
+    * ``thrust_noise``: standard deviation of multiplicative thrust noise (0.05 = 5 %), re-clipped to the limits
+      (at most 10).
     * ``initial_position_noise_m``: objects start uniformly within this radius (m) of their scenario position.
     * ``render_mode``: ``"rgb_array"`` (an ``(H, W, 3)`` uint8 frame per ``render()``), ``"human"`` (a pygame
       window) or None.
@@ -90,7 +96,9 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     ## Version history
     * v0: initial release (impact_env 0.1.0). In 0.2.0 the ids got ``max_episode_steps``, ``scenario`` became
       required and the episode clock (``dt_s``, ``horizon_steps``, ``horizon_s``) moved onto the env; dynamics,
-      reward and observations are unchanged, so the version stays v0.
+      reward and observations are unchanged, so the version stays v0. Also without a new version, because no
+      episode that was valid before changes: malformed actions and options are refused, noisy starts that
+      overlapped a wall, an obstacle or a body are drawn again, and an infinite robustness is clipped.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
