@@ -38,7 +38,10 @@ PLANNERS = ("sr", "ir")
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``plan`` subcommand to ``impact-env`` (entry point of the ``impact_env.commands`` group)."""
     p = subparsers.add_parser("plan", help="plan impacts and trajectories with a MILP planner (spatially robust "
-                              "or impact-robust)", description=__doc__.split("\n")[0])
+                              "or impact-robust)",
+                              description="Plan when, where and with which robot to hit each object, with maximal "
+                                          "STL robustness (--planner sr) or maximal tolerated post-impact velocity "
+                                          "error (--planner ir): a MILP, proved optimal.")
     p.add_argument("scenario", help="shipped name or path to a .toml file")
     p.add_argument("--planner", default="sr",
                    help="sr: maximise the STL spatial robustness rho (default); ir: maximise delta, the "
@@ -68,13 +71,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", help="write the plan as JSON (planners.plan.Plan.save)")
     p.add_argument("--plot", help="write a PNG of the plan: xy view, positions and velocities over time")
     p.add_argument("--quiet", action="store_true", help="no header and no progress lines; only the result")
+    from planners.tether.cli import add_arguments as add_tether_arguments
+
+    add_tether_arguments(p)  # a tether station (impact-env plan L) is planned by planners/tether/cli.py
     p.set_defaults(func=_cmd_plan)
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
     from impact_env.scenario import load_scenario
+    from impact_env.station import is_station_file
     from planners.offline.ir_planner import IRPlannerConfig, build_ir_model, plan_impact_robust
     from planners.offline.sr_planner import PlannerConfig, build_model, plan_spatially_robust
+
+    if is_station_file(args.scenario):
+        from planners.tether.cli import plan_station
+
+        return plan_station(args)
 
     _check_options(args)
     scenario = load_scenario(args.scenario)
@@ -137,7 +149,10 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.copy_intervals is not None and args.copy_intervals < 1:
         raise PlannerError(f"--copy-intervals must be >= 1, got {args.copy_intervals}")
     if args.solver not in SOLVER_NAMES:
-        raise PlannerError(f"unknown solver {args.solver!r}; choose one of: {', '.join(SOLVER_NAMES)}")
+        from impact_env.names import suggestion
+
+        raise PlannerError(f"unknown solver {args.solver!r}{suggestion(args.solver, SOLVER_NAMES)}; choose one of: "
+                           f"{', '.join(SOLVER_NAMES)}")
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         raise PlannerError(f"--time-limit must be a finite number of seconds > 0, got {args.time_limit:g}")
     if not 0.0 <= args.mip_gap < 1.0:

@@ -36,6 +36,10 @@ class PlanTimeoutError(PlannerError):
         self.mip_gap = mip_gap
 
 
+class MPCInputError(PlannerError, ValueError):
+    """A configuration value or a solve() input of the MPC has the wrong shape, range or is not finite."""
+
+
 class PlanCheckError(PlannerError, ValueError):
     """A plan violates continuity, bounds, thrust limits or the impact law; lists every violation."""
 
@@ -45,5 +49,6 @@ class PlanCheckError(PlannerError, ValueError):
 
 
 PLANNER_ERRORS: tuple[type[ImpactEnvError], ...] = (
-    PlannerError, UnsupportedSpecError, SolverNotAvailableError, InfeasiblePlanError, PlanTimeoutError, PlanCheckError,
+    PlannerError, UnsupportedSpecError, SolverNotAvailableError, InfeasiblePlanError, PlanTimeoutError, MPCInputError,
+    PlanCheckError,
 )

@@ -260,5 +260,6 @@ def test_impact_velocity_noise_option_in_the_env():
     key = "ab"[side] + "_velocity_after"
     error = np.subtract(noisy[key], base[key])
     assert 0 < np.max(np.abs(error)) <= 0.03
-    with pytest.raises(EnvConfigError, match="impact_velocity_noise_mps must be a finite number >= 0"):
-        TransportEnv("throw_and_catch_exp", impact_velocity_noise_mps=-0.1)
+    for bad in (-0.1, 1.5, float("nan"), True):
+        with pytest.raises(EnvConfigError, match=r"impact_velocity_noise_mps must be a finite number in \[0, 1\]"):
+            TransportEnv("throw_and_catch_exp", impact_velocity_noise_mps=bad)

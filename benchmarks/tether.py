@@ -1,0 +1,142 @@
+"""Tether planners benchmark: the thesis's pipeline (z3) against the exact planner, and the plans flown.
+
+Per station: the MP3 decomposition's region count; the thesis pipeline's wall time (decomposition, extension,
+automaton, divide and conquer with z3, under the thesis's anchor rule and under line of sight), its pulls or why
+it found none; the exact planner's cold time (a fresh planner: visibility polygons, radial cells, the levels,
+the forward read) and warm time (the same planner again from the start: the levels are kept), its pulls, path
+length and travel time with k = 1, 2, 3 (pulling at w plus the attach waits, see planners/tether/plan.py) and
+the pulling time of the time-optimal refinement with k robots (planners/tether/timing.py, Eq. 5's model, with
+the share of its relaxed activations at 0 or 1); then
+the tether expert flying it once per fidelity level (success, robustness, closest approach to the goal centre,
+snags, attachments). The baseline of the exact planner's times is the z3 pipeline measured in the same run; the
+literature figure is the thesis's 13 minutes for its full automaton with dReach on "a simple problem".
+
+Timings on a shared machine are noisy (the load average is printed; the CPU seconds of the cold plan are
+this process's, less sensitive to the load than the wall time); compare within one run. Usage:
+
+    python benchmarks/tether.py [--stations L,T,...] [--repeats 3] [--z3-timeout 20] [--no-smt] [--episodes 50]
+
+The last table is the expert's success rate over ``--episodes`` seeded episodes per station under ``reel`` with
+the winches 10 % slower and 10 % faster than planned and the cargo starting up to 0.3 m from its start point.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+import numpy as np
+
+from impact_env.envs.tether import TetherEnv
+from impact_env.rollout import run_episode
+from impact_env.station import load_station, station_names
+from planners.errors import PlannerError
+from planners.tether.automaton import build_thesis_map
+from planners.tether.expert import TetherExpert
+from planners.tether.reachability import ReachabilityPlanner
+from planners.tether.smt import SmtConfig, plan_smt
+from planners.tether.timing import refine_timing
+
+
+def exact_times(station, repeats: int):
+    """Median wall and CPU (this process) seconds of a cold plan, and wall seconds of a warm one."""
+    cold, cold_cpu, warm, plan = [], [], [], None
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        planner = ReachabilityPlanner(station)
+        plan = planner.plan()
+        cold.append(time.perf_counter() - t0)
+        cold_cpu.append(time.process_time() - c0)
+        t0 = time.perf_counter()
+        planner.plan()
+        warm.append(time.perf_counter() - t0)
+    return statistics.median(cold), statistics.median(cold_cpu), statistics.median(warm), plan
+
+
+def smt_row(station, rule: str, timeout_s: float) -> str:
+    t0 = time.perf_counter()
+    try:
+        plan = plan_smt(station, SmtConfig(rule=rule, timeout_s=timeout_s))
+        plan.check(station)
+        return f"{time.perf_counter() - t0:.2f} s, {plan.switches} pulls"
+    except PlannerError as exc:
+        why = "timeouts" if "unknown)" in str(exc) and not str(exc).endswith(" 0 unknown)") else "no plan"
+        return f"{time.perf_counter() - t0:.2f} s, {why}"
+
+
+def flown(station, fidelity: str, seed: int = 0) -> dict:
+    env = TetherEnv(station, fidelity=fidelity)
+    expert = TetherExpert(station)
+    res = run_episode(env, expert, seed=seed)
+    gx, gy = station.goal_center_m
+    p = np.asarray(res.positions)[:, 0]
+    closest = float(np.min(np.hypot(p[:, 0] - gx, p[:, 1] - gy)))
+    info = res.final_info
+    env.close()
+    return {"success": res.success, "rho": res.robustness, "closest": closest, "snags": info["snags"],
+            "switches": info["switches"]}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--stations", default=",".join(station_names()))
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--z3-timeout", type=float, default=20.0, help="z3's limit per check (s)")
+    parser.add_argument("--no-smt", action="store_true", help="skip the z3 pipeline (fast run)")
+    parser.add_argument("--episodes", type=int, default=50, help="perturbed reel episodes per station (0 skips)")
+    args = parser.parse_args()
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; times are medians of {args.repeats}")
+    print("\n| station | regions | thesis pipeline, z3, region rule | z3, line-of-sight rule | exact cold s (CPU s) | "
+          "exact warm s | pulls | path m | travel s k=1 / 2 / 3 | refined pulling s k=1 / 2 / 3 (bang-bang %) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    plans = {}
+    for name in args.stations.split(","):
+        st = load_station(name)
+        regions = len(build_thesis_map(st).regions)
+        z_region = "skipped" if args.no_smt else smt_row(st, "region", args.z3_timeout)
+        z_sight = "skipped" if args.no_smt else smt_row(st, "line_of_sight", args.z3_timeout)
+        cold, cold_cpu, warm, plan = exact_times(st, args.repeats)
+        plans[name] = plan
+        times = " / ".join(f"{plan.travel_time_s(k):.0f}" for k in (1, 2, 3))
+        refined = [refine_timing(st, plan, k) for k in (1, 2, 3)]
+        timing = " / ".join(f"{r.total_s:.0f}" if r.status == "optimal" else "-" for r in refined)
+        timing += " (" + " / ".join(f"{100 * r.bang_bang_fraction:.0f}" for r in refined) + ")"
+        print(f"| {name} | {regions} | {z_region} | {z_sight} | {cold:.3f} ({cold_cpu:.3f}) | {warm:.4f} | "
+              f"{plan.switches} | {plan.path_length_m:.1f} | {times} | {timing} |", flush=True)
+    print("\nThe plans flown by the tether expert in pymunk (seed 0): success, robustness (m), closest approach to "
+          "the goal centre (m), snags, attachments")
+    print("\n| station | kinematic | reel | force |")
+    print("|---|---|---|---|")
+    for name in args.stations.split(","):
+        st = load_station(name)
+        cells = []
+        for fid in ("kinematic", "reel", "force"):
+            r = flown(st, fid)
+            cells.append(f"{'yes' if r['success'] else 'NO'}, {r['rho']:+.2f}, {r['closest']:.2f}, {r['snags']}, "
+                         f"{r['switches']}")
+        print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+    if args.episodes > 0:
+        print(f"\nThe expert under reel, {args.episodes} seeded episodes per cell, cargo start within 0.3 m of its "
+              "start point: success rate, mean attachments, mean robustness (m)")
+        print("\n| station | w 10 % slow | w 10 % fast |")
+        print("|---|---|---|")
+        for name in args.stations.split(","):
+            st = load_station(name)
+            cells = []
+            for factor in (0.9, 1.1):
+                env = TetherEnv(st, fidelity="reel", pull_speed_mps=st.pull_speed_mps * factor,
+                                initial_position_noise_m=0.3)
+                expert = TetherExpert(st)
+                runs = [run_episode(env, expert, seed=seed) for seed in range(args.episodes)]
+                wins = sum(r.success for r in runs)
+                cells.append(f"{wins}/{args.episodes} ({100 * wins / args.episodes:.0f} %), "
+                             f"{np.mean([r.final_info['switches'] for r in runs]):.1f}, "
+                             f"{np.mean([r.robustness for r in runs]):+.2f}")
+                env.close()
+            print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

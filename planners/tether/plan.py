@@ -1,0 +1,190 @@
+"""The tether plan: a sequence of pulls, each one robot reeling the cargo in toward one anchor.
+
+Both tether planners (the exact reachability planner and the thesis's z3 pipeline) write a :class:`TetherPlan`;
+the tether expert flies it and the plotter draws it. A pull is a straight segment from its start to its switch
+point toward its anchor (Eq. 5 with one active anchor). ``switches`` counts the attachments, as the tether
+environment's ``info["switches"]`` does.
+
+Travel time with ``k`` robots (:meth:`TetherPlan.travel_time_s`): the pulls at ``w`` plus the attach time
+``t_switch``: with ``k = 1`` the one robot re-attaches at every switch point and the cargo waits ``t_switch``
+there each time; with ``k >= 2`` the next robot attaches ``t_switch`` before the switch point while the current
+one still pulls, so only the first attachment is waited for. Pulling on several anchors at once can be faster
+still; :mod:`~planners.tether.timing` computes that.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from impact_env.station import Station
+from planners.errors import PlannerError
+from planners.tether.errors import TetherPlanCheckError
+
+FORMAT = "impact_env.tether_plan/1"
+
+
+@dataclass(frozen=True)
+class Pull:
+    """One robot pulls the cargo from ``start_m`` to ``end_m`` (m) toward anchor ``anchor`` (its index)."""
+
+    anchor: int
+    start_m: tuple[float, float]
+    end_m: tuple[float, float]
+
+    @property
+    def length_m(self) -> float:
+        return math.dist(self.start_m, self.end_m)
+
+    def to_dict(self) -> dict:
+        return {"anchor": self.anchor, "start_m": list(self.start_m), "end_m": list(self.end_m)}
+
+
+@dataclass
+class TetherPlan:
+    """Pulls from ``start_m`` into ``goal_box`` (xmin, xmax, ymin, ymax), at pulling speed ``pull_speed_mps``."""
+
+    station: str
+    start_m: tuple[float, float]
+    goal_box: tuple[float, float, float, float]
+    pulls: list[Pull]
+    pull_speed_mps: float
+    switch_time_s: float
+    method: str = ""
+    solve_time_s: float = 0.0
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def switches(self) -> int:
+        """Attachments (one per pull), as the environment counts them."""
+        return len(self.pulls)
+
+    @property
+    def anchors(self) -> list[int]:
+        return [p.anchor for p in self.pulls]
+
+    @property
+    def path_length_m(self) -> float:
+        return float(sum(p.length_m for p in self.pulls))
+
+    @property
+    def end_m(self) -> tuple[float, float]:
+        return self.pulls[-1].end_m if self.pulls else self.start_m
+
+    def waypoints(self) -> np.ndarray:
+        """(n_pulls + 1, 2): the start and every switch point."""
+        return np.array([self.start_m] + [p.end_m for p in self.pulls], dtype=float)
+
+    def travel_time_s(self, k: int = 1) -> float:
+        """Pulling plus waiting for attachments with ``k`` robots (see the module docstring), s."""
+        if k < 1:
+            raise PlannerError(f"k must be >= 1, got {k}")
+        if not self.pulls:
+            return 0.0
+        waits = len(self.pulls) if k == 1 else 1
+        return self.path_length_m / self.pull_speed_mps + waits * self.switch_time_s
+
+    # --------------------------------------------------------------------------------------- check
+    def check(self, station: Station, spacing_m: float = 0.01, tol_m: float = 1e-6) -> None:
+        """Sample every pull each ``spacing_m``: the disc inside the station, the anchor in line of sight, the
+        motion straight toward the anchor and outside its stop radius, pulls joined end to start, the last end in
+        the goal box. Raises :class:`TetherPlanCheckError` listing every violation."""
+        bad: list[str] = []
+        if station.name != self.station:
+            bad.append(f"the plan is for station {self.station!r}, not {station.name!r}")
+        x0, x1, y0, y1 = station.goal_box
+        here = self.start_m
+        for i, p in enumerate(self.pulls):
+            if not 0 <= p.anchor < station.n_anchors:
+                bad.append(f"pull {i}: anchor {p.anchor} does not exist (0..{station.n_anchors - 1})")
+                continue
+            if math.dist(here, p.start_m) > tol_m:
+                bad.append(f"pull {i} starts at {list(p.start_m)}, {math.dist(here, p.start_m):.3g} m from where the "
+                           f"previous one ended")
+            a = station.anchor_positions[p.anchor]
+            s, e = np.asarray(p.start_m), np.asarray(p.end_m)
+            d0, d1 = np.linalg.norm(a - s), np.linalg.norm(a - e)
+            side = abs((a[0] - s[0]) * (e[1] - s[1]) - (a[1] - s[1]) * (e[0] - s[0])) / max(d0, 1e-12)
+            if side > tol_m or d1 > d0 + tol_m:
+                bad.append(f"pull {i} does not move straight toward anchor {p.anchor} ({side:.3g} m off its line)")
+            if d1 < station.stop_radius_m - tol_m:
+                bad.append(f"pull {i} ends {d1:.3g} m from anchor {p.anchor}, inside its stop radius "
+                           f"{station.stop_radius_m} m")
+            n = max(2, int(math.ceil(p.length_m / spacing_m)) + 1)
+            for t in np.linspace(0.0, 1.0, n):
+                x = s + t * (e - s)
+                if not station.cargo_inside(x, tol_m=tol_m):
+                    bad.append(f"pull {i}: the cargo disc at {x.round(4).tolist()} is not inside the station")
+                    break
+                if not station.line_of_sight(x, [p.anchor])[0]:
+                    bad.append(f"pull {i}: anchor {p.anchor} is not in line of sight from {x.round(4).tolist()}")
+                    break
+            here = p.end_m
+        if not (x0 - tol_m <= here[0] <= x1 + tol_m and y0 - tol_m <= here[1] <= y1 + tol_m):
+            bad.append(f"the plan ends at {list(here)}, outside the goal box {list(station.goal_box)}")
+        if bad:
+            raise TetherPlanCheckError(bad)
+
+    # ------------------------------------------------------------------------------------------ JSON
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": FORMAT, "station": self.station, "start_m": list(self.start_m),
+                "goal_box": list(self.goal_box), "pull_speed_mps": self.pull_speed_mps,
+                "switch_time_s": self.switch_time_s, "method": self.method, "solve_time_s": self.solve_time_s,
+                "pulls": [p.to_dict() for p in self.pulls], "stats": _jsonable(self.stats),
+                "summary": {"switches": self.switches, "path_length_m": self.path_length_m,
+                            "travel_time_s": {str(k): self.travel_time_s(k) for k in (1, 2, 3)}}}
+
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.to_dict(), indent=2))
+        return path
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TetherPlan:
+        if data.get("format") != FORMAT:
+            raise PlannerError(f"not a tether plan: format is {data.get('format')!r}, expected {FORMAT!r}")
+        try:
+            pulls = [Pull(anchor=int(p["anchor"]), start_m=tuple(map(float, p["start_m"])),
+                          end_m=tuple(map(float, p["end_m"]))) for p in data["pulls"]]
+            return cls(station=str(data["station"]), start_m=tuple(map(float, data["start_m"])),
+                       goal_box=tuple(map(float, data["goal_box"])), pulls=pulls,
+                       pull_speed_mps=float(data["pull_speed_mps"]), switch_time_s=float(data["switch_time_s"]),
+                       method=str(data.get("method", "")), solve_time_s=float(data.get("solve_time_s", 0.0)),
+                       stats=dict(data.get("stats", {})))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise PlannerError(f"malformed tether plan: {exc!r}") from None
+
+    @classmethod
+    def load(cls, path: str | Path) -> TetherPlan:
+        path = Path(path)
+        if not path.is_file():
+            raise PlannerError(f"plan file {str(path)!r} does not exist")
+        try:
+            data = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise PlannerError(f"{path}: not valid JSON: {exc}") from None
+        return cls.from_dict(data)
+
+
+def is_tether_plan_file(path: str | Path) -> bool:
+    """Whether ``path`` holds a tether plan (the expert's dispatch test)."""
+    try:
+        return json.loads(Path(path).read_text()).get("format") == FORMAT
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    return value

@@ -1,0 +1,347 @@
+"""The thesis's planner (Sec. 4.4) with an SMT solver that installs from the package index: z3.
+
+The thesis hands its hybrid automaton to dReach / dReal, which cannot be installed today. With one active anchor
+the flow of Eq. 5 is a straight line toward the anchor at speed ``w``, so a mode's trajectory needs no ODE: a pull
+from ``p`` ends at a point ``q`` of the segment from ``p`` toward the anchor ``a``, ``cross(q - p, a - p) = 0``,
+``0 <= (q - p) . (a - p) <= |a - p|^2``, outside the stop radius ``|q - a| >= s``: polynomial constraints, which
+z3 decides exactly over the reals (nlsat). Only single-anchor modes are encoded: extra robots add speed, not
+reach (see :mod:`~planners.tether.reachability`); the multi-anchor modes are in the ``.drh`` export.
+
+- :func:`plan_smt` is the thesis's divide and conquer: paths of the region graph from the start's region to a
+  goal region, shortest first (networkx); along a path one sub-problem per region, "take the cargo from the
+  current point into the overlap with the next region" (the goal box in the last), solved with 0, 1, 2, ...
+  pulls up to a bound; its end point starts the next sub-problem; a sub-problem without a solution rejects the
+  path and the next path is tried. Like the thesis's, it is incomplete: an early sub-problem may pick an end
+  point from which the rest fails, and the bound limits the pulls per region.
+- :func:`bounded_search` is the whole automaton as one bounded model check: ``n`` pulls, each a straight pull
+  toward one anchor that may cross several regions (split where it crosses), for ``n = 0, 1, 2, ...``. Its
+  smallest satisfiable ``n`` is the fewest pulls, to compare with the exact planner; ``unsat`` up to the bound
+  is a bounded answer, not a proof for longer plans.
+
+Both enforce line of sight from the start of each pull to its anchor (a disjunction over the triangles of the
+anchor's visibility polygon in the region; the thesis assumed that an anchor of the region is visible from all
+of it, which is not true near notches). ``rule`` picks the anchors a region's modes may use (see
+:mod:`~planners.tether.automaton`): the thesis's ``"region"`` or ``"line_of_sight"``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import networkx as nx
+import numpy as np
+import shapely
+from shapely.geometry import Point, Polygon
+
+from impact_env.station import Station
+from planners.errors import PlannerError
+from planners.tether.automaton import RULES, ThesisMap, build_thesis_map, half_planes
+from planners.tether.geometry import AREA_EPS_M2, clean, polygons_of, visibility_polygon
+from planners.tether.plan import Pull, TetherPlan
+
+
+def _z3():
+    try:
+        import z3
+    except ImportError:  # pragma: no cover - make test installs it
+        from planners.errors import SolverNotAvailableError
+
+        raise SolverNotAvailableError("the thesis pipeline needs z3: pip install 'impact_env[tether]' "
+                                      "(the z3-solver package)") from None
+    return z3
+
+
+class SmtNoPlanError(PlannerError):
+    """The SMT pipeline found no plan within its bounds (not a proof that none exists)."""
+
+    def __init__(self, message: str, stats: dict | None = None) -> None:
+        super().__init__(message)
+        self.stats = dict(stats or {})
+
+
+@dataclass(frozen=True)
+class SmtConfig:
+    """Options of the z3 pipeline.
+
+    Attributes:
+        rule: ``"region"`` (the thesis's anchors of a region) or ``"line_of_sight"``.
+        max_pulls_per_region: the sub-problems' bound (divide and conquer).
+        max_paths: region-graph paths tried before giving up.
+        timeout_s: z3's limit per check; a check that hits it counts as "no plan" and is reported.
+        clearance_m, stop_margin_m, goal_margin_m: as the exact planner's, so that both solve the same problem.
+        target_margin_m: shrinks each sub-problem's transition zone, so that the next sub-problem starts inside
+            its region rather than on its border.
+    """
+
+    rule: str = "region"
+    max_pulls_per_region: int = 3
+    max_paths: int = 8
+    timeout_s: float = 60.0
+    clearance_m: float = 0.02
+    stop_margin_m: float = 0.1
+    target_margin_m: float = 0.05
+    goal_margin_m: float = 0.15
+
+    def __post_init__(self) -> None:
+        if self.rule not in RULES:
+            raise PlannerError(f"SmtConfig.rule must be one of {RULES}, got {self.rule!r}")
+        if self.max_pulls_per_region < 1 or self.max_paths < 1:
+            raise PlannerError("SmtConfig.max_pulls_per_region and max_paths must be >= 1")
+        if not self.timeout_s > 0:
+            raise PlannerError(f"SmtConfig.timeout_s must be > 0, got {self.timeout_s}")
+
+
+@dataclass
+class SmtStats:
+    checks: int = 0
+    sat: int = 0
+    unsat: int = 0
+    unknown: int = 0
+    solve_s: float = 0.0
+    paths_tried: int = 0
+    log: list[str] = field(default_factory=list)
+
+
+def _val(model, v) -> float:
+    z3 = _z3()
+    e = model.eval(v, model_completion=True)
+    if z3.is_rational_value(e):
+        return float(Fraction(e.numerator_as_long(), e.denominator_as_long()))
+    return float(Fraction(e.approx(30).as_fraction()))
+
+
+def _in_rows(z3, x, y, rows, slack: float = 0.0):
+    return z3.And([a * x + b * y <= c + slack for a, b, c in rows])
+
+
+def _triangles(geom) -> list[list[tuple[float, float, float]]]:
+    """Half-plane rows of the triangles of a polygonal set (shapely's constrained Delaunay triangulation)."""
+    out = []
+    for p in polygons_of(geom):
+        for t in shapely.get_parts(shapely.constrained_delaunay_triangles(p)):
+            if t.area > AREA_EPS_M2:
+                out.append(half_planes(t))
+    return out
+
+
+class _Encoder:
+    """Shared pieces of both encodings: anchors' visible triangles per region, the pull constraints."""
+
+    def __init__(self, tmap: ThesisMap, config: SmtConfig) -> None:
+        self.tmap, self.config = tmap, config
+        self.st = tmap.station
+        self.stop_m = self.st.stop_radius_m + config.stop_margin_m
+        self._vis: dict[int, object] = {}
+        self._tri: dict[tuple[int, int], list] = {}
+        self.stats = SmtStats()
+
+    def visible_triangles(self, region: int, anchor: int) -> list | None:
+        """Triangles of the part of ``region`` that sees ``anchor``; None if the whole region sees it."""
+        key = (region, anchor)
+        if key not in self._tri:
+            if anchor not in self._vis:
+                self._vis[anchor] = visibility_polygon(self.st, anchor)
+            poly = self.tmap.regions[region].polygon
+            seen = clean(poly.intersection(self._vis[anchor]))
+            self._tri[key] = None if poly.difference(seen).area <= AREA_EPS_M2 else _triangles(seen)
+        return self._tri[key]
+
+    def pull(self, z3, px, py, qx, qy, anchor: int):
+        """A straight pull from (px, py) to (qx, qy) toward ``anchor``, ending outside the stop radius."""
+        ax, ay = map(float, self.st.anchor_positions[anchor])
+        dx, dy = qx - px, qy - py
+        ux, uy = ax - px, ay - py
+        return z3.And(dx * uy - dy * ux == 0, dx * ux + dy * uy >= 0, dx * ux + dy * uy <= ux * ux + uy * uy,
+                      (qx - ax) * (qx - ax) + (qy - ay) * (qy - ay) >= self.stop_m ** 2)
+
+    def sees(self, z3, x, y, region: int, anchor: int):
+        tri = self.visible_triangles(region, anchor)
+        if tri is None:
+            return z3.BoolVal(True)
+        if not tri:
+            return z3.BoolVal(False)
+        return z3.Or([_in_rows(z3, x, y, rows) for rows in tri])
+
+    def check(self, solver, what: str) -> str:
+        t0 = time.perf_counter()
+        result = str(solver.check())
+        dt = time.perf_counter() - t0
+        self.stats.checks += 1
+        self.stats.solve_s += dt
+        setattr(self.stats, result if result in ("sat", "unsat") else "unknown",
+                getattr(self.stats, result if result in ("sat", "unsat") else "unknown") + 1)
+        self.stats.log.append(f"{what}: {result} in {dt:.3f} s")
+        return result
+
+
+def goal_zone(station: Station, margin: float) -> Polygon:
+    """The goal box shrunk by ``margin`` (the box itself if that leaves nothing), as the exact planner's."""
+    x0, x1, y0, y1 = station.goal_box
+    if x1 - x0 > 2 * margin and y1 - y0 > 2 * margin:
+        return shapely.box(x0 + margin, y0 + margin, x1 - margin, y1 - margin)
+    return shapely.box(x0, y0, x1, y1)
+
+
+def _target(tmap: ThesisMap, path: list[int], i: int, config: SmtConfig) -> Polygon:
+    region = tmap.regions[path[i]].polygon
+    if i + 1 < len(path):
+        zone = clean(tmap.overlap(path[i], path[i + 1]))
+        margin = config.target_margin_m
+    else:
+        return clean(region.intersection(goal_zone(tmap.station, config.goal_margin_m)))
+    zone = clean(zone)
+    if zone.is_empty:
+        return zone
+    inner = clean(zone.buffer(-margin, join_style="mitre"))
+    return inner if not inner.is_empty else zone
+
+
+def _solve_region(enc: _Encoder, region: int, start: np.ndarray, target: Polygon, n: int):
+    """Sub-problem of Sec. 4.4: ``n`` pulls inside ``region`` from ``start`` into ``target``; the pulls or None."""
+    z3 = _z3()
+    anchors = enc.tmap.region_anchors[region]
+    rows = half_planes(enc.tmap.regions[region].polygon)
+    trows = half_planes(target)
+    s = z3.SolverFor("QF_NRA")
+    s.set("timeout", int(1000 * enc.config.timeout_s))
+    xs = [z3.RealVal(float(start[0]))] + [z3.Real(f"x{j}") for j in range(1, n + 1)]
+    ys = [z3.RealVal(float(start[1]))] + [z3.Real(f"y{j}") for j in range(1, n + 1)]
+    choice = [z3.Int(f"c{j}") for j in range(1, n + 1)]
+    for j in range(1, n + 1):
+        s.add(_in_rows(z3, xs[j], ys[j], rows))
+        options = []
+        for i, a in enumerate(anchors):
+            options.append(z3.And(choice[j - 1] == i, enc.pull(z3, xs[j - 1], ys[j - 1], xs[j], ys[j], a),
+                                  enc.sees(z3, xs[j - 1], ys[j - 1], region, a)))
+        s.add(z3.Or(options) if options else z3.BoolVal(False))
+    s.add(_in_rows(z3, xs[n], ys[n], trows))
+    if enc.check(s, f"region {region}, {n} pulls") != "sat":
+        return None
+    m = s.model()
+    pts = [np.asarray(start, float)] + [np.array([_val(m, xs[j]), _val(m, ys[j])]) for j in range(1, n + 1)]
+    return [Pull(anchors[m.eval(choice[j - 1]).as_long()], tuple(pts[j - 1]), tuple(pts[j])) for j in range(1, n + 1)]
+
+
+def plan_smt(station: Station, config: SmtConfig | None = None, tmap: ThesisMap | None = None) -> TetherPlan:
+    """The thesis's divide and conquer along region-graph paths (see the module docstring).
+
+    Raises:
+        SmtNoPlanError: no path gave a plan within the bounds (with the checks' log in ``stats``).
+    """
+    config = config or SmtConfig()
+    t0 = time.perf_counter()
+    tmap = tmap or build_thesis_map(station, config.rule, config.clearance_m)
+    enc = _Encoder(tmap, config)
+    start = np.asarray(station.cargo.start_m, float)
+    sources = tmap.regions_containing(start)
+    goals = tmap.goal_regions()
+    paths = []
+    for s in sources:
+        for g in goals:
+            try:
+                paths.extend(p for _, p in zip(range(config.max_paths), nx.shortest_simple_paths(tmap.graph, s, g)))
+            except nx.NetworkXNoPath:
+                continue
+    paths = sorted(paths, key=len)[: config.max_paths]
+    for path in paths:
+        enc.stats.paths_tried += 1
+        here, pulls, ok = start, [], True
+        for i, region in enumerate(path):
+            target = _target(tmap, path, i, config)
+            if target.is_empty:
+                ok = False
+                break
+            if target.distance(Point(*here)) < 1e-12:
+                continue  # already in the transition zone: zero pulls
+            for n in range(1, config.max_pulls_per_region + 1):
+                got = _solve_region(enc, region, here, target, n)
+                if got is not None:
+                    pulls.extend(got)
+                    here = np.asarray(got[-1].end_m)
+                    break
+            else:
+                ok = False
+                enc.stats.log.append(f"path {path}: region {region} has no solution with up to "
+                                     f"{config.max_pulls_per_region} pulls")
+                break
+        if ok:
+            return TetherPlan(station=station.name, start_m=tuple(start), goal_box=station.goal_box, pulls=pulls,
+                              pull_speed_mps=station.pull_speed_mps, switch_time_s=station.switch_time_s,
+                              method=f"smt-divide-and-conquer ({config.rule} rule)",
+                              solve_time_s=time.perf_counter() - t0,
+                              stats={"path": path, "regions": len(tmap.regions), "checks": enc.stats.checks,
+                                     "z3_s": enc.stats.solve_s, "unknown": enc.stats.unknown})
+    raise SmtNoPlanError(f"station {station.name!r}: the thesis pipeline ({config.rule} rule) found no plan on "
+                         f"{len(paths)} region path(s) with up to {config.max_pulls_per_region} pulls per region "
+                         f"({enc.stats.checks} z3 checks, {enc.stats.unknown} unknown)",
+                         stats={"log": enc.stats.log, "checks": enc.stats.checks})
+
+
+@dataclass
+class BoundedResult:
+    """The outcome of :func:`bounded_search`: the fewest pulls found (or None), the plan, and per bound the
+    answer (``"sat"``, ``"unsat"`` or ``"unknown"`` on a timeout)."""
+
+    pulls: int | None
+    plan: TetherPlan | None
+    answers: dict[int, str]
+    solve_s: float
+
+
+def bounded_search(station: Station, max_pulls: int = 4, config: SmtConfig | None = None,
+                   tmap: ThesisMap | None = None) -> BoundedResult:
+    """The whole automaton as one bounded model check with ``n = 0 .. max_pulls`` single-anchor pulls."""
+    z3 = _z3()
+    config = config or SmtConfig(rule="line_of_sight")
+    t0 = time.perf_counter()
+    tmap = tmap or build_thesis_map(station, config.rule, config.clearance_m)
+    enc = _Encoder(tmap, config)
+    regions = [r.index for r in tmap.regions]
+    m_split = len(regions)  # a straight pull crosses each convex region at most once
+    goal = clean(goal_zone(station, config.goal_margin_m).intersection(
+        shapely.union_all([r.polygon for r in tmap.regions])))
+    goal_rows = half_planes(goal) if goal.geom_type == "Polygon" else []
+    start = np.asarray(station.cargo.start_m, float)
+    answers: dict[int, str] = {}
+    if goal_rows and goal.distance(Point(*start)) < 1e-12:
+        return BoundedResult(0, None, {0: "sat"}, time.perf_counter() - t0)
+    answers[0] = "unsat"
+    for n in range(1, max_pulls + 1):
+        s = z3.SolverFor("QF_NRA")
+        s.set("timeout", int(1000 * config.timeout_s))
+        px = [z3.RealVal(float(start[0]))] + [z3.Real(f"x{j}") for j in range(1, n + 1)]
+        py = [z3.RealVal(float(start[1]))] + [z3.Real(f"y{j}") for j in range(1, n + 1)]
+        choice = [z3.Int(f"c{j}") for j in range(1, n + 1)]
+        for j in range(1, n + 1):
+            mus = [z3.RealVal(0)] + [z3.Real(f"mu{j}_{i}") for i in range(1, m_split)] + [z3.RealVal(1)]
+            for i in range(1, m_split):
+                s.add(mus[i - 1] <= mus[i], mus[i] <= 1)
+            qx = [px[j - 1] + mus[i] * (px[j] - px[j - 1]) for i in range(m_split + 1)]
+            qy = [py[j - 1] + mus[i] * (py[j] - py[j - 1]) for i in range(m_split + 1)]
+            options = []
+            for a in range(station.n_anchors):
+                allowed = [r for r in regions if a in tmap.region_anchors[r]]
+                if not allowed:
+                    continue
+                pieces = [z3.Or([z3.And(_in_rows(z3, qx[i], qy[i], half_planes(tmap.regions[r].polygon)),
+                                        _in_rows(z3, qx[i + 1], qy[i + 1], half_planes(tmap.regions[r].polygon)))
+                                 for r in allowed]) for i in range(m_split)]
+                sight = z3.Or([z3.And(_in_rows(z3, px[j - 1], py[j - 1], half_planes(tmap.regions[r].polygon)),
+                                      enc.sees(z3, px[j - 1], py[j - 1], r, a)) for r in allowed])
+                options.append(z3.And(choice[j - 1] == a, enc.pull(z3, px[j - 1], py[j - 1], px[j], py[j], a),
+                                      sight, *pieces))
+            s.add(z3.Or(options) if options else z3.BoolVal(False))
+        s.add(_in_rows(z3, px[n], py[n], goal_rows) if goal_rows else z3.BoolVal(False))
+        answers[n] = enc.check(s, f"bounded search, {n} pulls")
+        if answers[n] == "sat":
+            m = s.model()
+            pts = [start] + [np.array([_val(m, px[j]), _val(m, py[j])]) for j in range(1, n + 1)]
+            pulls = [Pull(m.eval(choice[j - 1]).as_long(), tuple(pts[j - 1]), tuple(pts[j])) for j in range(1, n + 1)]
+            plan = TetherPlan(station=station.name, start_m=tuple(start), goal_box=station.goal_box, pulls=pulls,
+                              pull_speed_mps=station.pull_speed_mps, switch_time_s=station.switch_time_s,
+                              method=f"smt-bounded ({config.rule} rule)", solve_time_s=time.perf_counter() - t0,
+                              stats={"answers": answers, "z3_s": enc.stats.solve_s})
+            return BoundedResult(n, plan, answers, time.perf_counter() - t0)
+    return BoundedResult(None, None, answers, time.perf_counter() - t0)
