@@ -28,7 +28,7 @@ delta, the half-widths and the feedback gains enter linearly. The only conservat
 (Eq. 3) taken at each impact, as in the paper. The guarantee is checked by sampling in
 ``tests/test_ir_planner.py``.
 
-Not as the paper's code does it (docs/background.md): the scenario's restitution in the law (not e = 1),
+Not as the paper's code does it (docs/background.md#impact-robust): the scenario's restitution in the law (not e = 1),
 a position spread that no impact removes (an impact resets only the velocity spread; the position spread
 shrinks only through feedback and time), thrust limits, big-Ms from bounds, and no forced durations.
 
