@@ -263,18 +263,19 @@ def extract_ir_plan(scenario: Scenario, built: IRModel, x: np.ndarray, solver: s
     plan = Plan(scenario=scenario.name, planner="ir", robustness=0.0, bodies=bodies, impacts=impacts,
                 solver=solver, solve_time_s=solve_time_s, build_time_s=built.build_time_s, mip_gap=float(mip_gap),
                 stats=stats, delta_mps=float(built.delta.value(x)), funnels=funnels, copies=copies)
-    # the MILP bounds half-widths from below only: away from impact knots (where the copies fix the box)
-    # record the exact propagated spread
+    # the MILP bounds half-widths from below only: record the exact propagated spread, except for the box
+    # the copies were built for at each impact (position at the impact knot, velocity on the interval before)
     from planners.funnels import feedback, propagate
 
     fb = feedback(plan, scenario)
     for name, funnel in funnels.items():
         hp, hv = propagate(funnel, plan.delta_mps, fb[name])
-        keep = np.zeros(len(hp), dtype=bool)
-        keep[list(fb[name])] = True
-        funnel.position_halfwidth_m = np.where(keep[:, None], funnel.position_halfwidth_m,
+        at_impact = np.zeros(len(hp), dtype=bool)
+        at_impact[list(fb[name])] = True
+        funnel.position_halfwidth_m = np.where(at_impact[:, None], funnel.position_halfwidth_m,
                                                np.minimum(funnel.position_halfwidth_m, hp))
-        funnel.velocity_halfwidth_mps = np.minimum(funnel.velocity_halfwidth_mps, hv)
+        funnel.velocity_halfwidth_mps = np.where(at_impact[1:, None], funnel.velocity_halfwidth_mps,
+                                                 np.minimum(funnel.velocity_halfwidth_mps, hv))
     plan.robustness = nominal_robustness(scenario, plan)
     return plan
 
