@@ -4,8 +4,8 @@ A station name or file is dispatched here by ``train``, ``bench`` and the sb3 co
 :class:`~impact_env.envs.tether.TetherEnv` (a MultiDiscrete action: one command per robot, so PPO, not SAC),
 the hyperparameters are keyed by the station's env id (``impact_env/TetherL-v0``; a user station takes the L
 map's), the expert is the tether expert with a plan of the exact planner. The impact world's options (thrust
-noise, fuel penalty, restitution) do not apply; the tether env's own are ``fidelity`` and the initial position
-noise.
+noise, fuel penalty, restitution, post-impact velocity noise) do not apply; the tether env's own are
+``fidelity`` and the initial position noise.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Any
 from impact_env.errors import ImpactEnvError
 
 DEFAULT_ENV_ID = "impact_env/TetherL-v0"
-IMPACT_ONLY = {"thrust_noise": 0.0, "fuel_penalty": 0.0, "restitution": None}
+IMPACT_ONLY = {"thrust_noise": 0.0, "fuel_penalty": 0.0, "restitution": None, "impact_velocity_noise_mps": 0.0}
 
 
 def is_station(name: str) -> bool:

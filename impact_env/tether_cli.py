@@ -36,7 +36,8 @@ def run_station(args: argparse.Namespace) -> int:
 
     st = load_station(args.scenario)
     for flag, value, default in (("--restitution", args.restitution, None), ("--thrust-noise", args.thrust_noise, 0.0),
-                                 ("--fuel-penalty", args.fuel_penalty, 0.0)):
+                                 ("--fuel-penalty", args.fuel_penalty, 0.0),
+                                 ("--impact-velocity-noise-mps", args.impact_velocity_noise_mps, 0.0)):
         if value != default:
             raise ImpactEnvError(f"{flag} applies to impact scenarios, not to station {st.name!r}")
     if args.reward_mode not in ("dense", "sparse"):

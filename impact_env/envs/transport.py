@@ -89,12 +89,12 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     * ``thrust_noise``: standard deviation of multiplicative thrust noise (0.05 = 5 %), re-clipped to the limits
       (at most 10).
     * ``initial_position_noise_m``: objects start uniformly within this radius (m) of their scenario position.
-    * ``impact_velocity_noise_mps``: after each robot-object impact, a uniform error in [-this, this] m/s per axis
-      on the object's velocity, drawn from the reset seed (at most 1; 0, the default, leaves the dynamics as
-      they were, so the version stays v0). The error an impact-robust plan's delta tolerates.
     * ``render_mode``: ``"rgb_array"`` (an ``(H, W, 3)`` uint8 frame per ``render()``), ``"human"`` (a pygame
       window) or None.
     * ``render_width_px``: width of the rendered frame; the height follows the world's aspect ratio.
+    * ``impact_velocity_noise_mps``: after each robot-object impact, a uniform error in [-this, this] m/s per axis
+      on the object's velocity, drawn from the reset seed (at most 1; 0, the default, leaves the dynamics as
+      they were, so the version stays v0). The error an impact-robust plan's delta tolerates.
 
     ## Version history
     * v0: initial release (impact_env 0.1.0). In 0.2.0 the ids got ``max_episode_steps``, ``scenario`` became

@@ -68,6 +68,8 @@ class TransportParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
     * ``max_cycles``: truncate after this many steps (None: only the horizon ends an episode).
     * ``render_mode``: ``"rgb_array"``, ``"human"`` or None.
     * ``render_width_px``: width of the rendered frame.
+    * ``impact_velocity_noise_mps``: after each robot-object impact, a uniform error in [-this, this] m/s per
+      axis on the object's velocity, drawn from the reset seed (see ``TransportEnv``).
 
     ## Metadata
     ``metadata["name"]`` is ``transport_<scenario>_v0`` (e.g. ``transport_corridor_v0``), so logs and
@@ -183,25 +185,30 @@ class TransportParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
 def parallel_env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
                  restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
                  max_cycles: int | None = None, render_mode: str | None = None,
-                 render_width_px: int = 600, **unknown: Any) -> TransportParallelEnv:
+                 render_width_px: int = 600, impact_velocity_noise_mps: float = 0.0,
+                 **unknown: Any) -> TransportParallelEnv:
     """The ParallelEnv; the arguments of :class:`TransportParallelEnv`."""
     return TransportParallelEnv(scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
-                                initial_position_noise_m, max_cycles, render_mode, render_width_px, **unknown)
+                                initial_position_noise_m, max_cycles, render_mode, render_width_px,
+                                impact_velocity_noise_mps, **unknown)
 
 
 def raw_env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
             restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
-            max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600, **unknown: Any):
+            max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600,
+            impact_velocity_noise_mps: float = 0.0, **unknown: Any):
     """The AEC form without the order-enforcing wrapper; the arguments of :class:`TransportParallelEnv`."""
     return parallel_to_aec_wrapper(parallel_env(scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
                                                 initial_position_noise_m, max_cycles, render_mode,
-                                                render_width_px, **unknown))
+                                                render_width_px, impact_velocity_noise_mps, **unknown))
 
 
 def env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
         restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
-        max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600, **unknown: Any):
+        max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600,
+        impact_velocity_noise_mps: float = 0.0, **unknown: Any):
     """The AEC form, order-enforced (what ``pettingzoo.test.api_test`` expects); the arguments of
     :class:`TransportParallelEnv`."""
     return OrderEnforcingWrapper(raw_env(scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
-                                         initial_position_noise_m, max_cycles, render_mode, render_width_px, **unknown))
+                                         initial_position_noise_m, max_cycles, render_mode, render_width_px,
+                                         impact_velocity_noise_mps, **unknown))
