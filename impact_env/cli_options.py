@@ -89,6 +89,9 @@ def add_transport_options(p: argparse.ArgumentParser, reward_modes: tuple[str, .
                    help="standard deviation of multiplicative thrust noise (0.05 = 5%%)")
     p.add_argument("--initial-position-noise-m", type=float, default=0.0, metavar="R",
                    help="objects (the cargo, for a station) start uniformly within this radius (m) of their position")
+    p.add_argument("--impact-velocity-noise-mps", type=float, default=0.0, metavar="M",
+                   help="impact scenarios only: a uniform error in [-M, M] m/s per axis on an object's velocity "
+                        "after each robot-object impact")
 
 
 def add_tether_options(p: argparse.ArgumentParser) -> None:
@@ -107,4 +110,5 @@ def add_tether_options(p: argparse.ArgumentParser) -> None:
 def transport_options(args: argparse.Namespace) -> dict[str, Any]:
     """``TransportEnv`` keywords from the parsed options."""
     return {"reward_mode": args.reward_mode, "fuel_penalty": args.fuel_penalty, "restitution": args.restitution,
-            "thrust_noise": args.thrust_noise, "initial_position_noise_m": args.initial_position_noise_m}
+            "thrust_noise": args.thrust_noise, "initial_position_noise_m": args.initial_position_noise_m,
+            "impact_velocity_noise_mps": args.impact_velocity_noise_mps}

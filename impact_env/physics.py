@@ -10,7 +10,11 @@ Design choices (each measured or taken from docs/background.md):
   ``sqrt(e)`` and every pair, body-body or body-wall, bounces with exactly the scenario's ``e``;
 - the collision slop (allowed overlap) is 0.1 by default, half a disc radius here; it is set to 0.1 mm;
 - every contact is logged as an :class:`ImpactEvent` from pymunk's begin to separate callbacks, summing
-  ``arbiter.total_impulse`` over all the steps the contact lasts.
+  ``arbiter.total_impulse`` over all the steps the contact lasts;
+- optional post-impact velocity noise (``impact_velocity_noise_mps``): when a robot-object contact ends, the
+  object's velocity gets a uniform error in [-noise, noise] on each axis, drawn from the episode's random
+  generator; the logged "after" velocities include it. This is the error the impact-robust planner's delta
+  bounds, so its guarantee can be tested in the simulator directly.
 
 Speed: pymunk's Python properties (and a typing mixin's ``__setattr__``) cost more than the physics itself
 at this size, so the substep loop calls the chipmunk functions that those properties wrap
@@ -108,6 +112,8 @@ def _on_post_solve(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -
 def _on_separate(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:
     c = world._open.pop(arbiter.shapes, None)
     if c is not None:
+        if world.impact_velocity_noise_mps > 0.0:
+            world._perturb_object(c)
         world._closed.append(_close(c, world.time_s))
 
 
@@ -128,13 +134,25 @@ class World:
         restitution: override of the scenario's restitution (model-mismatch studies); default the scenario's.
         initial_positions_m: optional name -> (x, y) overriding bodies' initial positions.
         fast: drive pymunk through its C functions in the substep loop (same results, ~3x faster).
+        impact_velocity_noise_mps: when a robot-object contact ends, add a uniform error in [-this, this]
+            (m/s) on each axis to the object's velocity, drawn from ``rng`` (required when > 0).
+        rng: the random generator of the noise (the environment passes its reset-seeded generator).
 
     Bodies are ordered as ``scenario.bodies`` (robots, then objects). Robot inputs are body-frame forces
     (N) and torques (N m), held constant over a control period of ``scenario.substeps`` physics steps.
     """
 
     def __init__(self, scenario: Scenario, restitution: float | None = None,
-                 initial_positions_m: Mapping[str, tuple[float, float]] | None = None, fast: bool = True) -> None:
+                 initial_positions_m: Mapping[str, tuple[float, float]] | None = None, fast: bool = True,
+                 impact_velocity_noise_mps: float = 0.0, rng: Any = None) -> None:
+        if not (math.isfinite(impact_velocity_noise_mps) and impact_velocity_noise_mps >= 0.0):
+            raise ValueError(f"impact_velocity_noise_mps must be a finite number >= 0, got {impact_velocity_noise_mps}")
+        if impact_velocity_noise_mps > 0.0 and rng is None:
+            raise ValueError("impact_velocity_noise_mps > 0 needs rng, a numpy random Generator")
+        self.impact_velocity_noise_mps = float(impact_velocity_noise_mps)
+        self._rng = rng
+        self._robot_names = {r.name for r in scenario.robots}
+        self._object_names = {o.name for o in scenario.objects}
         self.scenario = scenario
         self.restitution = scenario.restitution if restitution is None else float(restitution)
         self.dt_s = scenario.physics_dt_s
@@ -195,6 +213,19 @@ class World:
     @property
     def time_s(self) -> float:
         return self.n_substeps_done * self.dt_s
+
+    def _perturb_object(self, c: _Contact) -> None:
+        """The post-impact velocity error of a robot-object contact that just ended (see the class)."""
+        if c.a in self._robot_names and c.b in self._object_names:
+            body = c.body_b
+        elif c.b in self._robot_names and c.a in self._object_names:
+            body = c.body_a
+        else:
+            return
+        noise = self.impact_velocity_noise_mps
+        ex, ey = self._rng.uniform(-noise, noise, 2)
+        v = body.velocity
+        body.velocity = (v.x + float(ex), v.y + float(ey))
 
     def step(self, wrenches: Sequence[tuple[float, float, float]]) -> list[ImpactEvent]:
         """Advance one control period with each robot's body-frame (Fx, Fy, torque) held constant.

@@ -62,6 +62,16 @@ class Body:
 
 
 @dataclass(frozen=True)
+class FinalBox:
+    """How far an object's final state may lie from its planned one (per-axis half-widths): the terminal
+    condition of the impact-robust planner (``[final_box]`` in the scenario file)."""
+
+    object: str
+    position_m: tuple[float, float]
+    velocity_mps: tuple[float, float]
+
+
+@dataclass(frozen=True)
 class Scenario:
     """Everything that defines one transport task. Build with :func:`load_scenario`.
 
@@ -84,8 +94,17 @@ class Scenario:
     bezier_segments: dict[str, int] = field(default_factory=dict, hash=False)  # compared, not hashed (a dict)
     planner_intervals: int | None = None  # time-grid intervals of the offline planner
     planner_robot_degree: int | None = None  # degree of the robots' Bezier curves in the planner
+    planner_copy_intervals: int | None = None  # impact-robust planner: intervals a robot's copies may differ
+    final_boxes: tuple[FinalBox, ...] = ()  # [final_box]: per object, for the impact-robust planner
     source: str = ""
     _formula: Any = field(default=None, init=False, repr=False, compare=False, hash=False)
+
+    def final_box(self, name: str) -> FinalBox | None:
+        """The ``[final_box]`` entry of object ``name``, or None if the file gives none."""
+        for box in self.final_boxes:
+            if box.object == name:
+                return box
+        return None
 
     @property
     def bodies(self) -> tuple[Body, ...]:
@@ -355,7 +374,15 @@ def _build(data: dict, source: str) -> Scenario:
     degree = planner.get("robot_degree", None, kind="int")
     if degree is not None and not MIN_ROBOT_DEGREE <= degree <= MAX_ROBOT_DEGREE:
         raise ScenarioError(f"planner.robot_degree must be in {MIN_ROBOT_DEGREE}..{MAX_ROBOT_DEGREE}, got {degree}")
+    copy_intervals = planner.get("copy_intervals", None, kind="int")
+    if copy_intervals is not None and not 1 <= copy_intervals <= (intervals or 10) // 2:
+        raise ScenarioError(f"planner.copy_intervals must be in 1..{(intervals or 10) // 2} (half the grid's "
+                            f"intervals), got {copy_intervals}")
     planner.finish()
+    final_table = _Fields(top.get("final_box", {}), "final_box")
+    final_boxes = tuple(_final_box(final_table.get(key), f"final_box.{key}", key)
+                        for key in list(final_table.table))
+    final_table.finish()
     top.finish()
 
     names = [r.name for r in obstacles + regions]
@@ -364,6 +391,11 @@ def _build(data: dict, source: str) -> Scenario:
     _unique([b.name for b in bodies], "body")
     if set(names) & {b.name for b in bodies}:
         raise ScenarioError(f"names are shared by a body and a region: {sorted(set(names) & {b.name for b in bodies})}")
+    for box in final_boxes:
+        if box.object not in {o.name for o in objects}:
+            raise ScenarioError(f"final_box.{box.object}: no object named {box.object!r} (objects: "
+                                f"{', '.join(o.name for o in objects) or 'none'}); a final box bounds an object's "
+                                "final state")
     for key, value in segments.items():
         where = f"planner.bezier_segments.{key}"
         if key not in {b.name for b in bodies}:
@@ -398,10 +430,27 @@ def _build(data: dict, source: str) -> Scenario:
         name=name, description=description, world_box=world_box, obstacles=obstacles, regions=regions,
         robots=robots, objects=objects, restitution=restitution, tf_s=tf, task=task,
         control_period_s=period, substeps=substeps, bezier_segments=dict(segments), planner_intervals=intervals,
-        planner_robot_degree=degree, source=source,
+        planner_robot_degree=degree, planner_copy_intervals=copy_intervals, final_boxes=final_boxes, source=source,
     )
     _check_task(scenario)
     return scenario
+
+
+def _final_box(table: Any, where: str, name: str) -> FinalBox:
+    """``{ position_m = 0.5, velocity_mps = 0.05 }``; each a number > 0 or a per-axis pair [x, y] of them."""
+    f = _Fields(table, where)
+    halves = {}
+    for key in ("position_m", "velocity_mps"):
+        value = f.get(key)
+        pair = _check(value, "vec2", f"{where}.{key}") if isinstance(value, list) else (
+            (_check(value, "float", f"{where}.{key}"),) * 2)
+        for i, v in enumerate(pair):
+            if v <= 0:
+                at = f"{where}.{key}" + (f"[{i}]" if isinstance(value, list) else "")
+                raise ScenarioError(f"{at} must be > 0 (a half-width), got {v}")
+        halves[key] = pair
+    f.finish()
+    return FinalBox(name, halves["position_m"], halves["velocity_mps"])
 
 
 def _unique(names: list[str], what: str) -> None:

@@ -1,7 +1,8 @@
-"""The ``impact-env plan`` subcommand: run the spatially robust planner on a scenario.
+"""The ``impact-env plan`` subcommand: run the spatially robust or the impact-robust planner on a scenario.
 
-    impact-env plan SCENARIO [--solver highs|scip|gurobi] [--time-limit S] [--mip-gap G] [--threads N]
-                    [--intervals N] [--degree D] [--smooth] [--out plan.json] [--plot plan.png] [--quiet]
+    impact-env plan SCENARIO [--planner sr|ir] [--solver highs|scip|gurobi] [--time-limit S] [--mip-gap G]
+                    [--threads N] [--intervals N] [--degree D] [--copy-intervals W] [--smooth]
+                    [--out plan.json] [--plot plan.png] [--quiet]
 
 Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``). Prints a header with the
 model size, a progress line at most once a second during the solve, then the robustness, solve time, gap
@@ -31,14 +32,21 @@ if TYPE_CHECKING:
     from planners.plan import Plan
 
 EXIT_TIME_LIMIT = 3
+PLANNERS = ("sr", "ir")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``plan`` subcommand to ``impact-env`` (entry point of the ``impact_env.commands`` group)."""
-    p = subparsers.add_parser("plan", help="plan impacts and trajectories with the spatially robust MILP planner",
-                              description="Plan when, where and with which robot to hit each object, with "
-                                          "maximal STL robustness (a MILP, proved optimal).")
+    p = subparsers.add_parser("plan", help="plan impacts and trajectories with a MILP planner (spatially robust "
+                              "or impact-robust)",
+                              description="Plan when, where and with which robot to hit each object, with maximal "
+                                          "STL robustness (--planner sr) or maximal tolerated post-impact velocity "
+                                          "error (--planner ir): a MILP, proved optimal.")
     p.add_argument("scenario", help="shipped name or path to a .toml file")
+    p.add_argument("--planner", default="sr",
+                   help="sr: maximise the STL spatial robustness rho (default); ir: maximise delta, the "
+                        "post-impact velocity error every impact may have (m/s per axis) with the task and the "
+                        "scenario's [final_box] still guaranteed")
     # a free string, checked in the handler, so that a typo is a one-line error rather than argparse usage
     p.add_argument("--solver", default="highs", help=f"MILP solver: one of {', '.join(SOLVER_NAMES)} (default highs)")
     p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
@@ -50,6 +58,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="time-grid intervals; impacts happen at its knots (default: the scenario's [planner] hint)")
     p.add_argument("--degree", type=int, default=None, metavar="D",
                    help="degree of the robots' Bezier curves (default: the scenario's [planner] hint)")
+    p.add_argument("--copy-intervals", type=int, default=None, metavar="W",
+                   help="ir only: grid intervals before and after an impact on which the robot's contingency "
+                        "copies may differ (default: the scenario's [planner] hint, else 2)")
     p.add_argument("--smooth", action="store_true",
                    help="finish with a QP that minimises squared accelerations (Eq. 28); slower (1-30 s)")
     p.add_argument("--refine-nodes", type=int, default=20, metavar="N",
@@ -69,6 +80,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _cmd_plan(args: argparse.Namespace) -> int:
     from impact_env.scenario import load_scenario
     from impact_env.station import is_station_file
+    from planners.offline.ir_planner import IRPlannerConfig, build_ir_model, plan_impact_robust
     from planners.offline.sr_planner import PlannerConfig, build_model, plan_spatially_robust
 
     if is_station_file(args.scenario):
@@ -79,27 +91,34 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     _check_options(args)
     scenario = load_scenario(args.scenario)
     say = (lambda text: None) if args.quiet else (lambda text: print(text, flush=True))
-    config = PlannerConfig(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth,
-                           solver=args.solver, time_limit_s=args.time_limit, mip_gap=args.mip_gap,
-                           threads=args.threads, seed=args.seed, refine_nodes=args.refine_nodes,
-                           progress=None if args.quiet else progress_printer())
+    common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth,
+                  solver=args.solver, time_limit_s=args.time_limit, mip_gap=args.mip_gap,
+                  threads=args.threads, seed=args.seed, refine_nodes=args.refine_nodes,
+                  progress=None if args.quiet else progress_printer())
+    if args.planner == "ir":
+        config = IRPlannerConfig(copy_intervals=args.copy_intervals, **common)
+        build, plan_fn = build_ir_model, plan_impact_robust
+    else:
+        config = PlannerConfig(**common)
+        build, plan_fn = build_model, plan_spatially_robust
 
     say(f"plan {scenario.name}: {len(scenario.robots)} robot(s), {len(scenario.objects)} object(s), "
         f"e = {scenario.restitution:g}, tf = {scenario.tf_s:g} s")
     say(textwrap.fill(f"task: {' '.join(scenario.task.split())}", width=100, subsequent_indent="      "))
     if not args.quiet:
         # a separate build only to show the model size before the (possibly long) solve; it costs ~0.1 s
-        built = build_model(scenario, config)
+        built = build(scenario, config)
         m = built.model
         limit = "none" if args.time_limit is None else f"{args.time_limit:g} s"
         say(f"model: {built.grid.intervals} intervals, robot degree {built.robots[0].degree}: {m.n_binaries} "
             f"binaries, {m.n_vars} variables, {m.n_rows} rows (built in {built.build_time_s:.2f} s)")
-        say(f"solving with {args.solver} (time limit {limit}, mip gap {args.mip_gap:g})")
+        goal = "delta, the tolerated post-impact velocity error" if args.planner == "ir" else "robustness rho"
+        say(f"solving with {args.solver} (time limit {limit}, mip gap {args.mip_gap:g}): maximise {goal}")
 
     code = 0
     start = time.perf_counter()
     try:
-        plan = plan_spatially_robust(scenario, config)
+        plan = plan_fn(scenario, config)
     except PlanTimeoutError as exc:
         if exc.plan is None:
             raise
@@ -123,6 +142,12 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
 def _check_options(args: argparse.Namespace) -> None:
     """Reject option values the planner would otherwise fail on deep inside, with a one-line message."""
+    if args.planner not in PLANNERS:
+        raise PlannerError(f"unknown planner {args.planner!r}; choose one of: {', '.join(PLANNERS)}")
+    if args.copy_intervals is not None and args.planner != "ir":
+        raise PlannerError("--copy-intervals applies to the impact-robust planner only (--planner ir)")
+    if args.copy_intervals is not None and args.copy_intervals < 1:
+        raise PlannerError(f"--copy-intervals must be >= 1, got {args.copy_intervals}")
     if args.solver not in SOLVER_NAMES:
         from impact_env.names import suggestion
 
@@ -171,12 +196,23 @@ def format_summary(plan: Plan, wall_s: float | None = None) -> str:
     """The result: robustness, MILP solve time (and the whole planner call's ``wall_s``, which adds the
     build, the smoothing stage and the plan check), gap, and one line per impact."""
     total = "" if wall_s is None else f", {wall_s:.2f} s in all"
-    lines = [f"robustness rho = {plan.robustness:.4f} m   {plan.solver} MILP solve {plan.solve_time_s:.2f} s "
-             f"(build {plan.build_time_s:.2f} s{total})   gap {100 * plan.mip_gap:.2f}%",
-             f"{len(plan.impacts)} impact{'' if len(plan.impacts) == 1 else 's'}:"]
+    solve = (f"{plan.solver} MILP solve {plan.solve_time_s:.2f} s (build {plan.build_time_s:.2f} s{total})   "
+             f"gap {100 * plan.mip_gap:.2f}%")
+    if plan.planner == "ir":
+        lines = [f"delta = {plan.delta_mps:.5f} m/s (post-impact velocity error tolerated per axis, every impact)   "
+                 f"{solve}", f"nominal robustness rho = {plan.robustness:.4f} m (not maximised by this planner)"]
+        for name, funnel in plan.funnels.items():
+            hp, hv = funnel.position_halfwidth_m[-1], funnel.terminal_velocity_halfwidth_mps
+            lines.append(f"{name} ends within +-({hp[0]:.3f}, {hp[1]:.3f}) m and +-({hv[0]:.4f}, {hv[1]:.4f}) m/s of "
+                         f"the plan (final box {list(funnel.final_box_m)} m, {list(funnel.final_box_mps)} m/s)")
+        kept, trimmed = "delta", "fewest impacts"
+    else:
+        lines = [f"robustness rho = {plan.robustness:.4f} m   {solve}"]
+        kept, trimmed = "rho", "fewest impacts, least acceleration"
     if plan.stats.get("refine_status", "skipped") != "skipped":
-        lines.insert(1, f"stage 2 (fewest impacts, least acceleration, rho kept): {plan.stats['refine_status']} "
-                        f"after {plan.stats['refine_s']:.2f} s, objective {plan.stats['refine_objective']:.4f}")
+        lines.append(f"stage 2 ({trimmed}, {kept} kept): {plan.stats['refine_status']} "
+                     f"after {plan.stats['refine_s']:.2f} s, objective {plan.stats['refine_objective']:.4f}")
+    lines.append(f"{len(plan.impacts)} impact{'' if len(plan.impacts) == 1 else 's'}:")
     for k, imp in enumerate(plan.impacts, start=1):
         before, after = imp.object_velocity_before, imp.object_velocity_after
         lines.append(f"  I{k}  t = {imp.time_s:6.2f} s  {imp.robot} -> {imp.object}  at ({imp.position[0]:.3f}, "

@@ -152,6 +152,10 @@ class Expert:
                                            frozenset(self._robot_names), frozenset(self._object_names),
                                            cfg.identification_config)
         strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
+        if plan.planner == "ir" and isinstance(strategy, PlanContact):
+            from planners.online.contingency import CopyContact
+
+            strategy = CopyContact(sc, fallback=strategy)  # the plan's copies as contingency plans
         self.selector = ReferenceSelector(plan, self.grid_dt, self.dt, strategy, cfg.replan_intervals,
                                           disc_offset=cfg.disc_offset, box=self._safe_box)
         self.mission = (MissionPlanner(sc, plan, cfg.mission, planner_config, cfg.aim_final_position)
@@ -333,6 +337,7 @@ class Expert:
         act = np.asarray(self.stats.act_ms) if self.stats.act_ms else np.zeros(1)
         out = {
             "planned_robustness": self.offline_plan.robustness,
+            "planner": self.offline_plan.planner,
             "planned_impacts": [{"time": i.time_s, "robot": i.robot, "object": i.object,
                                  "position": list(i.position)} for i in self.plan.impacts],
             "replans": self.selector.replans,
@@ -346,6 +351,11 @@ class Expert:
                        "aim_final_position": self.config.aim_final_position,
                        "disc_offset": self.config.disc_offset},
         }
+        if self.offline_plan.planner == "ir":
+            # the residual final velocity the plan accounts for, per object and axis (its final box)
+            out["planned_delta_mps"] = self.offline_plan.delta_mps
+            out["tolerated_final_velocity_mps"] = {name: list(f.final_box_mps)
+                                                   for name, f in self.offline_plan.funnels.items()}
         if self.config.identification:
             out["identification"] = self.identifier.report()
         if self.mission is not None:

@@ -20,6 +20,9 @@ import numpy as np
 from impact_env.scenario import Scenario
 from planners import bezier, plan_schema
 from planners.errors import PlanCheckError
+from planners.funnels import ImpactCopies, ObjectFunnel, check_impact_robust
+
+__all__ = ["BodyPlan", "ImpactCopies", "ObjectFunnel", "Plan", "PlannedImpact", "Segment"]
 
 
 @dataclass
@@ -108,7 +111,13 @@ class PlannedImpact:
 
 @dataclass
 class Plan:
-    """Trajectories of every body and the impacts, with how the plan was obtained."""
+    """Trajectories of every body and the impacts, with how the plan was obtained.
+
+    ``planner`` is ``"sr"`` (spatially robust: ``robustness`` is the maximised rho) or ``"ir"``
+    (impact-robust: ``delta_mps`` is the maximised tolerated post-impact velocity error per axis,
+    ``funnels`` the objects' state boxes, ``copies`` the robots' contingency curves per impact, see
+    :mod:`planners.funnels`; ``robustness`` is then the nominal curves' sampled STL robustness).
+    """
 
     scenario: str
     planner: str
@@ -120,6 +129,9 @@ class Plan:
     build_time_s: float = 0.0
     mip_gap: float = 0.0
     stats: dict[str, Any] = field(default_factory=dict)
+    delta_mps: float | None = None
+    funnels: dict[str, ObjectFunnel] = field(default_factory=dict)
+    copies: list[ImpactCopies] = field(default_factory=list)
 
     @property
     def tf_s(self) -> float:
@@ -142,6 +154,14 @@ class Plan:
 
     # ------------------------------------------------------------------------------------------ JSON
     def to_dict(self) -> dict[str, Any]:
+        out = self._base_dict()
+        if self.planner == "ir":
+            out["delta_mps"] = self.delta_mps
+            out["funnels"] = {name: f.to_dict() for name, f in self.funnels.items()}
+            out["copies"] = [c.to_dict() for c in self.copies]
+        return out
+
+    def _base_dict(self) -> dict[str, Any]:
         return {
             "scenario": self.scenario, "planner": self.planner, "robustness": self.robustness,
             "solve_time_s": self.solve_time_s, "build_time_s": self.build_time_s, "mip_gap": self.mip_gap,
@@ -185,10 +205,16 @@ class Plan:
                 time_s=i["time_s"], robot=i["robot"], object=i["object"], position=i["position"],
                 object_velocity_before=i["object_velocity_before"], object_velocity_after=i["object_velocity_after"],
                 robot_velocity_before=i["robot_velocity_before"], robot_velocity_after=i["robot_velocity_after"]))
+        funnels = {name: ObjectFunnel(name, f["t0_s"], f["dt_s"], f["position_halfwidth_m"],
+                                      f["velocity_halfwidth_mps"], f["final_box_m"], f["final_box_mps"])
+                   for name, f in fields["funnels"].items()}
+        copies = [ImpactCopies(c["time_s"], c["robot"], c["object"], c["window_start_s"], c["window_end_s"],
+                               c["signs"], c["before"], c["after"]) for c in fields["copies"]]
         if problems:
             raise PlanCheckError(problems)
         return cls(fields["scenario"], fields["planner"], fields["robustness"], bodies, impacts, fields["solver"],
-                   fields["solve_time_s"], fields["build_time_s"], fields["mip_gap"], fields["stats"])
+                   fields["solve_time_s"], fields["build_time_s"], fields["mip_gap"], fields["stats"],
+                   fields["delta_mps"], funnels, copies)
 
     def save(self, path: str | Path) -> Path:
         path = Path(path)
@@ -222,7 +248,9 @@ class Plan:
         which bounds every point of the curve; objects move in straight lines at constant velocity between
         impacts; velocities are continuous where there is no impact; at each impact the positions coincide
         and the point-mass law (Eq. 5) holds in REAL velocities: momentum is conserved and the normal
-        relative velocity is reversed and scaled by e.
+        relative velocity is reversed and scaled by e. An impact-robust plan (``planner == "ir"``) also has
+        its funnels and copies checked (:func:`planners.funnels.check_impact_robust`): every copy's contact
+        and impact law at its box vertex, limits, sharing and affine feedback, and the box propagation.
         """
         bad: list[str] = []
         for check in PLAN_CHECKS:
@@ -392,7 +420,18 @@ def _left_velocity(body: BodyPlan, t: float) -> np.ndarray:
 
 # What Plan.check verifies, in order. The structural checks come first: when one fails, the later ones (which
 # index bodies and evaluate curves) are skipped. A new plan feature adds its check here.
+def _check_impact_robustness(plan: Plan, scenario: Scenario, tol: float) -> list[str]:
+    """An impact-robust plan's funnels and copies (:func:`planners.funnels.check_impact_robust`); a spatially
+    robust plan must carry none."""
+    if plan.planner == "ir":
+        return check_impact_robust(plan, scenario, tol)
+    if plan.delta_mps is not None or plan.funnels or plan.copies:
+        return [f"a plan of planner {plan.planner!r} has delta_mps, funnels or copies: only an impact-robust "
+                "('ir') plan has them"]
+    return []
+
+
 PLAN_CHECKS: tuple[Callable[[Plan, Scenario, float], list[str]], ...] = (
-    _check_structure, _check_impact_records, _check_trajectories, _check_impact_laws,
+    _check_structure, _check_impact_records, _check_trajectories, _check_impact_laws, _check_impact_robustness,
 )
 _STRUCTURAL = frozenset({_check_structure, _check_impact_records})

@@ -7,6 +7,9 @@ problem as ``"bodies.R1.segments[3].control_points: ..."`` so that :class:`~plan
 lists them all. A new field is one new row; a new kind of value is one new reader (a function
 ``(value, where, problems) -> value``, appending to ``problems`` and returning :data:`INVALID` on failure).
 
+An impact-robust plan adds ``delta_mps``, ``funnels`` (per object, :data:`FUNNEL_FIELDS`) and ``copies``
+(per impact, :data:`COPIES_FIELDS`); :mod:`planners.funnels` says what they mean.
+
 Limits: times in [0, :data:`MAX_TIME_S`] s, coordinates and velocities within +-:data:`MAX_COORDINATE_M`,
 Bezier degree 1.. :data:`MAX_DEGREE` (the planner writes 1 for objects and 2..8 for robots), ``stats`` nested at
 most :data:`MAX_STATS_DEPTH` deep, and every number finite (JSON's ``NaN`` and ``Infinity`` are refused).
@@ -225,6 +228,93 @@ IMPACT_FIELDS: dict[str, Field] = {
     "robot_velocity_after": Field(vec2),
 }
 
+def positive(value: Any, where: str, problems: list[str]) -> Any:
+    x = number(value, where, problems, 0.0, MAX_COORDINATE_M)
+    if x is not INVALID and x <= 0.0:
+        problems.append(f"{where} must be > 0, got {_brief(value)}")
+        return INVALID
+    return x
+
+
+def optional_non_negative(value: Any, where: str, problems: list[str]) -> Any:
+    return None if value is None else number(value, where, problems, 0.0, MAX_COORDINATE_M)
+
+
+def positive_pair(value: Any, where: str, problems: list[str]) -> Any:
+    xy = vec2(value, where, problems)
+    if xy is not INVALID and min(xy) <= 0.0:
+        problems.append(f"{where} must be two numbers > 0 (half-widths), got {_brief(value)}")
+        return INVALID
+    return xy
+
+
+def halfwidths(value: Any, where: str, problems: list[str]) -> Any:
+    """A non-empty list of [x, y] half-widths >= 0."""
+    if not isinstance(value, list) or not value:
+        problems.append(f"{where} must be a non-empty list of [x, y] half-widths, got {_brief(value)}")
+        return INVALID
+    rows = [vec2(v, f"{where}[{i}]", problems) for i, v in enumerate(value)]
+    if INVALID in rows:
+        return INVALID
+    if min(min(r) for r in rows) < 0.0:
+        problems.append(f"{where}: half-widths must be >= 0")
+        return INVALID
+    return np.array(rows, dtype=float)
+
+
+def sign_pairs(value: Any, where: str, problems: list[str]) -> Any:
+    """The four (s_p, s_v) pairs of the copies, each -1 or +1."""
+    if not isinstance(value, list) or len(value) != 4 or any(
+            not isinstance(p, list) or len(p) != 2 or any(type(v) is not int or v not in (-1, 1) for v in p)
+            for p in value):
+        problems.append(f"{where} must be four pairs [s_p, s_v] of -1 or 1, got {_brief(value)}")
+        return INVALID
+    return [tuple(p) for p in value]
+
+
+def copy_curves(value: Any, where: str, problems: list[str]) -> Any:
+    """Four copies, each a non-empty list of segments' control points of one shape."""
+    if not isinstance(value, list) or len(value) != 4:
+        problems.append(f"{where} must be a list of 4 copies, got {_brief(value)}")
+        return INVALID
+    out = []
+    for j, curve in enumerate(value):
+        if not isinstance(curve, list) or not curve:
+            problems.append(f"{where}[{j}] must be a non-empty list of segments, got {_brief(curve)}")
+            return INVALID
+        segs = [control_points(c, f"{where}[{j}][{i}]", problems) for i, c in enumerate(curve)]
+        if any(s is INVALID for s in segs):
+            return INVALID
+        if len({s.shape for s in segs}) != 1:
+            problems.append(f"{where}[{j}]: every segment must have the same number of control points")
+            return INVALID
+        out.append(np.array(segs))
+    if len({c.shape for c in out}) != 1:
+        problems.append(f"{where}: the four copies must have the same shape")
+        return INVALID
+    return out
+
+
+FUNNEL_FIELDS: dict[str, Field] = {
+    "t0_s": Field(time_s),
+    "dt_s": Field(positive),
+    "position_halfwidth_m": Field(halfwidths),
+    "velocity_halfwidth_mps": Field(halfwidths),
+    "final_box_m": Field(positive_pair),
+    "final_box_mps": Field(positive_pair),
+}
+
+COPIES_FIELDS: dict[str, Field] = {
+    "time_s": Field(time_s),
+    "robot": Field(name),
+    "object": Field(name),
+    "window_start_s": Field(time_s),
+    "window_end_s": Field(time_s),
+    "signs": Field(sign_pairs),
+    "before": Field(copy_curves),
+    "after": Field(copy_curves),
+}
+
 PLAN_FIELDS: dict[str, Field] = {
     "scenario": Field(name),
     "planner": Field(text),
@@ -236,4 +326,8 @@ PLAN_FIELDS: dict[str, Field] = {
     "stats": Field(json_data, {}),
     "impacts": Field(table_list(IMPACT_FIELDS, non_empty=False)),
     "bodies": Field(table_map(BODY_FIELDS)),
+    # impact-robust plans only (planners.funnels)
+    "delta_mps": Field(optional_non_negative, None),
+    "funnels": Field(table_map(FUNNEL_FIELDS), {}),
+    "copies": Field(table_list(COPIES_FIELDS, non_empty=False), []),
 }

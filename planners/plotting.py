@@ -1,4 +1,6 @@
-"""A figure of a plan after the paper's Fig. 4: the xy view, and positions and velocities over time.
+"""A figure of a plan after the paper's Fig. 4 (spatially robust) or Fig. 5 (impact-robust): the xy view, and
+positions and velocities over time. An impact-robust plan adds the objects' funnels (their state boxes swept
+along the path, and bands around their positions and velocities over time) and the robots' copies.
 
 Only the object-oriented matplotlib API is used (no pyplot), like :mod:`impact_env.plotting`, whose
 :func:`~impact_env.plotting.draw_scenario` draws the world underneath the planned paths.
@@ -33,7 +35,10 @@ def plot_plan(scenario: Scenario, plan: Plan, path: str | Path | None = None, sa
     points (small faint dots) and the impacts (red stars I1, I2, ... at their positions). Right, sharing
     the time axis: positions (x solid, y dashed) and velocities (vx solid, vy dashed) over time, objects
     drawn thicker; each segment is sampled on its own and lines are broken at impacts, so a velocity jump
-    is a vertical gap. Impact times are dotted vertical lines labelled like the stars.
+    is a vertical gap. Impact times are dotted vertical lines labelled like the stars. For an impact-robust
+    plan (the paper's Fig. 5): each object's box at every knot and its sweep between knots (the funnel) in
+    the xy view, with the impacting robots' four copies (thin dashed) around each impact; over time, bands
+    of the position and velocity half-widths around the object's nominal values.
 
     Args:
         samples: sample points per body over [0, tf] (spread over its segments, at least 2 per segment).
@@ -51,11 +56,17 @@ def plot_plan(scenario: Scenario, plan: Plan, path: str | Path | None = None, sa
     ax_pos = fig.add_subplot(grid[0, 1])
     ax_vel = fig.add_subplot(grid[1, 1], sharex=ax_pos)
 
+    if plan.funnels:
+        _draw_funnels_xy(plan, ax_xy, colours)
+        _draw_copies_xy(plan, ax_xy, colours)
+        _draw_funnel_bands(plan, ax_pos, ax_vel, colours)
     _draw_xy(scenario, plan, ax_xy, colours, samples)
     _draw_time(scenario, plan, ax_pos, ax_vel, colours, samples)
 
     gap = f", gap {100 * plan.mip_gap:.2f}%" if plan.mip_gap > 1e-3 else ""
-    fig.suptitle(f"{plan.scenario}: planner \"{plan.planner}\", robustness rho = {plan.robustness:.3f} m  "
+    what = (f"delta = {plan.delta_mps:.4f} m/s, nominal rho = {plan.robustness:.3f} m" if plan.planner == "ir"
+            else f"robustness rho = {plan.robustness:.3f} m")
+    fig.suptitle(f"{plan.scenario}: planner \"{plan.planner}\", {what}  "
                  f"({plan.solver}, {plan.solve_time_s:.1f} s{gap}; {len(plan.impacts)} impacts)")
     if path is not None:
         path = Path(path)
@@ -88,6 +99,83 @@ def _sample(body: BodyPlan, samples: int, what: str, break_at: list[float]) -> t
     return np.concatenate(times), np.concatenate(values)
 
 
+def _hull(points: np.ndarray) -> np.ndarray:
+    """Convex hull (counter-clockwise) of 2-D points (Andrew's monotone chain)."""
+    pts = sorted(map(tuple, np.round(points, 12)))
+    if len(pts) <= 2:
+        return np.array(pts)
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    lower, upper = [], []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    for p in reversed(pts):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def _corners(centre: np.ndarray, half: np.ndarray) -> np.ndarray:
+    return centre + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * half
+
+
+def _draw_funnels_xy(plan: Plan, ax: Axes, colours: dict[str, str]) -> None:
+    """Each object's position box at every knot (outlined) and the hull of consecutive boxes (filled): the
+    set its straight flights can sweep."""
+    from matplotlib.patches import Polygon
+
+    for name, funnel in plan.funnels.items():
+        body = plan.bodies[name]
+        knots = funnel.knots_s
+        centres = body.position(knots)
+        half = np.asarray(funnel.position_halfwidth_m)
+        colour = colours[name]
+        for k in range(len(knots) - 1):
+            pts = np.vstack([_corners(centres[k], half[k]), _corners(centres[k + 1], half[k + 1])])
+            ax.add_patch(Polygon(_hull(pts), closed=True, fc=colour, ec="none", alpha=0.15, zorder=3))
+        for k in range(1, len(knots)):
+            if np.any(half[k] > 1e-9):
+                ax.add_patch(Polygon(_corners(centres[k], half[k]), closed=True, fill=False, ec=colour, lw=0.8,
+                                     alpha=0.7, zorder=4))
+
+
+def _draw_copies_xy(plan: Plan, ax: Axes, colours: dict[str, str], samples: int = 40) -> None:
+    """The robots' four copies over each impact's window (thin dashed)."""
+    s = np.linspace(0.0, 1.0, samples)
+    from planners import bezier
+
+    for c in plan.copies:
+        for j in range(len(c.signs)):
+            segments = list(np.asarray(c.before[j])) + list(np.asarray(c.after[j]))
+            xy = np.concatenate([bezier.evaluate(cps, s) for cps in segments])
+            ax.plot(xy[:, 0], xy[:, 1], ls="--", lw=0.7, color=colours[c.robot], alpha=0.8, zorder=4)
+
+
+def _draw_funnel_bands(plan: Plan, ax_pos: Axes, ax_vel: Axes, colours: dict[str, str]) -> None:
+    """Bands: nominal position +- the position half-width (linear between knots, a bound since a zonotope's
+    half-width is convex in time) and nominal velocity +- the velocity half-width (constant per interval)."""
+    for name, funnel in plan.funnels.items():
+        body = plan.bodies[name]
+        colour = colours[name]
+        t = np.linspace(funnel.knots_s[0], funnel.knots_s[-1], 400)
+        centre, half = body.position(t), funnel.position_halfwidth(t)
+        for axis in range(2):
+            ax_pos.fill_between(t, centre[:, axis] - half[:, axis], centre[:, axis] + half[:, axis], color=colour,
+                                alpha=0.18 if axis == 0 else 0.10, lw=0)
+        for k, seg in enumerate(body.segments):
+            tk = np.array([seg.t0_s, seg.t1_s])
+            v = seg.velocity(seg.t0_s)[0]
+            hv = funnel.velocity_halfwidth_mps[k]
+            for axis in range(2):
+                ax_vel.fill_between(tk, v[axis] - hv[axis], v[axis] + hv[axis], color=colour,
+                                    alpha=0.18 if axis == 0 else 0.10, lw=0)
+
+
 def _draw_xy(scenario: Scenario, plan: Plan, ax: Axes, colours: dict[str, str], samples: int) -> None:
     draw_scenario(scenario, ax)
     legend = ax.get_legend()
@@ -105,6 +193,11 @@ def _draw_xy(scenario: Scenario, plan: Plan, ax: Axes, colours: dict[str, str], 
     if any(b.kind == "robot" for b in plan.bodies.values()):
         handles.append(Line2D([], [], ls="", marker="o", ms=3, color="0.4", alpha=0.5,
                               label="robot Bezier control points"))
+    if plan.funnels:
+        from matplotlib.patches import Patch
+
+        handles.append(Patch(fc="0.5", alpha=0.3, ec="0.3", label=f"object funnel (delta = {plan.delta_mps:.4f} m/s)"))
+        handles.append(Line2D([], [], ls="--", lw=0.7, color="0.3", label="robot copies (Lemma 1)"))
     if plan.impacts:
         pts = np.array([imp.position for imp in plan.impacts])
         handles.append(ax.scatter(pts[:, 0], pts[:, 1], marker="*", s=170, color=IMPACT_COLOUR, edgecolor="k",

@@ -194,3 +194,72 @@ def test_fast_path_matches_public_api_bit_for_bit():
         assert worlds[0].read_state() == worlds[1].read_state()
     assert [e.to_dict() for e in events[0]] == [e.to_dict() for e in events[1]]
     assert len(events[0]) > 0
+
+
+def test_impact_velocity_noise_is_the_seeded_uniform_draw_on_top_of_eq5():
+    """A robot-object impact: the object leaves with Eq. (5) plus exactly the generator's uniform draw; the
+    robot's own velocity is Eq. (5) unchanged."""
+    noise = 0.05
+    sc = two_body(e=0.75, robot_vel=(0.3, 0.0), control_period_s=0.01, substeps=1)
+    world = World(sc, impact_velocity_noise_mps=noise, rng=np.random.default_rng(7))
+    event, _ = run_until_separated(world)
+    vr, vo = eq5(16.8, 16.8, 0.3, 0.0, 0.75)
+    draw = np.random.default_rng(7).uniform(-noise, noise, 2)
+    assert event.velocity_after("O1") == pytest.approx((vo + draw[0], draw[1]), abs=1e-9)
+    assert event.velocity_after("R1") == pytest.approx((vr, 0.0), abs=1e-9)
+    assert tuple(world.bodies[1].velocity) == pytest.approx(event.velocity_after("O1"), abs=1e-12)
+
+
+def test_impact_velocity_noise_is_uniform_within_its_bound():
+    noise = 0.02
+    errors = []
+    for seed in range(300):
+        sc = two_body(e=0.5, robot_vel=(0.3, 0.0), control_period_s=0.01, substeps=1)
+        event, _ = run_until_separated(World(sc, impact_velocity_noise_mps=noise, rng=np.random.default_rng(seed)))
+        errors.append(np.array(event.velocity_after("O1")) - (eq5(16.8, 16.8, 0.3, 0.0, 0.5)[1], 0.0))
+    errors = np.array(errors)
+    assert np.all(np.abs(errors) <= noise + 1e-12)
+    # uniform on [-0.02, 0.02]: mean 0 (std of the mean 0.0007), standard deviation 0.02 / sqrt(3) = 0.0115
+    assert np.all(np.abs(errors.mean(axis=0)) < 0.0025)
+    np.testing.assert_allclose(errors.std(axis=0), noise / math.sqrt(3), rtol=0.12)
+
+
+def test_impact_velocity_noise_leaves_wall_contacts_exact():
+    sc = two_body(e=0.75, robot_pos=(2.0, 8.0), robot_vel=(0.0, 0.0), object_pos=(9.0, 5.0), object_vel=(0.4, 0.0),
+                  control_period_s=0.01, substeps=1)
+    world = World(sc, impact_velocity_noise_mps=0.05, rng=np.random.default_rng(0))
+    for _ in range(1000):
+        events = world.step([(0.0, 0.0, 0.0)])
+        if events:
+            break
+    assert {events[0].a, events[0].b} == {"O1", "wall"}
+    assert events[0].velocity_after("O1") == pytest.approx((-0.3, 0.0), abs=1e-9)
+
+
+def test_impact_velocity_noise_option_in_the_env():
+    from impact_env.envs import TransportEnv
+    from impact_env.envs.core import EnvConfigError
+
+    def first_impact(noise: float, seed: int):
+        env = TransportEnv("throw_and_catch_exp", impact_velocity_noise_mps=noise)
+        env.reset(seed=seed)
+        push = np.zeros(env.action_space.shape)
+        push[0] = 1.0  # R1 pushes straight at the object
+        for _ in range(200):
+            _, _, _, _, info = env.step(push)
+            if info["impacts"]:
+                return info["impacts"][0]
+        raise AssertionError("no impact")
+
+    base = first_impact(0.0, 0)
+    assert first_impact(0.0, 5) == base  # no noise: the seed does not matter and no draw changes anything
+    noisy = first_impact(0.03, 5)
+    assert noisy == first_impact(0.03, 5)
+    assert noisy != first_impact(0.03, 6)
+    side = 0 if noisy["a"] == "O1" else 1
+    key = "ab"[side] + "_velocity_after"
+    error = np.subtract(noisy[key], base[key])
+    assert 0 < np.max(np.abs(error)) <= 0.03
+    for bad in (-0.1, 1.5, float("nan"), True):
+        with pytest.raises(EnvConfigError, match=r"impact_velocity_noise_mps must be a finite number in \[0, 1\]"):
+            TransportEnv("throw_and_catch_exp", impact_velocity_noise_mps=bad)

@@ -11,8 +11,8 @@ from tests.helpers import DELETE, modified, two_body_dict
 
 
 def test_shipped_scenarios_are_listed_and_load():
-    assert scenario_names() == ["corridor", "obstacle_avoidance", "ping_pong_stop", "relay", "throw_and_catch_exp",
-                                "two_objects"]
+    assert scenario_names() == ["corridor", "long_throw_trim", "obstacle_avoidance", "ping_pong_stop", "relay",
+                                "throw_and_catch_exp", "two_objects"]
     for name in scenario_names():
         sc = load_scenario(name)
         assert sc.name == name
@@ -111,3 +111,34 @@ def test_unknown_name_missing_file_and_bad_toml(tmp_path):
     bad.write_text("name = \n")
     with pytest.raises(ScenarioError, match="not valid TOML"):
         load_scenario(bad)
+
+
+def test_final_box_table():
+    data = two_body_dict()
+    sc = scenario_from_dict({**data, "final_box": {"O1": {"position_m": 0.5, "velocity_mps": [0.05, 0.1]}}})
+    box = sc.final_box("O1")
+    assert box.position_m == (0.5, 0.5) and box.velocity_mps == (0.05, 0.1)
+    assert scenario_from_dict(data).final_box("O1") is None
+    assert load_scenario("throw_and_catch_exp").final_box("O1").position_m == (0.4, 0.4)
+    assert load_scenario("corridor").final_box("O1").velocity_mps == (0.05, 0.05)
+
+
+@pytest.mark.parametrize("table, message", [
+    ({"R1": {"position_m": 0.5, "velocity_mps": 0.05}}, "final_box.R1: no object named 'R1'"),
+    ({"O1": {"position_m": 0.5}}, "final_box.O1.velocity_mps is required"),
+    ({"O1": {"position_m": -0.5, "velocity_mps": 0.05}}, "final_box.O1.position_m must be > 0"),
+    ({"O1": {"position_m": 0.5, "velocity_mps": [0.05, 0.0]}}, r"final_box.O1.velocity_mps\[1\] must be > 0"),
+    ({"O1": {"position_m": [0.5], "velocity_mps": 0.05}}, "final_box.O1.position_m must be a list of 2 numbers"),
+    ({"O1": {"position_m": 0.5, "velocity_mps": 0.05, "speed": 1}}, "final_box.O1.speed: unknown key"),
+    ({"O1": 0.5}, "final_box.O1 must be a table"),
+])
+def test_bad_final_box_names_the_field(table, message):
+    with pytest.raises(ScenarioError, match=message):
+        scenario_from_dict({**two_body_dict(), "final_box": table})
+
+
+def test_copy_intervals_hint_is_checked():
+    data = {**two_body_dict(), "planner": {"intervals": 10, "copy_intervals": 3}}
+    assert scenario_from_dict(data).planner_copy_intervals == 3
+    with pytest.raises(ScenarioError, match=r"planner.copy_intervals must be in 1..5"):
+        scenario_from_dict({**data, "planner": {"intervals": 10, "copy_intervals": 6}})

@@ -49,6 +49,7 @@ ACTION_PER_ROBOT = 3  # body-frame Fx, Fy, torque, each in [-1, 1]
 _FLOAT32_LIMIT = float(np.finfo(np.float32).max) / 2  # observation bounds stay finite in float32
 MAX_THRUST_NOISE = 10.0  # std of the multiplicative noise; beyond, 0 * (1 + noise * z) overflows to NaN
 MAX_FUEL_PENALTY = 1e6  # reward per N s; beyond, a step's penalty can overflow to -inf
+MAX_IMPACT_NOISE_MPS = 1.0  # post-impact velocity error (m/s per axis); beyond, it dwarfs the planned speeds
 
 
 def speed_bounds(scenario: Scenario, duration_s: float) -> tuple[float, float]:
@@ -100,17 +101,20 @@ class TransportCore:
         restitution: simulate with this restitution instead of the scenario's (model mismatch studies).
         thrust_noise: standard deviation of multiplicative thrust noise (0.05 = 5 %), re-clipped to limits.
         initial_position_noise_m: objects start uniformly within this radius of their scenario position.
+        impact_velocity_noise_mps: after each robot-object impact the object's velocity gets a uniform error in
+            [-this, this] m/s per axis (drawn from the reset seed): the error an impact-robust plan tolerates.
     """
 
     def __init__(self, scenario: Scenario | str, reward_mode: str = "dense", fuel_penalty: float = 0.0,
                  restitution: float | None = None, thrust_noise: float = 0.0,
-                 initial_position_noise_m: float = 0.0) -> None:
+                 initial_position_noise_m: float = 0.0, impact_velocity_noise_mps: float = 0.0) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if reward_mode not in REWARD_MODES:
             raise EnvConfigError(f"reward_mode must be one of {REWARD_MODES}, got {reward_mode!r}")
         for name, value, most in (("fuel_penalty", fuel_penalty, MAX_FUEL_PENALTY),
                                   ("thrust_noise", thrust_noise, MAX_THRUST_NOISE),
-                                  ("initial_position_noise_m", initial_position_noise_m, math.inf)):
+                                  ("initial_position_noise_m", initial_position_noise_m, math.inf),
+                                  ("impact_velocity_noise_mps", impact_velocity_noise_mps, MAX_IMPACT_NOISE_MPS)):
             if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
                     and 0 <= value <= most):
                 limit = f"in [0, {most:g}]" if math.isfinite(most) else ">= 0"
@@ -124,6 +128,7 @@ class TransportCore:
         self.restitution = restitution
         self.thrust_noise = float(thrust_noise)
         self.initial_position_noise_m = float(initial_position_noise_m)
+        self.impact_velocity_noise_mps = float(impact_velocity_noise_mps)
 
         sc = self.scenario
         self.n_robots = len(sc.robots)
@@ -167,7 +172,8 @@ class TransportCore:
         overrides = {}
         if self.initial_position_noise_m > 0:
             overrides = starts.draw_starts(self.scenario, self.initial_position_noise_m, rng)
-        self.world = World(self.scenario, restitution=self.restitution, initial_positions_m=overrides)
+        self.world = World(self.scenario, restitution=self.restitution, initial_positions_m=overrides,
+                           impact_velocity_noise_mps=self.impact_velocity_noise_mps, rng=rng)
         self._rng = rng
         self.step_count = 0
         self.log = EpisodeLog()

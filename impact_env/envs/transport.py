@@ -89,6 +89,9 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     * ``thrust_noise``: standard deviation of multiplicative thrust noise (0.05 = 5 %), re-clipped to the limits
       (at most 10).
     * ``initial_position_noise_m``: objects start uniformly within this radius (m) of their scenario position.
+    * ``impact_velocity_noise_mps``: after each robot-object impact, a uniform error in [-this, this] m/s per axis
+      on the object's velocity, drawn from the reset seed (at most 1; 0, the default, leaves the dynamics as
+      they were, so the version stays v0). The error an impact-robust plan's delta tolerates.
     * ``render_mode``: ``"rgb_array"`` (an ``(H, W, 3)`` uint8 frame per ``render()``), ``"human"`` (a pygame
       window) or None.
     * ``render_width_px``: width of the rendered frame; the height follows the world's aspect ratio.
@@ -106,15 +109,16 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     def __init__(self, scenario: Scenario | str | None = None, reward_mode: str = "dense",
                  fuel_penalty: float = 0.0, restitution: float | None = None, thrust_noise: float = 0.0,
                  initial_position_noise_m: float = 0.0, render_mode: str | None = None,
-                 render_width_px: int = 600, **unknown: Any) -> None:
+                 render_width_px: int = 600, impact_velocity_noise_mps: float = 0.0, **unknown: Any) -> None:
         reject_unknown(unknown, type(self))
         EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
-                          initial_position_noise_m, render_mode, render_width_px)
+                          initial_position_noise_m, render_mode, render_width_px, impact_velocity_noise_mps)
         check_render_options(self.metadata, render_mode, render_width_px)
         scenario = required(scenario, "scenario", SCENARIO_HINT, SCENARIO_EXAMPLE)
         self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
                                   restitution=restitution, thrust_noise=thrust_noise,
-                                  initial_position_noise_m=initial_position_noise_m)
+                                  initial_position_noise_m=initial_position_noise_m,
+                                  impact_velocity_noise_mps=impact_velocity_noise_mps)
         self.scenario = self.core.scenario
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.scenario.control_period_s))
         self.render_mode = render_mode

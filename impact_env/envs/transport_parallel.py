@@ -85,17 +85,20 @@ class TransportParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
     def __init__(self, scenario: Scenario | str | None = None, reward_mode: str = "dense",
                  fuel_penalty: float = 0.0, restitution: float | None = None, thrust_noise: float = 0.0,
                  initial_position_noise_m: float = 0.0, max_cycles: int | None = None,
-                 render_mode: str | None = None, render_width_px: int = 600, **unknown: Any) -> None:
+                 render_mode: str | None = None, render_width_px: int = 600,
+                 impact_velocity_noise_mps: float = 0.0, **unknown: Any) -> None:
         reject_unknown(unknown, type(self))
         EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
-                          initial_position_noise_m, max_cycles, render_mode, render_width_px)
+                          initial_position_noise_m, max_cycles, render_mode, render_width_px,
+                          impact_velocity_noise_mps)
         check_render_options(self.metadata, render_mode, render_width_px)
         check_max_cycles(max_cycles)
         scenario = required(scenario, "scenario", SCENARIO_HINT,
                             "impact_env.transport_v0.parallel_env(scenario='corridor')")
         self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
                                   restitution=restitution, thrust_noise=thrust_noise,
-                                  initial_position_noise_m=initial_position_noise_m)
+                                  initial_position_noise_m=initial_position_noise_m,
+                                  impact_velocity_noise_mps=impact_velocity_noise_mps)
         self.scenario = self.core.scenario
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.scenario.control_period_s),
                              name=f"transport_{self.scenario.name}_v0")

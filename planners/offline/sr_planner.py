@@ -5,8 +5,9 @@
 Maximises the STL spatial robustness rho of the scenario's task subject to satisfying it (rho >= 0), the
 point-mass impact law in real velocities, conditional smoothness, velocity bounds, thrust limits, robot
 separation and obstacle clearance. The model is solved by an open-source solver (HiGHS by default); a
-second stage fixes the binaries and smooths the robots' accelerations with a convex QP (Eq. 28) while
-keeping rho. See ``planners/offline/milp/`` for each constraint family.
+second stage keeps rho and trims impacts and acceleration, and a third fixes the binaries and polishes
+(``planners/offline/stages.py``, shared with the impact-robust planner). See ``planners/offline/milp/`` for
+each constraint family.
 """
 
 from __future__ import annotations
@@ -14,12 +15,13 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
 from impact_env.scenario import Scenario
-from planners.errors import PlannerError, PlanTimeoutError
+from planners.errors import PlanTimeoutError
+from planners.offline.common import DEFAULT_DEGREE, DEFAULT_INTERVALS, add_obstacle_clearance, check_common_options
+from planners.offline.common import encode_task as _encode_task
 from planners.offline.milp.collisions import add_robot_object_separation, add_robot_separation
 from planners.offline.milp.impacts import ImpactVars, add_impacts
 from planners.offline.milp.model import LinExpr, Model
@@ -33,13 +35,12 @@ from planners.offline.milp.trajectories import (
     allowed_box,
     value,
 )
-from planners.offline.solvers import solve
-from planners.offline.solvers.base import Progress, SolverOptions, Status
+from planners.offline.solvers.base import Progress, Status
+from planners.offline.stages import StagedModel, solve_stages
 from planners.plan import BodyPlan, Plan, PlannedImpact, Segment
 
-DEFAULT_INTERVALS = 10
-DEFAULT_DEGREE = 4
-
+__all__ = ["DEFAULT_DEGREE", "DEFAULT_INTERVALS", "BuiltModel", "PlannerConfig", "build_model", "extract_plan",
+           "plan_spatially_robust"]
 
 @dataclass
 class PlannerConfig:
@@ -115,18 +116,8 @@ class BuiltModel:
 def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
     """Build the MILP of the spatially robust planner (no solving)."""
     start = time.perf_counter()
-    if not scenario.objects:
-        raise PlannerError(f"scenario {scenario.name!r} has no object to transport")
-    if not 0.0 < config.thrust_fraction <= 1.0:
-        raise PlannerError(f"thrust_fraction must be in (0, 1], got {config.thrust_fraction}")
-    if config.refine_nodes is not None and config.refine_nodes < 0:
-        raise PlannerError(f"refine_nodes must be >= 0 (0 skips stage 2) or None (no node limit), "
-                           f"got {config.refine_nodes}")
-    n = config.intervals or scenario.planner_intervals or DEFAULT_INTERVALS
-    degree = config.robot_degree or scenario.planner_robot_degree or DEFAULT_DEGREE
-    if n < 2 or degree < 2:
-        raise PlannerError(f"need at least 2 intervals and robot degree >= 2, got {n} and {degree}")
-    grid = Grid(n, scenario.tf_s)
+    grid, degree = check_common_options(scenario, config)
+    n = grid.intervals
     model = Model(name=f"sr:{scenario.name}")
     boxes = {b.name: allowed_box(scenario, b) for b in scenario.bodies}
     robots = [RobotTrajectory(model, b, grid, degree, boxes[b.name]) for b in scenario.robots]
@@ -141,38 +132,32 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
     encoder = STLEncoder(model, grid, lambda body, k: trajectories[body].points(k), boxes, scenario.region_map(),
                          bound_propagation=config.bound_propagation)
     if config.obstacle_clearance:
-        for body in scenario.bodies:
-            for obstacle in scenario.obstacles:
-                for k in range(n):
-                    encoder.clearance(body.name, obstacle.name, k, body.radius_m, group="obstacle clearance")
-
-    # one group per top-level conjunct of the task, so that infeasibility names the conflicting parts
-    formula = scenario.formula
-    conjuncts = formula.children if type(formula).__name__ == "And" else (formula,)
-    encoded = []
-    for c in conjuncts:
-        encoder.group = f"task: {c}"  # a conjunct's encoding rows live in its own group
-        encoded.append(encoder.encode(c))
-    # satisfaction (rho >= 0) lives in the conjuncts' own groups, not in a bound, so that an infeasible task
-    # is explained by the conjuncts that cause it
-    rho = model.add_var(-encoder.bound, max(-encoder.bound, min(encoder.upper_bound(r) for r in encoded)),
-                        name="rho")
-    groups = []
-    for c, r_c in zip(conjuncts, encoded):
-        group = f"task: {c}"
-        groups.append(group)
-        model.add(r_c >= 0.0, group=group)
-        model.add(rho <= r_c, group="robustness objective")
+        add_obstacle_clearance(encoder, scenario, n)
+    # rho <= every conjunct's robustness: its upper bound is the smallest of theirs
+    task = _encode_task(model, encoder, scenario, rho=lambda encoded: model.add_var(
+        -encoder.bound, max(-encoder.bound, min(encoder.upper_bound(r) for r in encoded)), name="rho"))
+    rho = task.rho
 
     cost = acceleration_l1(model, robots)
     n_terms = sum(len(r.acceleration_points(k)) * 2 for r in robots for k in range(n))
-    a_bound = max(max(r.spec.thrust_limit_N) / r.spec.mass_kg for r in robots)
-    weight = config.acceleration_weight / max(1, n_terms) / a_bound
+    weight = config.acceleration_weight / max(1, n_terms) / _acceleration_scale(robots)
     # fewer impacts among equally robust plans: a touch with no momentum exchange is a valid point-mass
     # "impact" but not something a robot can fly
     n_impacts = sum(impacts.z.values(), LinExpr())
     model.set_objective(rho - cost * weight - n_impacts * config.impact_weight, maximize=True)
-    return BuiltModel(model, grid, robots, objects, impacts, rho, cost, time.perf_counter() - start, groups)
+    return BuiltModel(model, grid, robots, objects, impacts, rho, cost, time.perf_counter() - start, task.groups)
+
+
+def _acceleration_scale(robots: list[RobotTrajectory]) -> float:
+    """The largest acceleration any robot's full thrust gives (m/s^2): normalises acceleration costs."""
+    return max(max(r.spec.thrust_limit_N) / r.spec.mass_kg for r in robots)
+
+
+def staged_model(built: BuiltModel) -> StagedModel:
+    """What the lexicographic stages need from the spatially robust model."""
+    return StagedModel(built.model, built.rho, "robustness", sum(built.impacts.z.values(), LinExpr()),
+                       built.acceleration_cost, _acceleration_scale(built.robots),
+                       [r.acceleration_points(k) for r in built.robots for k in range(built.grid.intervals)])
 
 
 def plan_spatially_robust(scenario: Scenario, config: PlannerConfig | None = None) -> Plan:
@@ -185,94 +170,16 @@ def plan_spatially_robust(scenario: Scenario, config: PlannerConfig | None = Non
     """
     config = config or PlannerConfig()
     built = build_model(scenario, config)
-    options = SolverOptions(time_limit_s=config.time_limit_s, node_limit=config.node_limit, mip_gap=config.mip_gap,
-                            threads=config.threads,
-                            verbose=config.verbose, progress=config.progress, seed=config.seed,
-                            warm_start=_warm_start(built, config.warm_start))
-    result = solve(built.model, config.solver, options)
-    if result.status == Status.INFEASIBLE:
-        from planners.offline.solvers.diagnose import explain_infeasible
-
-        if config.diagnose_infeasibility:
-            # each check is capped: an undecided check keeps its group (a superset is still a true answer)
-            raise explain_infeasible(built.model, config.solver, SolverOptions(time_limit_s=2.0))
-        from planners.errors import InfeasiblePlanError
-
-        raise InfeasiblePlanError(f"no plan satisfies the task of {scenario.name!r}")
-    if result.status in (Status.ERROR, Status.UNBOUNDED):
-        raise PlannerError(f"solver {config.solver} failed on {scenario.name!r}: {result.status.value} "
-                           f"{result.message}")
-    if not result.has_solution:
-        raise PlanTimeoutError(f"no plan found within the time limit of {config.time_limit_s} s "
-                               f"(try a longer --time-limit or fewer intervals)")
-    x = result.x
-    refine: dict[str, Any] = {"refine_status": "skipped"}
-    if result.status == Status.OPTIMAL and config.refine_nodes != 0 and config.refine_time_s > 0:
-        x, refine = _refine(built, x, config)
-    t0 = time.perf_counter()
-    x = _polish(built, x, config)
-    plan = extract_plan(scenario, built, x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
-    plan.stats.update(refine, polish_s=time.perf_counter() - t0)
+    solution = solve_stages(staged_model(built), config, scenario.name,
+                            warm_start=_warm_start(built, config.warm_start), progress=config.progress)
+    result = solution.result
+    plan = extract_plan(scenario, built, solution.x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
+    plan.stats.update(solution.stats)
     plan.check(scenario, tol=1e-6)
     if result.status == Status.TIME_LIMIT:
         raise PlanTimeoutError(f"time limit of {config.time_limit_s} s reached with gap {result.mip_gap:.3g}; "
                                f"best robustness {plan.robustness:.4f} m", plan=plan, mip_gap=result.mip_gap)
     return plan
-
-
-def _copy(m: Model, name: str, integer: bool = True) -> Model:
-    integrality = list(m.integer) if integer else [False] * m.n_vars
-    return Model(m.name + ":" + name, list(m.col_lo), list(m.col_hi), integrality,
-                 m.col_names, list(m.rows), list(m.row_groups))
-
-
-def _refine(built: BuiltModel, x: np.ndarray, config: PlannerConfig) -> tuple[np.ndarray, dict[str, Any]]:
-    """Stage 2: keep rho, minimise impacts + L1 acceleration. Returns the better of x and the new incumbent,
-    and stats: solve time, the stage-2 objective of what is returned, and how the solve ended
-    (``node_limit`` is the normal, deterministic end; ``time_limit`` means the safety net cut it and the
-    plan may differ from run to run)."""
-    m = _copy(built.model, "refine")
-    m.add(built.rho >= built.rho.value(x) - 1e-7, group="keep robustness")
-    n_impacts = sum(built.impacts.z.values(), LinExpr())
-    a_bound = max(max(r.spec.thrust_limit_N) / r.spec.mass_kg for r in built.robots)
-    n_terms = max(1, len(built.acceleration_cost.terms))
-    # one impact outweighs any change in total acceleration
-    m.set_objective(n_impacts + built.acceleration_cost * (0.5 / (n_terms * a_bound)), maximize=False)
-    options = SolverOptions(time_limit_s=config.refine_time_s, node_limit=config.refine_nodes, mip_gap=1e-3,
-                            threads=config.threads, verbose=config.verbose, seed=config.seed, warm_start=x)
-    result = solve(m, config.solver, options)
-    stopped = (Status.OPTIMAL, Status.NODE_LIMIT, Status.TIME_LIMIT)
-    if result.x is not None and result.status in stopped and not m.check(result.x, 1e-5):
-        x = result.x
-    return x, {"refine_s": result.solve_time_s, "refine_status": result.status.value,
-               "refine_objective": float(m.objective.value(x))}
-
-
-def _polish(built: BuiltModel, x: np.ndarray, config: PlannerConfig) -> np.ndarray:
-    """Second stage: binaries fixed exactly, rho kept, then minimise squared accelerations (Eq. 28) if
-    ``config.smooth`` (a convex QP), else the same linear objective (an LP). Fixing the binaries also
-    removes the integrality tolerance's leak through big-M rows, so the impact law holds to the LP
-    tolerance. Falls back to ``x`` if the second stage fails."""
-    m = built.model
-    fixed = _copy(m, "polish", integer=False)
-    for i, is_int in enumerate(m.integer):
-        if is_int:
-            fixed.col_lo[i] = fixed.col_hi[i] = float(round(x[i]))
-    rho = built.rho.value(x)
-    fixed.add(built.rho >= rho - 1e-7, group="keep robustness")
-    if config.smooth:
-        fixed.set_objective(LinExpr(), maximize=False)
-        for r in built.robots:
-            for k in range(built.grid.intervals):
-                for p in r.acceleration_points(k):
-                    for axis in range(2):
-                        fixed.add_quadratic(p[axis], 1.0)
-    else:
-        fixed.set_objective(built.acceleration_cost, maximize=False)
-    result = solve(fixed, "highs", SolverOptions(time_limit_s=config.time_limit_s, verbose=config.verbose))
-    if result.status == Status.OPTIMAL and result.x is not None:
-        return result.x
-    return x
 
 
 def extract_plan(scenario: Scenario, built: BuiltModel, x: np.ndarray, solver: str, solve_time_s: float,

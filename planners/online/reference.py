@@ -13,8 +13,11 @@ For each robot, each control step:
    the plan; otherwise the reference is the plan itself.
 
 The strategy is the hook for other planners' plans: an impact-robust plan carries robot copies for every
-vertex of the object's state box, and its strategy returns the contact of the copy (or blend of copies)
-that matches the observed object state. Segments are "safe" when :class:`SegmentLimits` are given (world
+vertex of the object's state box, and its strategy (:class:`planners.online.contingency.CopyContact`) returns
+the contact of the blend of copies that matches the observed object state. A strategy may also have
+``observe(plan, robot, t, next_impact, object_state)`` (called every step before the reference is chosen),
+``plan_state(plan, name, times, sampled)`` (adjusts the plan's robot states the reference starts from and
+rejoins) and ``reset()``. Segments are "safe" when :class:`SegmentLimits` are given (world
 box, obstacle faces and other robots; see :mod:`planners.online.replanner`).
 """
 
@@ -151,6 +154,9 @@ class ReferenceSelector:
     def reset(self) -> None:
         self.replanned = {}
         self.replans = 0
+        reset = getattr(self.strategy, "reset", None)
+        if reset is not None:
+            reset()
 
     # ------------------------------------------------------------------------------------------ step
     def robot_reference(self, robot: Body, obj_of: Callable[[str], Body], t: float, state: np.ndarray,
@@ -165,6 +171,9 @@ class ReferenceSelector:
         ``model(robot, object)``: the identified (restitution, (m_robot, m_object)).
         """
         name = robot.name
+        observe = getattr(self.strategy, "observe", None)  # e.g. an impact-robust plan's copy blend
+        if observe is not None:
+            observe(self.plan, robot, t, nxt, object_state)
         window_start = 0.0
         if nxt is not None:
             window_start = max([nxt.time_s - self.replan_intervals * self.grid_dt] + [p + self.dt for p in past_times])
@@ -179,8 +188,8 @@ class ReferenceSelector:
         elif current is not None and t < current.post.t1_s:
             # after the impact: rejoin the plan from where the robot really is
             t1 = current.post.t1_s
-            current.post = replan_segment(state[:2], state[3:5], self.sampler.position(name, t1),
-                                          self.sampler.velocity(name, t1), t, t1, robot.velocity_bound_mps, limits,
+            p1, v1 = self._plan_point(name, t1)
+            current.post = replan_segment(state[:2], state[3:5], p1, v1, t, t1, robot.velocity_bound_mps, limits,
                                           self.acceleration_bound(robot))
         elif current is not None:
             del self.replanned[name]
@@ -208,9 +217,8 @@ class ReferenceSelector:
         t_rejoin = min(impact.time_s + self.grid_dt, self.tf)
         if t_rejoin <= impact.time_s + 1e-9:
             t_rejoin = impact.time_s + self.grid_dt
-        pre, post = replan_around_impact(t, state[:2], state[3:5], impact.time_s, contact, t_rejoin,
-                                         self.sampler.position(robot.name, t_rejoin),
-                                         self.sampler.velocity(robot.name, t_rejoin),
+        p1, v1 = self._plan_point(robot.name, t_rejoin)
+        pre, post = replan_around_impact(t, state[:2], state[3:5], impact.time_s, contact, t_rejoin, p1, v1,
                                          robot.velocity_bound_mps, limits, self.acceleration_bound(robot))
         self.replans += 1
         return Replanned(impact, pre, post)
@@ -241,12 +249,23 @@ class ReferenceSelector:
             np.clip(ref[:, 0], x0, x1, out=ref[:, 0])
             np.clip(ref[:, 1], y0, y1, out=ref[:, 1])
 
+    def _plan_state(self, name: str, times: np.ndarray) -> np.ndarray:
+        """[x, y, vx, vy] of the plan for robot ``name`` at ``times``, as the strategy adjusts it (an
+        impact-robust plan: the copy blend that matches the object's state, inside its windows)."""
+        ref = self.sampler.state(name, times)
+        adjust = getattr(self.strategy, "plan_state", None)
+        return ref if adjust is None else adjust(self.plan, name, np.asarray(times, dtype=float), ref)
+
+    def _plan_point(self, name: str, t: float) -> tuple[np.ndarray, np.ndarray]:
+        state = self._plan_state(name, np.array([t]))[0]
+        return state[:2], state[2:]
+
     def _reference(self, name: str, times: np.ndarray, current: Replanned | None, approaching: bool) -> np.ndarray:
         """[x, y, vx, vy] at the horizon's nodes: the replanned segments where they apply, else the plan.
 
         While an impact is still to come, the approach continues past the planned time straight at the
         contact velocity (a late contact is met at full speed, not braked for)."""
-        ref = self.sampler.state(name, np.minimum(times, self.tf))
+        ref = self._plan_state(name, np.minimum(times, self.tf))
         ref[times > self.tf, 2:] = 0.0
         if current is not None and approaching:
             pre = current.pre

@@ -10,6 +10,9 @@ velocities, which on the common time grid are linear in the control points:
 
 Where no impact involves a body at a knot its velocity is continuous (Eq. 13-14, 23). Every big-M is the
 range of the expression it relaxes, from the world box and the velocity bounds.
+
+The pieces (binaries and assignment, smoothness, the law) are separate functions because the impact-robust
+planner applies them to each copy of a robot (``planners/offline/milp/copies.py``).
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from planners.offline.milp.model import LinExpr, Model
-from planners.offline.milp.trajectories import ObjectTrajectory, RobotTrajectory, velocity_bound
+from planners.offline.milp.trajectories import ObjectTrajectory, Point, RobotTrajectory, velocity_bound
 
 
 @dataclass
@@ -37,8 +40,9 @@ def mass_fractions(m_r: float, m_o: float, e: float) -> tuple[float, float, floa
     return (m_r - e * m_o) / s, (1 + e) * m_o / s, (1 + e) * m_r / s, (m_o - e * m_r) / s
 
 
-def add_impacts(model: Model, robots: list[RobotTrajectory], objects: list[ObjectTrajectory], restitution: float,
-                world_box: tuple[float, float, float, float]) -> ImpactVars:
+def impact_binaries(model: Model, robots: list[RobotTrajectory], objects: list[ObjectTrajectory]) -> ImpactVars:
+    """z[R, O, k] for every robot, object and interior knot, with the assignment rows: at a knot an object is
+    hit by at most one robot and a robot hits at most one object."""
     n = robots[0].grid.intervals
     z: dict[tuple[str, str, int], LinExpr] = {}
     for r in robots:
@@ -55,39 +59,72 @@ def add_impacts(model: Model, robots: list[RobotTrajectory], objects: list[Objec
             zs = iv.at(robot=r.spec.name, knot=k)
             if len(zs) > 1:
                 model.add(sum(zs, LinExpr()) <= 1, group="impact assignment")
+    return iv
+
+
+def add_robot_smoothness(model: Model, r: RobotTrajectory, iv: ImpactVars, name: str | None = None) -> None:
+    """Eq. (14): the robot's velocity is continuous at every knot where it hits nothing. ``name`` is the robot
+    whose binaries apply (default ``r``'s own; the impact-robust planner passes each copy of one robot)."""
+    name = name or r.spec.name
+    vr = velocity_bound(r.spec)
+    for k in range(1, r.grid.intervals):
+        hit = sum(iv.at(robot=name, knot=k), LinExpr())
+        equal_unless(model, r.velocity_start(k), r.velocity_end(k - 1), hit, [2 * vr[0], 2 * vr[1]],
+                     "robot smoothness")
+
+
+def add_object_smoothness(model: Model, o: ObjectTrajectory, iv: ImpactVars) -> None:
+    """Eq. (13, 23): the object's velocity is continuous at every knot where nothing hits it."""
+    vo = velocity_bound(o.spec)
+    for k in range(1, o.grid.intervals):
+        hit = sum(iv.at(obj=o.spec.name, knot=k), LinExpr())
+        equal_unless(model, o.velocity(k), o.velocity(k - 1), hit, [2 * vo[0], 2 * vo[1]], "object smoothness")
+
+
+def point_mass_law(fractions: tuple[float, float, float, float], vr_in: Point, vo_in: Point) -> tuple[Point, Point]:
+    """Eq. (5) per axis: (robot, object) velocities after the impact from those before, in real units."""
+    m1, m2, m3, m4 = fractions
+    vr_out = tuple(vr_in[a] * m1 + vo_in[a] * m2 for a in range(2))
+    vo_out = tuple(vr_in[a] * m3 + vo_in[a] * m4 for a in range(2))
+    return vr_out, vo_out
+
+
+def law_big_m(fractions: tuple[float, float, float, float], vr: tuple[float, float],
+              vo: tuple[float, float]) -> tuple[list[float], list[float]]:
+    """Per-axis ranges of (robot, object) post-impact velocity minus its law value, from the velocity
+    bounds: the big-Ms of the impact-law rows."""
+    m1, m2, m3, m4 = fractions
+    m_rob = [vr[a] + abs(m1) * vr[a] + m2 * vo[a] for a in range(2)]
+    m_obj = [vo[a] + m3 * vr[a] + abs(m4) * vo[a] for a in range(2)]
+    return m_rob, m_obj
+
+
+def add_impacts(model: Model, robots: list[RobotTrajectory], objects: list[ObjectTrajectory], restitution: float,
+                world_box: tuple[float, float, float, float]) -> ImpactVars:
+    """The spatially robust planner's impacts: binaries, smoothness, contact and the point-mass law."""
+    n = robots[0].grid.intervals
+    iv = impact_binaries(model, robots, objects)
+    for r in robots:
+        add_robot_smoothness(model, r, iv)
+    for o in objects:
+        add_object_smoothness(model, o, iv)
 
     extent = (world_box[1] - world_box[0], world_box[3] - world_box[2])
     for r in robots:
         vr = velocity_bound(r.spec)
-        for k in range(1, n):
-            hit = sum(iv.at(robot=r.spec.name, knot=k), LinExpr())
-            _equal_unless(model, r.velocity_start(k), r.velocity_end(k - 1), hit, [2 * vr[0], 2 * vr[1]],
-                          "robot smoothness")
-    for o in objects:
-        vo = velocity_bound(o.spec)
-        for k in range(1, n):
-            hit = sum(iv.at(obj=o.spec.name, knot=k), LinExpr())
-            _equal_unless(model, o.velocity(k), o.velocity(k - 1), hit, [2 * vo[0], 2 * vo[1]], "object smoothness")
-
-    for r in robots:
-        vr = velocity_bound(r.spec)
         for o in objects:
-            vo = velocity_bound(o.spec)
-            m1, m2, m3, m4 = mass_fractions(r.spec.mass_kg, o.spec.mass_kg, restitution)
+            fractions = mass_fractions(r.spec.mass_kg, o.spec.mass_kg, restitution)
+            m_rob, m_obj = law_big_m(fractions, vr, velocity_bound(o.spec))
             for k in range(1, n):
-                miss = 1 - z[(r.spec.name, o.spec.name, k)]
-                _equal_unless(model, r.position_at_knot(k), o.position_at_knot(k), miss, extent, "impact contact")
-                vr_in, vo_in = r.velocity_end(k - 1), o.velocity(k - 1)
-                vo_law = tuple(vr_in[a] * m3 + vo_in[a] * m4 for a in range(2))
-                vr_law = tuple(vr_in[a] * m1 + vo_in[a] * m2 for a in range(2))
-                m_obj = [vo[a] + m3 * vr[a] + abs(m4) * vo[a] for a in range(2)]
-                m_rob = [vr[a] + abs(m1) * vr[a] + m2 * vo[a] for a in range(2)]
-                _equal_unless(model, o.velocity(k), vo_law, miss, m_obj, "impact law")
-                _equal_unless(model, r.velocity_start(k), vr_law, miss, m_rob, "impact law")
+                miss = 1 - iv.z[(r.spec.name, o.spec.name, k)]
+                equal_unless(model, r.position_at_knot(k), o.position_at_knot(k), miss, extent, "impact contact")
+                vr_law, vo_law = point_mass_law(fractions, r.velocity_end(k - 1), o.velocity(k - 1))
+                equal_unless(model, o.velocity(k), vo_law, miss, m_obj, "impact law")
+                equal_unless(model, r.velocity_start(k), vr_law, miss, m_rob, "impact law")
     return iv
 
 
-def _equal_unless(model: Model, a, b, relax: LinExpr, big_m, group: str) -> None:
+def equal_unless(model: Model, a, b, relax: LinExpr, big_m, group: str) -> None:
     """a == b (per axis) when ``relax`` is 0; |a - b| <= big_m[axis] when it is 1."""
     for axis in range(2):
         diff = a[axis] - b[axis]

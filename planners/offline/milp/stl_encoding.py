@@ -8,7 +8,12 @@ on a whole grid interval through the control points of the body's curve there (c
 - ``in(S, R)`` on interval k:   r <= b_f - h_f . p   for every face f of R and control point p  (Eq. 21)
 - ``!in(S, R)`` on interval k:  some face f with r <= h_f . p - b_f for every control point p     (Eq. 22)
 
-so an interval's robustness never exceeds that of any point on it (sound, conservative). Temporal
+so an interval's robustness never exceeds that of any point on it (sound, conservative). A body's points
+may also be given as a :class:`PointProduct`, every (x, y) with x from one list and y from another (the
+impact-robust planner's robot copies and object boxes, whose coordinates vary independently): for a face
+with normal (n_x, n_y) the extreme of n . p over the product is the sum of the extremes of n_x x and n_y y,
+so one auxiliary per axis replaces the |xs| |ys| rows exactly, and an axis-aligned face needs no auxiliary at
+all. Temporal
 operators are evaluated at t = 0 over the grid intervals that meet their window: F picks one, G takes all,
 U picks one interval for the right operand and requires the left one on it and on every earlier interval.
 On the fixed grid these time gates are known when the model is built and need no binaries. Temporal
@@ -19,6 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -27,6 +33,17 @@ from impact_env.stl import Always, And, Eventually, FalseFormula, Formula, InReg
 from planners.errors import UnsupportedSpecError
 from planners.offline.milp.model import LinExpr, Model
 from planners.offline.milp.trajectories import Grid, Point
+
+
+@dataclass(frozen=True)
+class PointProduct:
+    """The points (x, y) for every x in ``xs`` and every y in ``ys`` (LinExprs)."""
+
+    xs: tuple[LinExpr, ...]
+    ys: tuple[LinExpr, ...]
+
+
+PointSet = Point | PointProduct
 
 
 class NotInRegion(Formula):
@@ -72,18 +89,25 @@ class STLEncoder:
     Args:
         model: the model to extend.
         grid: the planner's time grid.
-        points: ``points(body, k)`` gives the control points (LinExpr pairs) of the body on interval k.
+        points: ``points(body, k)`` gives the control points of the body on interval k: LinExpr pairs or
+            :class:`PointProduct` sets, every point of which must satisfy a predicate.
         boxes: per body, the box its centre stays in (for big-Ms and to skip impossible faces).
         regions: name -> convex polygon.
         bound_propagation: bound every robustness variable by what its predicates can reach (else only by
             the scene's diagonal; kept to measure the difference).
+        reuse_clearance: a predicate ``!in(body, region)`` on an interval where :meth:`clearance` already keeps
+            every point of the body at least m beyond a face of the region has robustness >= m: use m, a
+            constant, instead of encoding the faces again. Only for a planner that requires the task's
+            robustness >= 0 and does not maximise it (the impact-robust one): the value is a lower bound.
     """
 
-    def __init__(self, model: Model, grid: Grid, points: Callable[[str, int], list[Point]],
+    def __init__(self, model: Model, grid: Grid, points: Callable[[str, int], list[PointSet]],
                  boxes: dict[str, tuple[float, float, float, float]], regions: dict[str, ConvexPolygon],
-                 bound_propagation: bool = True) -> None:
+                 bound_propagation: bool = True, reuse_clearance: bool = False) -> None:
         self.model, self.grid, self.points, self.boxes, self.regions = model, grid, points, boxes, regions
         self.bound_propagation = bound_propagation
+        self.reuse_clearance = reuse_clearance
+        self._clearance: dict[tuple[str, str, int], float] = {}
         corners = [(b[0], b[2]) for b in boxes.values()] + [(b[1], b[3]) for b in boxes.values()]
         corners += [tuple(v) for poly in regions.values() for v in poly.vertices]
         xs, ys = [c[0] for c in corners], [c[1] for c in corners]
@@ -199,7 +223,7 @@ class STLEncoder:
         self._memo[key] = r
         return r
 
-    def _pts(self, body: str, k: int, first_point_only: bool) -> list[Point]:
+    def _pts(self, body: str, k: int, first_point_only: bool) -> list[PointSet]:
         pts = self.points(body, k)
         return pts[:1] if first_point_only else pts
 
@@ -208,25 +232,52 @@ class STLEncoder:
         r = self._var(f"in({body},{region})@{k}", self.predicate_upper_bound(body, region, inside=True))
         for p in self._pts(body, k, first_point_only):
             for n, b in zip(poly.normals, poly.offsets):
-                self.model.add(r <= b - (p[0] * float(n[0]) + p[1] * float(n[1])), group=self.group)
+                for dot in self._dots(body, p, n, upper=True, group=self.group):
+                    self.model.add(r <= b - dot, group=self.group)
         return r
+
+    def _dots(self, body: str, p: PointSet, n: np.ndarray, upper: bool, group: str) -> list[LinExpr]:
+        """Expressions that bound n . q for every point q of ``p``: from above (``upper``) or below.
+
+        A pair gives its own n . p. A product gives one expression per x (or y) when the face is parallel to
+        an axis, else the sum of two auxiliaries u_x >= n_x x for every x and u_y >= n_y y for every y (<=
+        for a lower bound): exact, since the extreme of a sum of independent terms is the sum of extremes.
+        """
+        nx, ny = float(n[0]), float(n[1])
+        if not isinstance(p, PointProduct):
+            return [p[0] * nx + p[1] * ny]
+        if ny == 0.0:
+            return [x * nx for x in p.xs]
+        if nx == 0.0:
+            return [y * ny for y in p.ys]
+        x0, x1, y0, y1 = self.boxes[body]
+        total = LinExpr()
+        for coef, values, (lo, hi) in ((nx, p.xs, (x0, x1)), (ny, p.ys, (y0, y1))):
+            ends = (coef * lo, coef * hi)
+            aux = self.model.add_var(min(ends), max(ends), name=f"dot[{body}]")
+            for v in values:
+                self.model.add(aux >= v * coef if upper else aux <= v * coef, group=group)
+            total = total + aux
+        return [total]
 
     def _outside(self, body: str, region: str, k: int, first_point_only: bool) -> LinExpr:
         """r <= distance outside one face of the region, for every control point (Eq. 22)."""
+        if self.reuse_clearance and not first_point_only and (body, region, k) in self._clearance:
+            return LinExpr.of(self._clearance[(body, region, k)])
         r = self._var(f"!in({body},{region})@{k}", self.predicate_upper_bound(body, region, inside=False))
         self._beyond_one_face(body, region, k if not first_point_only else -1,
                               self._pts(body, max(k, 0), first_point_only), r, self.group)
         return r
 
-    def _beyond_one_face(self, body: str, region: str, key_k: int, points: list[Point], lower: LinExpr | float,
-                         group: str) -> None:
+    def _beyond_one_face(self, body: str, region: str, key_k: int, points: list[PointSet],
+                         lower: LinExpr | float, group: str) -> None:
         """Every point at least ``lower`` beyond the same face of the region, the face picked by binaries."""
         for face, w in self.face_choice(body, region, key_k, group):
             n, b = self.regions[region].normals[face], self.regions[region].offsets[face]
+            slack = (1 - w) * self.big_m if w is not None else 0.0
             for p in points:
-                dist = p[0] * float(n[0]) + p[1] * float(n[1]) - float(b)
-                slack = (1 - w) * self.big_m if w is not None else 0.0
-                self.model.add(dist + slack >= lower, group=group)
+                for dot in self._dots(body, p, n, upper=False, group=group):
+                    self.model.add(dot - float(b) + slack >= lower, group=group)
 
     def face_choice(self, body: str, region: str, k: int, group: str) -> list[tuple[int, LinExpr | None]]:
         """The faces the body may be beyond on interval k, each with its binary (None if it is the only one).
@@ -256,6 +307,7 @@ class STLEncoder:
     def clearance(self, body: str, region: str, k: int, margin_m: float, group: str) -> None:
         """Keep the body's whole interval k at least ``margin_m`` outside the region (solid obstacles)."""
         self._beyond_one_face(body, region, k, self.points(body, k), margin_m, group)
+        self._clearance[(body, region, k)] = max(margin_m, self._clearance.get((body, region, k), -math.inf))
 
     # ------------------------------------------------------------------------------- min / max
     def _combine(self, f: Formula, rs: list[LinExpr], tag: str) -> LinExpr:

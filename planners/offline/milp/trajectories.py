@@ -50,10 +50,16 @@ def _sub(a: Point, b: Point) -> Point:
 
 
 class RobotTrajectory:
-    """A robot's control points ``cp[k][i]`` (interval k, index i = 0..degree), shared at knots."""
+    """A robot's control points ``cp[k][i]`` (interval k, index i = 0..degree), shared at knots.
 
-    def __init__(self, model: Model, spec: Body, grid: Grid, degree: int, box: tuple[float, ...]) -> None:
+    ``label`` names the variables (default the robot's name; the impact-robust planner's copies of one
+    robot are ``R1~0`` ... ``R1~3``).
+    """
+
+    def __init__(self, model: Model, spec: Body, grid: Grid, degree: int, box: tuple[float, ...],
+                 label: str | None = None) -> None:
         self.spec, self.grid, self.degree = spec, grid, degree
+        label = label or spec.name
         xmin, xmax, ymin, ymax = box
         self.cp: list[list[Point]] = []
         prev: Point | None = None
@@ -61,10 +67,23 @@ class RobotTrajectory:
             row = [prev] if prev is not None else []
             while len(row) < degree + 1:
                 i = len(row)
-                row.append((model.add_var(xmin, xmax, name=f"{spec.name}.cp[{k}][{i}].x"),
-                            model.add_var(ymin, ymax, name=f"{spec.name}.cp[{k}][{i}].y")))
+                row.append((model.add_var(xmin, xmax, name=f"{label}.cp[{k}][{i}].x"),
+                            model.add_var(ymin, ymax, name=f"{label}.cp[{k}][{i}].y")))
             self.cp.append(row)
             prev = row[-1]
+
+    @classmethod
+    def mean(cls, curves: list[RobotTrajectory]) -> RobotTrajectory:
+        """The curve whose control points are the mean of ``curves``' (no new variables): a Bezier curve is
+        linear in its control points, so this is the pointwise mean of the curves."""
+        first = curves[0]
+        out = cls.__new__(cls)
+        out.spec, out.grid, out.degree = first.spec, first.grid, first.degree
+        w = 1.0 / len(curves)
+        out.cp = [[(sum((c.cp[k][i][0] for c in curves), LinExpr()) * w,
+                    sum((c.cp[k][i][1] for c in curves), LinExpr()) * w)
+                   for i in range(first.degree + 1)] for k in range(first.grid.intervals)]
+        return out
 
     def points(self, k: int) -> list[Point]:
         return self.cp[k]

@@ -38,7 +38,9 @@ class SolverOptions:
     with a :class:`Progress` during MIP solves. seed: the solver's random seed (solve times vary ~2x with it).
     node_limit: stop a MIP after this many branch-and-bound nodes (1: the root node only). Unlike a time
     limit it is a deterministic amount of work: the same model, options and seed stop at the same incumbent
-    however loaded the machine is.
+    however loaded the machine is. heuristics: False switches the MIP's primal heuristics off (HiGHS
+    ``mip_heuristic_effort = 0``, SCIP's heuristics emphasis off, Gurobi ``Heuristics = 0``): with a good warm
+    start they can cost more than a node limit bounds (the impact-robust planner's stage 2).
     """
 
     time_limit_s: float | None = None
@@ -49,6 +51,7 @@ class SolverOptions:
     progress: Callable[[Progress], None] | None = None
     seed: int = 0
     node_limit: int | None = None
+    heuristics: bool = True
 
 
 def limit_message(limit: str, has_x: bool) -> str:

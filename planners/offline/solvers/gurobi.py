@@ -72,6 +72,8 @@ def _set_options(m: gp.Model, options: SolverOptions) -> None:
         m.Params.TimeLimit = max(options.time_limit_s, 0.0)
     if options.node_limit is not None:
         m.Params.NodeLimit = int(options.node_limit)
+    if not options.heuristics:
+        m.Params.Heuristics = 0.0
     m.Params.MIPGap = options.mip_gap
     m.Params.Seed = options.seed
     if options.threads is not None:

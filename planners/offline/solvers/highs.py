@@ -92,6 +92,8 @@ def _set_options(h: highspy.Highs, options: SolverOptions) -> None:
     h.setOptionValue("random_seed", int(options.seed))
     if options.node_limit is not None:
         h.setOptionValue("mip_max_nodes", int(options.node_limit))
+    if not options.heuristics:
+        h.setOptionValue("mip_heuristic_effort", 0.0)
     if options.threads is not None:
         # HiGHS sizes one process-wide scheduler on first use and refuses a later, different `threads`
         # (model status kNotset) unless the scheduler is reset; do not change `threads` while another

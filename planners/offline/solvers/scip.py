@@ -77,6 +77,10 @@ def _set_options(scip: pyscipopt.Model, options: SolverOptions) -> None:
     scip.setParam("randomization/randomseedshift", int(options.seed))
     if options.node_limit is not None:
         scip.setParam("limits/nodes", int(options.node_limit))
+    if not options.heuristics:
+        from pyscipopt import SCIP_PARAMSETTING
+
+        scip.setHeuristics(SCIP_PARAMSETTING.OFF)
 
 
 def _set_warm_start(scip: pyscipopt.Model, model: Model, xs: list, x0: np.ndarray) -> None:

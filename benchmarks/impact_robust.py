@@ -1,0 +1,216 @@
+"""Closed-loop benchmark: the expert flying the spatially robust (SR) plan against the impact-robust (IR) plan.
+
+For each scenario both plans are made once (cached beside the results) and flown by the expert in the
+Gymnasium env under:
+
+- post-impact velocity noise (``impact_velocity_noise_mps``) of 0, delta, 2 delta and 5 delta m/s, delta being
+  the IR plan's delta on that scenario (the same noise in m/s for both plans): 50 seeds per cell (the
+  noise-free cell is deterministic and runs once);
+- the simulator's restitution off by -0.2, -0.1, +0.1, +0.2 (no noise: each is one deterministic episode).
+
+Two expert stacks: ``all`` (the default :class:`~planners.expert.ExpertConfig`: identification, mission
+replanning, safe segments; a mission re-plan replaces the rest of an IR plan by an SR plan) and ``paper``
+(local replanning at planned impacts only, so what each plan brings is what flies). An IR plan is flown
+with its copies as contingency plans (:mod:`planners.online.contingency`).
+
+Reported per cell: success rate (final STL robustness > 0), mean and min robustness, the object's final
+speed (mean and max, m/s), the share of episodes whose object ends inside the final box around its plan's
+final state (the scenario's ``[final_box]``, default 0.5 m / 0.05 m/s: the residual the IR plan tolerates),
+and mission re-plans per episode. Every cell is cached as JSON in ``--out`` when done (a rerun resumes);
+episodes run in ``--workers`` spawned processes.
+
+    python benchmarks/impact_robust.py --estimate
+    python benchmarks/impact_robust.py [--scenarios a,b] [--stacks all,paper] [--seeds 50] [--workers 2]
+    python benchmarks/impact_robust.py --table-only
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+SHIPPED = ("corridor", "obstacle_avoidance", "throw_and_catch_exp")
+PLANNERS = ("sr", "ir")
+STACKS = ("all", "paper")
+NOISE_FACTORS = (1.0, 2.0, 5.0)
+E_OFFSETS = (-0.2, -0.1, 0.1, 0.2)
+_WORKER: dict = {}
+
+
+def expert_config(stack: str):
+    from planners.expert import ExpertConfig
+
+    return {"all": ExpertConfig(), "paper": ExpertConfig.paper()}[stack]
+
+
+def conditions(delta: float, seeds: int) -> list[tuple[str, float, int]]:
+    """(axis, level, episodes): noise levels in m/s, restitution offsets."""
+    out = [("nominal", 0.0, 1)]
+    out += [("noise", k * delta, seeds) for k in NOISE_FACTORS]
+    out += [("e", de, 1) for de in E_OFFSETS]
+    return out
+
+
+def plans_for(name: str, out: Path) -> dict[str, dict]:
+    """Both offline plans of a scenario, computed once and cached (the planners are deterministic)."""
+    from impact_env.scenario import load_scenario
+    from planners.offline.ir_planner import IRPlannerConfig, plan_impact_robust
+    from planners.offline.sr_planner import plan_spatially_robust
+
+    plans = {}
+    for planner in PLANNERS:
+        path = out / f"{name}__{planner}_plan.json"
+        if not path.exists():
+            scenario = load_scenario(name)
+            plan = (plan_impact_robust(scenario, IRPlannerConfig(time_limit_s=600)) if planner == "ir"
+                    else plan_spatially_robust(scenario))
+            plan.save(path)
+        plans[planner] = json.loads(path.read_text())
+    return plans
+
+
+def _episode(args: tuple) -> dict:
+    name, planner, stack, plan_dict, axis, level, seed = args
+    from impact_env.envs.transport import TransportEnv
+    from impact_env.rollout import robot_object_impacts, run_episode
+    from impact_env.scenario import load_scenario
+    from planners.expert import Expert
+    from planners.offline.ir_planner import final_boxes
+    from planners.plan import Plan
+
+    key = (name, planner, stack)
+    if key not in _WORKER:  # one expert (compiled MPCs) per worker, scenario, plan and stack
+        _WORKER[key] = Expert(load_scenario(name), plan=Plan.from_dict(plan_dict), config=expert_config(stack))
+    expert = _WORKER[key]
+    sc = expert.scenario
+    options = {}
+    if axis == "noise":
+        options["impact_velocity_noise_mps"] = level
+    elif axis == "e":
+        options["restitution"] = float(np.clip(sc.restitution + level, 0.0, 1.0))
+    env = TransportEnv(sc, **options)
+    res = run_episode(env, expert, seed=seed)
+    report = expert.report()
+    plan, boxes = expert.offline_plan, final_boxes(sc)
+    dt = sc.control_period_s
+    finals = {}
+    for i, o in enumerate(sc.objects):
+        k = len(sc.robots) + i
+        p_end = res.positions[-1, k]
+        v_end = (res.positions[-1, k] - res.positions[-2, k]) / dt
+        tf = res.times_s[-1]
+        dp = np.abs(p_end - plan.position(o.name, tf))
+        dv = np.abs(v_end - plan.bodies[o.name].segments[-1].velocity(plan.tf_s)[0])
+        (bp, bv) = boxes[o.name]
+        finals[o.name] = {"speed": float(np.hypot(*v_end)), "in_box": bool(np.all(dp <= bp) and np.all(dv <= bv))}
+    return {"seed": seed, "success": bool(res.success), "robustness": float(res.robustness),
+            "impacts": len(robot_object_impacts(sc, res.impacts)),
+            "final_speed": max(f["speed"] for f in finals.values()),
+            "in_final_box": all(f["in_box"] for f in finals.values()),
+            "mission_replans": report.get("mission", {}).get("replans", 0), "wall_s": res.wall_time_s}
+
+
+def cell_path(out: Path, name: str, planner: str, stack: str, axis: str, level: float) -> Path:
+    return out / f"{name}__{planner}__{stack}__{axis}_{level:+.4f}.json"
+
+
+def run(scenarios, stacks, seeds: int, out: Path, workers: int) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    ctx = multiprocessing.get_context("spawn")  # the parent has run HiGHS threads: never fork after that
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        for name in scenarios:
+            plans = plans_for(name, out)
+            delta = plans["ir"]["delta_mps"]
+            for axis, level, n in conditions(delta, seeds):
+                for stack in stacks:
+                    for planner in PLANNERS:
+                        path = cell_path(out, name, planner, stack, axis, level)
+                        if path.exists() and json.loads(path.read_text())["episodes_requested"] >= n:
+                            continue
+                        start = time.perf_counter()
+                        jobs = [(name, planner, stack, plans[planner], axis, level, s) for s in range(n)]
+                        episodes = list(pool.map(_episode, jobs))
+                        cell = {"scenario": name, "planner": planner, "stack": stack, "axis": axis, "level": level,
+                                "delta": delta, "episodes_requested": n, "episodes": episodes,
+                                "wall_s": time.perf_counter() - start}
+                        path.write_text(json.dumps(cell))
+                        print(row(cell), flush=True)
+
+
+def label(cell: dict) -> str:
+    if cell["axis"] == "nominal":
+        return "nominal"
+    if cell["axis"] == "noise":
+        return f"impact noise {cell['level'] / cell['delta']:g} delta ({cell['level']:.4g} m/s)"
+    return f"e {cell['level']:+g}"
+
+
+def row(cell: dict) -> str:
+    eps = cell["episodes"]
+    rho = [e["robustness"] for e in eps]
+    speed = [e["final_speed"] for e in eps]
+    return (f"| {cell['scenario']} | {label(cell)} | {cell['stack']} | {cell['planner']} | {len(eps)} | "
+            f"{100 * np.mean([e['success'] for e in eps]):.0f}% | {np.mean(rho):+.3f} ({min(rho):+.3f}) | "
+            f"{np.mean(speed):.3f} ({max(speed):.3f}) | {100 * np.mean([e['in_final_box'] for e in eps]):.0f}% | "
+            f"{np.mean([e['mission_replans'] for e in eps]):.2f} |")
+
+
+def table(cells: list[dict], scenarios) -> str:
+    axes = ["nominal", "noise", "e"]
+    cells = [c for c in cells if c["scenario"] in scenarios]
+    cells.sort(key=lambda c: (list(scenarios).index(c["scenario"]), axes.index(c["axis"]), c["level"],
+                              STACKS.index(c["stack"]), PLANNERS.index(c["planner"])))
+    lines = ["| scenario | simulator | stack | plan | episodes | success | robustness mean (min) | "
+             "final speed m/s mean (max) | in final box | mission replans / ep |",
+             "|---|---|---|---|---:|---:|---:|---:|---:|---:|"]
+    return "\n".join(lines + [row(c) for c in cells])
+
+
+def estimate(scenarios, stacks, seeds: int) -> float:
+    """Seconds of one worker, from each scenario's episode length (about 3 ms of controller and simulation
+    per control step and robot, measured here on an idle machine)."""
+    from impact_env.scenario import load_scenario
+
+    total = 0.0
+    for name in scenarios:
+        sc = load_scenario(name)
+        steps = round(sc.formula.horizon_s / sc.control_period_s)
+        n = sum(n for _, _, n in conditions(1.0, seeds)) * len(stacks) * len(PLANNERS)
+        total += n * steps * 3e-3 * len(sc.robots)
+    return total
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--scenarios", default=",".join(SHIPPED))
+    parser.add_argument("--stacks", default=",".join(STACKS))
+    parser.add_argument("--seeds", type=int, default=50, help="seeds per noisy cell")
+    parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    parser.add_argument("--out", default="benchmarks/results/impact_robust")
+    parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
+    parser.add_argument("--table-only", action="store_true", help="print the table of the cached cells")
+    args = parser.parse_args()
+    scenarios, stacks = args.scenarios.split(","), args.stacks.split(",")
+    if any(s not in STACKS for s in stacks):
+        parser.error(f"--stacks takes {', '.join(STACKS)}, got {args.stacks!r}")
+    out = Path(args.out)
+    if args.estimate:
+        seconds = estimate(scenarios, stacks, args.seeds)
+        print(f"about {seconds / 3600:.1f} h of one worker, {seconds / 3600 / args.workers:.1f} h with "
+              f"{args.workers} workers on an idle machine")
+        return
+    if not args.table_only:
+        run(scenarios, stacks, args.seeds, out, args.workers)
+    cells = [json.loads(p.read_text()) for p in sorted(out.glob("*__*__*__*.json"))]
+    print(table(cells, scenarios))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,126 @@
+"""What an impact-robust plan promises, flown by point masses: a check that does not trust the planner.
+
+:func:`rollout` flies the plan's point-mass model (the planner's Assumption 1-2) when impact i sends the
+object off with a velocity error ``errors[i]`` (m/s per axis, on top of the point-mass law): between
+impacts objects fly straight; at each impact the impacting robot flies the multilinear blend of its copies
+that the object's state selects (:meth:`~planners.funnels.ImpactCopies.blend`), and the object leaves with
+Eq. (5) applied to the blended robot's pre-impact velocity, plus the error. The result says whether the task
+holds (STL robustness of the sampled trace), whether every object ends inside its final box, and how far
+out of its box the object ever was at an impact (|xi| <= 1: inside). A plan with delta promises all three
+for every error in [-delta, delta]^2 at every impact.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from impact_env.scenario import Scenario
+from planners.funnels import box_coordinates
+from planners.offline.milp.impacts import mass_fractions
+from planners.plan import BodyPlan, Plan, Segment
+
+
+@dataclass
+class Outcome:
+    """One rollout. robustness: the task's STL robustness (m) on the trace sampled every control period;
+    final_position_error_m / final_velocity_error_mps: per object, |state(tf) - plan(tf)| per axis;
+    in_final_box: every object's final state within its final box; max_box_coordinate: the largest |xi|
+    of an object's state at an impact (> 1: it left the box the copies cover)."""
+
+    robustness: float
+    final_position_error_m: dict[str, np.ndarray]
+    final_velocity_error_mps: dict[str, np.ndarray]
+    in_final_box: bool
+    max_box_coordinate: float
+    positions: dict[str, np.ndarray]
+    times_s: np.ndarray
+
+    @property
+    def ok(self) -> bool:
+        """The task holds, every object ends in its final box and stayed in its boxes (to 1e-6)."""
+        return self.robustness >= -1e-6 and self.in_final_box and self.max_box_coordinate <= 1.0 + 1e-6
+
+
+def rollout(plan: Plan, scenario: Scenario, errors: Sequence[np.ndarray] | np.ndarray) -> Outcome:
+    """Fly ``plan`` by point masses with ``errors[i]`` (shape (2,)) added after impact i; see the module
+    docstring. ``errors`` has one row per planned impact, in ``plan.impacts`` order."""
+    if plan.planner != "ir":
+        raise ValueError(f"rollout needs an impact-robust plan (planner 'ir'), got {plan.planner!r}")
+    errors = np.asarray(errors, dtype=float).reshape(len(plan.impacts), 2)
+    copies = {(c.robot, round(c.time_s, 9)): c for c in plan.copies}
+    state = {o.name: (np.array(o.position_m, float), np.array(o.velocity_mps, float), 0.0) for o in scenario.objects}
+    robots = {r.name: plan.bodies[r.name] for r in scenario.robots}
+    worst = 0.0
+    breaks: dict[str, list[tuple[float, np.ndarray, np.ndarray]]] = {o.name: [] for o in scenario.objects}
+    for imp, err in zip(plan.impacts, errors):
+        p0, v0, t0 = state[imp.object]
+        p = p0 + (imp.time_s - t0) * v0
+        c = copies[(imp.robot, round(imp.time_s, 9))]
+        xi = box_coordinates(plan, c, p, v0)
+        worst = max(worst, float(np.max(np.abs(xi))))
+        before, after = c.blend(xi)
+        robots[imp.robot] = _with_window(robots[imp.robot], c, before, after)
+        dt = plan.funnels[imp.object].dt_s
+        v_robot = (before[-1][-1] - before[-1][-2]) * (len(before[-1]) - 1) / dt
+        _, _, m3, m4 = mass_fractions(scenario.body(imp.robot).mass_kg, scenario.body(imp.object).mass_kg,
+                                      scenario.restitution)
+        v1 = m3 * v_robot + m4 * v0 + err
+        state[imp.object] = (p, v1, imp.time_s)
+        breaks[imp.object].append((imp.time_s, p, v1))
+
+    dt = scenario.control_period_s
+    steps = round(scenario.formula.horizon_s / dt)
+    times = np.arange(steps + 1) * dt
+    trace = {name: body.position(times) for name, body in robots.items()}
+    pos_err, vel_err, inside = {}, {}, True
+    for o in scenario.objects:
+        p0, v0 = np.array(o.position_m, float), np.array(o.velocity_mps, float)
+        trace[o.name] = _piecewise_linear(times, p0, v0, breaks[o.name])
+        tf = plan.tf_s
+        p_end, v_end, t_end = state[o.name]
+        p_tf = p_end + (tf - t_end) * v_end
+        pos_err[o.name] = np.abs(p_tf - plan.bodies[o.name].position(tf))
+        vel_err[o.name] = np.abs(v_end - plan.bodies[o.name].segments[-1].velocity(tf)[0])
+        funnel = plan.funnels[o.name]
+        inside &= bool(np.all(pos_err[o.name] <= np.asarray(funnel.final_box_m) + 1e-6)
+                       and np.all(vel_err[o.name] <= np.asarray(funnel.final_box_mps) + 1e-6))
+    from impact_env.stl import robustness
+
+    rho = float(robustness(scenario.formula, trace, scenario.region_map(), dt=dt))
+    return Outcome(rho, pos_err, vel_err, inside, worst, trace, times)
+
+
+def _piecewise_linear(times: np.ndarray, p0: np.ndarray, v0: np.ndarray,
+                      breaks: list[tuple[float, np.ndarray, np.ndarray]]) -> np.ndarray:
+    out = p0 + np.outer(times, v0)
+    for t_b, p_b, v_b in breaks:
+        later = times >= t_b
+        out[later] = p_b + np.outer(times[later] - t_b, v_b)
+    return out
+
+
+def _with_window(body: BodyPlan, copies, before: np.ndarray, after: np.ndarray) -> BodyPlan:
+    """``body`` with its segments inside the copies' window replaced by the blended ones."""
+    segments = list(body.segments)
+    blended = list(before) + list(after)
+    first = next(i for i, s in enumerate(segments) if abs(s.t0_s - copies.window_start_s) < 1e-9)
+    for j, cps in enumerate(blended):
+        s = segments[first + j]
+        segments[first + j] = Segment(s.t0_s, s.t1_s, np.asarray(cps))
+    return dataclasses.replace(body, segments=segments)
+
+
+def worst_case_errors(plan: Plan, scale: float = 1.0) -> list[np.ndarray]:
+    """Every sign pattern of errors of magnitude ``scale * delta`` on both axes of every impact (the vertices
+    of the error set): 4^(number of impacts) rows of shape (impacts, 2)."""
+    n = len(plan.impacts)
+    d = scale * (plan.delta_mps or 0.0)
+    out = []
+    for code in range(4 ** n):
+        signs = [((code >> (2 * i)) & 1, (code >> (2 * i + 1)) & 1) for i in range(n)]
+        out.append(np.array([[d if sx else -d, d if sy else -d] for sx, sy in signs]))
+    return out

@@ -1,0 +1,291 @@
+"""The impact-robust offline planner (paper Sec. IV-C, Eq. 16-20, Lemma 1) as a MILP over Bezier curves.
+
+    plan = plan_impact_robust(load_scenario("corridor"))
+    plan.delta_mps      # every impact may send the object off up to this far (m/s, per axis) from the plan
+
+Maximises delta, the post-impact velocity error (per axis, at every robot-object impact) that the plan
+tolerates: for every such error the task still holds and every object ends inside its final box
+(``[final_box]`` in the scenario; default :data:`DEFAULT_FINAL_BOX`). What is shared with the spatially
+robust planner is shared, not copied: the time grid (``common.py``), the robots' Bezier curves, velocity
+bounds and thrust limits (``milp/trajectories.py``), the point-mass impact law in real velocities with the
+scenario's restitution (``milp/impacts.py``), the STL and obstacle encoding (``milp/stl_encoding.py``),
+robot separation (``milp/collisions.py``), the solver backends and the lexicographic stages cut by nodes
+(``stages.py``). What is new:
+
+- the object's state is a set: a zonotope per axis, whose box grows by free flight and is reset by every
+  impact (``milp/boxes.py``, Eq. 17-19); its box, not a point, must satisfy the task's predicates (every
+  corner inside a goal, the whole box beyond an obstacle face) and end inside the final box;
+- each robot is four copies that reach the box's vertices (Lemma 1, in the exact per-axis form of
+  ``milp/copies.py``); copies keep the thrust and velocity limits, the task and the obstacle clearance;
+- the post-impact velocity may depend on where in its box the object was hit (affine feedback through the
+  copies), so an impact can steer the position spread back in: a later trimming impact narrows the funnel.
+
+Why the encoding is exact: the guarantee is a universally quantified statement over the object's states,
+and every step of its encoding is either linear (free flight on the fixed grid, the impact law, the box of
+a zonotope, the product sets of predicates) or a disjunction decided by an existing binary (which impact is
+last, which face) with a big-M equal to the range of what it relaxes. No product of variables appears:
+delta, the half-widths and the feedback gains enter linearly. The only conservatism is the interval hull
+(Eq. 3) taken at each impact, as in the paper. The guarantee is checked by sampling in
+``tests/test_ir_planner.py``.
+
+Not as the paper's code does it (docs/background.md#impact-robust): the scenario's restitution in the law (not e = 1),
+a position spread that no impact removes (an impact resets only the velocity spread; the position spread
+shrinks only through feedback and time), thrust limits, big-Ms from bounds, and no forced durations.
+
+Stages: (1) maximise delta alone (>= ``min_delta_mps``; tie-breaks in this objective halved HiGHS's node
+throughput), (2) keeping it, fewest impacts, cut at ``refine_nodes`` nodes, (3) with the binaries fixed,
+the LP that minimises the L1 acceleration of all copies (or the QP with ``smooth``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from impact_env.scenario import Scenario
+from planners.errors import PlannerError, PlanTimeoutError
+from planners.offline.common import add_obstacle_clearance, check_common_options, encode_task
+from planners.offline.milp.boxes import ObjectBox
+from planners.offline.milp.collisions import add_robot_separation
+from planners.offline.milp.copies import SIGNS, RobotCopies, add_copy_impacts
+from planners.offline.milp.impacts import ImpactVars, add_object_smoothness, impact_binaries
+from planners.offline.milp.model import LinExpr, Model
+from planners.offline.milp.stl_encoding import STLEncoder
+from planners.offline.milp.trajectories import (
+    Grid,
+    ObjectTrajectory,
+    acceleration_l1,
+    add_kinematics,
+    allowed_box,
+    value,
+    velocity_bound,
+)
+from planners.offline.solvers.base import Status
+from planners.offline.sr_planner import PlannerConfig
+from planners.offline.stages import StagedModel, solve_stages
+from planners.plan import BodyPlan, ImpactCopies, ObjectFunnel, Plan, PlannedImpact, Segment
+
+DEFAULT_FINAL_BOX = (0.5, 0.05)  # position half-width (m), velocity half-width (m/s): the authors' default
+DEFAULT_COPY_INTERVALS = 2
+
+
+@dataclass
+class IRPlannerConfig(PlannerConfig):
+    """Options of the impact-robust planner: those of :class:`PlannerConfig` (grid, thrust share, stages,
+    solver) and
+
+    min_delta_mps: the smallest delta worth a plan (a task that cannot tolerate it is infeasible: the
+        final box is then smaller than the grid can trim to). default_final_box: (position_m,
+        velocity_mps) half-widths for objects without a ``[final_box]`` entry. copy_intervals: grid
+        intervals before and after an impact on which the robot's copies may differ (room to reach the box
+        vertices within the thrust limits; default: the scenario's ``[planner] copy_intervals``, else 2).
+        disjunctive_resets: the box resets in Balas' convex-hull form (False: big-M switching, the baseline
+        of ``benchmarks/planner.py``).
+    """
+
+    acceleration_weight: float = 0.0
+    impact_weight: float = 0.0
+    min_delta_mps: float = 1e-3
+    default_final_box: tuple[float, float] = DEFAULT_FINAL_BOX
+    copy_intervals: int | None = None
+    disjunctive_resets: bool = True
+
+
+@dataclass
+class IRModel:
+    """The impact-robust MILP with handles on its variables."""
+
+    model: Model
+    grid: Grid
+    robots: list[RobotCopies]
+    objects: list[ObjectTrajectory]
+    boxes: list[ObjectBox]
+    impacts: ImpactVars
+    delta: LinExpr
+    acceleration_cost: LinExpr
+    build_time_s: float
+    final_boxes: dict[str, tuple[tuple[float, float], tuple[float, float]]]
+    window: int
+    conjunct_groups: list[str] = field(default_factory=list)
+
+
+def final_boxes(scenario: Scenario, default: tuple[float, float] = DEFAULT_FINAL_BOX
+                ) -> dict[str, tuple[tuple[float, float], tuple[float, float]]]:
+    """Per object, the (position, velocity) half-widths of its final box: the scenario's or ``default``."""
+    out = {}
+    for o in scenario.objects:
+        box = scenario.final_box(o.name)
+        out[o.name] = ((box.position_m, box.velocity_mps) if box is not None
+                       else ((default[0],) * 2, (default[1],) * 2))
+    return out
+
+
+def build_ir_model(scenario: Scenario, config: IRPlannerConfig) -> IRModel:
+    """Build the MILP of the impact-robust planner (no solving)."""
+    start = time.perf_counter()
+    grid, degree = check_common_options(scenario, config)
+    if config.robot_object_separation:
+        raise PlannerError("robot_object_separation is not available with the impact-robust planner: the "
+                           "controller keeps robots off objects away from planned impacts")
+    if not config.min_delta_mps > 0:
+        raise PlannerError(f"min_delta_mps must be > 0, got {config.min_delta_mps}")
+    n = grid.intervals
+    model = Model(name=f"ir:{scenario.name}")
+    allowed = {b.name: allowed_box(scenario, b) for b in scenario.bodies}
+    robots = [RobotCopies(model, b, grid, degree, allowed[b.name]) for b in scenario.robots]
+    objects = [ObjectTrajectory(model, b, grid, allowed[b.name]) for b in scenario.objects]
+    ends = final_boxes(scenario, config.default_final_box)
+    # an impacted object keeps a velocity spread >= delta to the end, which its final box bounds: delta can
+    # be no larger (if no object is ever hit any delta is tolerated, and the cap is what is reported)
+    delta_ub = max(min(min(velocity_bound(o)), min(ends[o.name][1])) for o in scenario.objects)
+    delta = model.add_var(0.0, delta_ub, name="delta")
+    model.add(delta >= config.min_delta_mps, group=f"delta >= min_delta_mps = {config.min_delta_mps:g} m/s")
+    boxes = [ObjectBox(model, o, allowed[o.spec.name], delta, delta_ub) for o in objects]
+
+    add_kinematics(model, [c for r in robots for c in r.copies], objects, config.thrust_fraction)
+    impacts = impact_binaries(model, [r.nominal for r in robots], objects)
+    for o in objects:
+        add_object_smoothness(model, o, impacts)
+    window = config.copy_intervals or scenario.planner_copy_intervals or DEFAULT_COPY_INTERVALS
+    if not 1 <= window <= n // 2:
+        raise PlannerError(f"copy_intervals must be in 1..{n // 2} (half the grid's {n} intervals), got {window}")
+    resets = add_copy_impacts(model, robots, boxes, impacts, scenario.restitution, scenario.world_box, window)
+    for box in boxes:
+        box.add_propagation(model, impacts, resets[box.spec.name], disjunctive=config.disjunctive_resets)
+        box.add_bounds(model)
+        box.add_final_box(model, *ends[box.spec.name])
+    add_robot_separation(model, robots, scenario.world_box)
+
+    point_sets = {r.spec.name: r.point_sets for r in robots}
+    point_sets.update({b.spec.name: b.point_sets for b in boxes})
+    encoder = STLEncoder(model, grid, lambda body, k: point_sets[body](k), allowed, scenario.region_map(),
+                         bound_propagation=config.bound_propagation, reuse_clearance=True)
+    if config.obstacle_clearance:
+        add_obstacle_clearance(encoder, scenario, n)
+    task = encode_task(model, encoder, scenario)
+
+    copies = [c for r in robots for c in r.copies]
+    cost = acceleration_l1(model, copies)
+    n_terms = max(1, len(cost.terms))
+    weight = config.acceleration_weight / n_terms / _acceleration_scale(robots)
+    n_impacts = sum(impacts.z.values(), LinExpr())
+    model.set_objective(delta - cost * weight - n_impacts * config.impact_weight, maximize=True)
+    return IRModel(model, grid, robots, objects, boxes, impacts, delta, cost, time.perf_counter() - start, ends,
+                   window, task.groups)
+
+
+def _acceleration_scale(robots: list[RobotCopies]) -> float:
+    return max(max(r.spec.thrust_limit_N) / r.spec.mass_kg for r in robots)
+
+
+def staged_model(built: IRModel) -> StagedModel:
+    """What the lexicographic stages need from the impact-robust model."""
+    # Stage 2 minimises the impact count alone: with the four copies' L1 acceleration in its objective each
+    # node's LP was 5-10x slower (obstacle_avoidance: 70 s for 20 nodes) and it ended with more impacts
+    # (6 instead of 4); the polish LP (stage 3) then minimises that acceleration with the binaries fixed.
+    return StagedModel(built.model, built.delta, "delta", sum(built.impacts.z.values(), LinExpr()),
+                       built.acceleration_cost, _acceleration_scale(built.robots),
+                       [r.acceleration_points(k) for r in built.robots for k in range(built.grid.intervals)],
+                       refine_acceleration=False)
+
+
+def plan_impact_robust(scenario: Scenario, config: IRPlannerConfig | None = None) -> Plan:
+    """Find the plan that tolerates the largest post-impact velocity error delta; see the module docstring.
+
+    Raises:
+        InfeasiblePlanError: no plan tolerates ``min_delta_mps``; ``.groups`` names the conflicting groups
+            (e.g. 'final box' and the delta floor when the final box is smaller than the grid can trim to).
+        PlanTimeoutError: time limit reached; ``.plan`` is the best plan found (or None) and ``.mip_gap``.
+        UnsupportedSpecError: the task uses STL the planner cannot encode.
+    """
+    config = config or IRPlannerConfig()
+    if not isinstance(config, IRPlannerConfig):
+        config = IRPlannerConfig(**{k: getattr(config, k) for k in PlannerConfig.__dataclass_fields__})
+    built = build_ir_model(scenario, config)
+    solution = solve_stages(staged_model(built), config, scenario.name, progress=config.progress)
+    result = solution.result
+    plan = extract_ir_plan(scenario, built, solution.x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
+    plan.stats.update(solution.stats)
+    plan.check(scenario, tol=1e-6)
+    if result.status == Status.TIME_LIMIT:
+        raise PlanTimeoutError(f"time limit of {config.time_limit_s} s reached with gap {result.mip_gap:.3g}; "
+                               f"best delta {plan.delta_mps:.5f} m/s", plan=plan, mip_gap=result.mip_gap)
+    return plan
+
+
+def _segments(curve, grid: Grid, x: np.ndarray) -> list[Segment]:
+    return [Segment(*grid.interval(k), np.array([value(p, x) for p in curve.points(k)]))
+            for k in range(grid.intervals)]
+
+
+def extract_ir_plan(scenario: Scenario, built: IRModel, x: np.ndarray, solver: str, solve_time_s: float,
+                    mip_gap: float) -> Plan:
+    """Read a solution vector back into a :class:`Plan` with its funnels and robot copies."""
+    grid = built.grid
+    bodies: dict[str, BodyPlan] = {}
+    for r in built.robots:
+        bodies[r.spec.name] = BodyPlan(r.spec.name, "robot", _segments(r.nominal, grid, x))
+    for o in built.objects:
+        bodies[o.spec.name] = BodyPlan(o.spec.name, "object", _segments(o, grid, x))
+    robots = {r.spec.name: r for r in built.robots}
+    objects = {o.spec.name: o for o in built.objects}
+    impacts, copies = [], []
+    for (rn, on, k), z in sorted(built.impacts.z.items(), key=lambda item: item[0][2]):
+        if z.value(x) <= 0.5:
+            continue
+        r, o = robots[rn], objects[on]
+        impacts.append(PlannedImpact(
+            time_s=grid.knot(k), robot=rn, object=on, position=tuple(value(o.position_at_knot(k), x)),
+            object_velocity_before=tuple(value(o.velocity(k - 1), x)),
+            object_velocity_after=tuple(value(o.velocity(k), x)),
+            robot_velocity_before=tuple(value(r.nominal.velocity_end(k - 1), x)),
+            robot_velocity_after=tuple(value(r.nominal.velocity_start(k), x))))
+        first, last = max(0, k - built.window), min(grid.intervals, k + built.window)
+        copies.append(ImpactCopies(
+            time_s=grid.knot(k), robot=rn, object=on, window_start_s=grid.knot(first), window_end_s=grid.knot(last),
+            signs=[tuple(s) for s in SIGNS],
+            before=[np.array([[value(p, x) for p in c.points(j)] for j in range(first, k)]) for c in r.copies],
+            after=[np.array([[value(p, x) for p in c.points(j)] for j in range(k, last)]) for c in r.copies]))
+    funnels = {}
+    for box in built.boxes:
+        name = box.spec.name
+        position, velocity = built.final_boxes[name]
+        funnels[name] = ObjectFunnel(
+            name, grid.knot(0), grid.dt_s,
+            position_halfwidth_m=np.array([[h.value(x) for h in hk] for hk in box.hp]),
+            velocity_halfwidth_mps=np.array([[h.value(x) for h in hk] for hk in box.hv]),
+            final_box_m=tuple(position), final_box_mps=tuple(velocity))
+    m = built.model
+    stats = {"intervals": grid.intervals, "robot_degree": built.robots[0].degree, "binaries": m.n_binaries,
+             "variables": m.n_vars, "rows": m.n_rows}
+    plan = Plan(scenario=scenario.name, planner="ir", robustness=0.0, bodies=bodies, impacts=impacts,
+                solver=solver, solve_time_s=solve_time_s, build_time_s=built.build_time_s, mip_gap=float(mip_gap),
+                stats=stats, delta_mps=float(built.delta.value(x)), funnels=funnels, copies=copies)
+    # the MILP bounds half-widths from below only: away from impact knots (where the copies fix the box)
+    # record the exact propagated spread
+    from planners.funnels import feedback, propagate
+
+    fb = feedback(plan, scenario)
+    for name, funnel in funnels.items():
+        hp, hv = propagate(funnel, plan.delta_mps, fb[name])
+        keep = np.zeros(len(hp), dtype=bool)
+        keep[list(fb[name])] = True
+        funnel.position_halfwidth_m = np.where(keep[:, None], funnel.position_halfwidth_m,
+                                               np.minimum(funnel.position_halfwidth_m, hp))
+        funnel.velocity_halfwidth_mps = np.minimum(funnel.velocity_halfwidth_mps, hv)
+    plan.robustness = nominal_robustness(scenario, plan)
+    return plan
+
+
+def nominal_robustness(scenario: Scenario, plan: Plan) -> float:
+    """STL robustness (m) of the plan's nominal curves, sampled every control period (the impact-robust
+    planner keeps the task satisfied for the whole box but does not maximise this margin)."""
+    from impact_env.stl import robustness
+
+    dt = scenario.control_period_s
+    steps = round(scenario.formula.horizon_s / dt)
+    t = np.arange(steps + 1) * dt
+    trace = {name: body.position(t) for name, body in plan.bodies.items()}
+    return float(robustness(scenario.formula, trace, scenario.region_map(), dt=dt))

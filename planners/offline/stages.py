@@ -1,0 +1,180 @@
+"""The lexicographic solve shared by the spatially robust and the impact-robust planners.
+
+Both planners maximise one quantity (rho, the STL spatial robustness, or delta, the tolerated post-impact
+velocity error) and then, keeping it, prefer plans with fewer impacts and less acceleration:
+
+1. stage 1: maximise the primary quantity (with tie-breaks below the MIP gap), to proven optimality (or
+   to ``node_limit`` nodes: the mission replanner's budget; stage 2 then runs only if it proved optimality);
+2. stage 2: keep it (>= its optimum - 1e-7), minimise the number of impacts plus the L1 acceleration
+   (Eq. 28 in L1 form; impacts only if the model says so, and acceleration is then left to stage 3),
+   warm-started from stage 1, cut after ``refine_nodes`` branch-and-bound nodes. A node
+   count is the same work on every machine, so the same scenario and config give the same plan however busy
+   the machine is (a time limit would not: ``benchmarks/planner_stage2.py``);
+3. polish: the binaries fixed, an LP with the stage-2 objective (or, with ``smooth``, a convex QP on squared
+   accelerations), which also removes the integrality tolerance's leak through big-M rows.
+
+A planner hands its model over as a :class:`StagedModel`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from planners.errors import InfeasiblePlanError, PlannerError, PlanTimeoutError
+from planners.offline.milp.model import LinExpr, Model
+from planners.offline.solvers import solve
+from planners.offline.solvers.base import SolveResult, SolverOptions, Status
+
+DIAGNOSE_NODES = 100  # branch-and-bound nodes per check of the infeasibility diagnosis
+DIAGNOSE_SAFETY_S = 20.0  # and a time limit per check that only a pathological model reaches
+
+
+class StageConfig(Protocol):
+    """The options the stages read (both planners' configs have them)."""
+
+    solver: str
+    time_limit_s: float | None
+    node_limit: int | None
+    mip_gap: float
+    threads: int | None
+    verbose: bool
+    seed: int
+    refine_nodes: int | None
+    refine_time_s: float
+    smooth: bool
+    diagnose_infeasibility: bool
+
+
+@dataclass
+class StagedModel:
+    """A planner's MILP with what the stages need.
+
+    primary: the maximised quantity (rho or delta); primary_name: its name in messages and in the
+    "keep ..." group; impact_count: the sum of the impact binaries; acceleration_cost: the L1 acceleration
+    (m/s^2, summed over control points); acceleration_scale: a bound of one acceleration term, to normalise
+    it; acceleration_points: per curve and interval, the acceleration control points (for the QP).
+    """
+
+    model: Model
+    primary: LinExpr
+    primary_name: str
+    impact_count: LinExpr
+    acceleration_cost: LinExpr
+    acceleration_scale: float
+    acceleration_points: list[list[tuple[LinExpr, LinExpr]]]
+    refine_heuristics: bool = True
+    refine_acceleration: bool = True
+
+
+@dataclass
+class StagedSolution:
+    """The polished solution vector, the stage-1 solver result, and the stages' statistics."""
+
+    x: np.ndarray
+    result: SolveResult
+    stats: dict[str, Any]
+
+
+def solve_stages(staged: StagedModel, config: StageConfig, scenario_name: str,
+                 warm_start: np.ndarray | None = None, progress=None) -> StagedSolution:
+    """Run stages 1-3; see the module docstring.
+
+    Raises:
+        InfeasiblePlanError: stage 1 is infeasible; ``.groups`` names the conflicting constraint groups
+            (found by re-solving with groups left out, each check capped at ``DIAGNOSE_NODES`` nodes) if
+            ``config.diagnose_infeasibility``.
+        PlannerError: the solver failed.
+        PlanTimeoutError: stage 1 found no solution within the time limit (with a solution, the caller
+            decides: ``result.status`` is ``TIME_LIMIT``).
+    """
+    options = SolverOptions(time_limit_s=config.time_limit_s, node_limit=config.node_limit, mip_gap=config.mip_gap,
+                            threads=config.threads, verbose=config.verbose, progress=progress, seed=config.seed,
+                            warm_start=warm_start)
+    result = solve(staged.model, config.solver, options)
+    if result.status == Status.INFEASIBLE:
+        if config.diagnose_infeasibility:
+            from planners.offline.solvers.diagnose import explain_infeasible
+
+            # each check is capped by work, not time (an undecided check keeps its group): under the former
+            # 2 s cap, which groups were named depended on how busy the machine was
+            raise explain_infeasible(staged.model, config.solver,
+                                     SolverOptions(time_limit_s=DIAGNOSE_SAFETY_S, node_limit=DIAGNOSE_NODES))
+        raise InfeasiblePlanError(f"no plan satisfies the task of {scenario_name!r}")
+    if result.status in (Status.ERROR, Status.UNBOUNDED):
+        raise PlannerError(f"solver {config.solver} failed on {scenario_name!r}: {result.status.value} "
+                           f"{result.message}")
+    if not result.has_solution:
+        raise PlanTimeoutError(f"no plan found within the time limit of {config.time_limit_s} s "
+                               f"(try a longer --time-limit or fewer intervals)")
+    x = result.x
+    stats: dict[str, Any] = {"refine_status": "skipped"}
+    if result.status == Status.OPTIMAL and config.refine_nodes != 0 and config.refine_time_s > 0:
+        x, refine_stats = refine(staged, x, config)
+        stats.update(refine_stats)
+    t0 = time.perf_counter()
+    x = polish(staged, x, config)
+    stats["polish_s"] = time.perf_counter() - t0
+    return StagedSolution(x, result, stats)
+
+
+def copy_model(m: Model, name: str, integer: bool = True) -> Model:
+    """A copy of ``m`` that can take more rows (``integer=False``: every variable continuous)."""
+    integrality = list(m.integer) if integer else [False] * m.n_vars
+    return Model(m.name + ":" + name, list(m.col_lo), list(m.col_hi), integrality,
+                 m.col_names, list(m.rows), list(m.row_groups))
+
+
+def _stage2_objective(staged: StagedModel) -> LinExpr:
+    if not staged.refine_acceleration:
+        return staged.impact_count
+    n_terms = max(1, len(staged.acceleration_cost.terms))
+    # one impact outweighs any change in total acceleration
+    return staged.impact_count + staged.acceleration_cost * (0.5 / (n_terms * staged.acceleration_scale))
+
+
+def refine(staged: StagedModel, x: np.ndarray, config: StageConfig) -> tuple[np.ndarray, dict[str, Any]]:
+    """Stage 2: keep the primary quantity, minimise impacts + L1 acceleration. Returns the better of x and the
+    new incumbent, and stats: solve time, the stage-2 objective of what is returned, and how the solve ended
+    (``node_limit`` is the normal, deterministic end; ``time_limit`` means the safety net cut it and the
+    plan may differ from run to run)."""
+    m = copy_model(staged.model, "refine")
+    m.add(staged.primary >= staged.primary.value(x) - 1e-7, group=f"keep {staged.primary_name}")
+    m.set_objective(_stage2_objective(staged), maximize=False)
+    options = SolverOptions(time_limit_s=config.refine_time_s, node_limit=config.refine_nodes, mip_gap=1e-3,
+                            threads=config.threads, verbose=config.verbose, seed=config.seed, warm_start=x,
+                            heuristics=staged.refine_heuristics)
+    result = solve(m, config.solver, options)
+    stopped = (Status.OPTIMAL, Status.NODE_LIMIT, Status.TIME_LIMIT)
+    if result.x is not None and result.status in stopped and not m.check(result.x, 1e-5):
+        x = result.x
+    return x, {"refine_s": result.solve_time_s, "refine_status": result.status.value,
+               "refine_objective": float(m.objective.value(x))}
+
+
+def polish(staged: StagedModel, x: np.ndarray, config: StageConfig) -> np.ndarray:
+    """Stage 3: binaries fixed exactly, the primary quantity kept, then minimise squared accelerations
+    (Eq. 28) if ``config.smooth`` (a convex QP), else the stage-2 objective's acceleration (an LP). Fixing the
+    binaries also removes the integrality tolerance's leak through big-M rows, so the impact law holds to
+    the LP tolerance. Falls back to ``x`` if the stage fails."""
+    m = staged.model
+    fixed = copy_model(m, "polish", integer=False)
+    for i, is_int in enumerate(m.integer):
+        if is_int:
+            fixed.col_lo[i] = fixed.col_hi[i] = float(round(x[i]))
+    fixed.add(staged.primary >= staged.primary.value(x) - 1e-7, group=f"keep {staged.primary_name}")
+    if config.smooth:
+        fixed.set_objective(LinExpr(), maximize=False)
+        for points in staged.acceleration_points:
+            for p in points:
+                for axis in range(2):
+                    fixed.add_quadratic(p[axis], 1.0)
+    else:
+        fixed.set_objective(staged.acceleration_cost, maximize=False)
+    result = solve(fixed, "highs", SolverOptions(time_limit_s=config.time_limit_s, verbose=config.verbose))
+    if result.status == Status.OPTIMAL and result.x is not None:
+        return result.x
+    return x
