@@ -13,7 +13,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 OUT := out
 
-.PHONY: demo test test-slow fuzz bench bench-expert results lint clean wheel-check docs docs-check docs-media
+.PHONY: demo test test-slow fuzz bench bench-expert bench-ir results lint clean wheel-check docs docs-check docs-media
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -59,6 +59,11 @@ fuzz: $(VENV)/.dev-installed
 
 bench-expert: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/expert.py --episodes 50
+
+# the expert flying spatially robust against impact-robust plans under impact noise and restitution offsets
+# (benchmarks/results/impact_robust: cached cells, resumable; about 1.5 h with 2 workers on an idle machine)
+bench-ir: $(VENV)/.base-installed
+	$(BIN)/python benchmarks/impact_robust.py --workers 2
 
 bench: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/env_throughput.py
