@@ -91,7 +91,7 @@ def stl_text(text: str) -> None:
 
 def plan_file(args: tuple[str, dict]) -> None:
     name, tree = args
-    scenario = load_scenario(name)
+    scenario = load_scenario(name.split("__")[0])  # "corridor" or "corridor__ir_plan"
 
     def load() -> Plan:
         plan = Plan.from_dict(json.loads(json.dumps(tree)))  # through JSON, as a file would be
