@@ -12,6 +12,7 @@ import numpy as np
 # install (make demo), so stable-baselines3, yaml and minari are imported only by the command handlers.
 from baselines import ALGOS
 from impact_env.envs.core import REWARD_MODES
+from impact_env.sweep import add_engine_arguments, engine_config
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -43,10 +44,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("scenarios", nargs="?", default="corridor,obstacle_avoidance,throw_and_catch_exp",
                    help="comma-separated scenario names (default: all three)")
     p.add_argument("--controllers", default="expert,random,zero",
-                   help="comma-separated: expert, random, zero, label:path/to/model.zip "
-                        "({scenario} in a path becomes each scenario's name)")
+                   help="comma-separated: expert, random, zero, label:path/to/model.zip (stable-baselines3), "
+                        "label:rllib:RUN_OR_CHECKPOINT (RLlib) ({scenario} in a path becomes each scenario's name)")
     p.add_argument("--episodes", type=int, default=10)
-    p.add_argument("--workers", type=int, default=None, help="parallel processes (default: CPU count)")
     p.add_argument("--out", default="bench", help="output folder (tables, CSV, figure)")
     p.add_argument("--thrust-noise", type=float, default=0.0, help="std of multiplicative thrust noise (0.05 = 5%%)")
     p.add_argument("--init-noise", type=float, default=0.0, help="objects start within this radius (m)")
@@ -56,6 +56,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "entries); a pickle can run any code: only for files you made yourself")
     p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
                    help="tether stations only: the tether physics (see impact_env.tether_physics)")
+    add_engine_arguments(p)
     p.set_defaults(func=_bench)
 
     p = subparsers.add_parser("convert-model", help="rewrite old model folders without pickles (vecnormalize.pkl "
@@ -168,7 +169,7 @@ def _bench(args: argparse.Namespace) -> int:
     if any(is_station(s) for s in scenarios):
         options["fidelity"] = args.fidelity
     summary = run_bench(scenarios, parse_controllers(args.controllers, scenarios, args.trust_pickle), args.episodes,
-                        Path(args.out), args.workers, options)
+                        Path(args.out), env_options=options, engine=engine_config(args))
     print(markdown_table(summary))
     print(f"wrote {args.out}/summary.md, summary.csv, episodes.csv, bench.png")
     return 0
