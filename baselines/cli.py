@@ -10,7 +10,7 @@ import numpy as np
 
 # Nothing from the [rl] extra is imported here: `impact-env` loads this module at start-up, also in a base
 # install (make demo), so stable-baselines3, yaml and minari are imported only by the command handlers.
-from baselines import ALGOS
+from baselines import ALGOS, rllib_cli
 from impact_env.envs.core import REWARD_MODES
 from impact_env.sweep import add_engine_arguments, engine_config
 
@@ -38,6 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="tether stations only: the tether physics (see impact_env.tether_physics)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--verbose", type=int, default=0)
+    rllib_cli.add_arguments(p)
     p.set_defaults(func=_run)
 
     p = subparsers.add_parser("bench", help="the same seeded episodes for several controllers: table and figure")
@@ -186,6 +187,9 @@ def _run(args: argparse.Namespace) -> int:
 
     if is_station(args.scenario):
         options["fidelity"] = args.fidelity
+    if args.engine == "rllib":
+        return rllib_cli.run(args, options)
+    rllib_cli.check_sb3_options(args)
     config = TrainConfig(algo=args.algo, scenario=args.scenario, timesteps=args.timesteps, seed=args.seed,
                          n_envs=args.n_envs, out=args.out, env_options=options, eval_freq=args.eval_freq,
                          multiagent=args.multiagent, progress_bar=not args.no_progress,
