@@ -1,6 +1,6 @@
 # Two entry points from a fresh clone (only Python 3.11 needed):
 #   make demo   - create .venv, install the package, run the main demo (video + JSON + plots in out/)
-#   make test   - create .venv, install with the [rl,dev] extras, run the default (fast) test suite
+#   make test   - create .venv, install with the [rl,dev,scip,tether,ray] extras, run the default (fast) test suite
 # Further targets: make test-slow (long checks), make bench (benchmarks), make lint,
 #   make results (retrain the RL baselines and rerun the expert-vs-learned benchmark: ~3 h).
 
@@ -22,10 +22,12 @@ $(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml
 
 # The dev install: torch pinned to the CPU build first (an unpinned torch pulls several GB of CUDA
 # wheels), then stable-baselines3, supersuit, SCIP (so the tests cover that planner backend too), z3 (the
-# tether planners' thesis pipeline) and the test tools.
+# tether planners' thesis pipeline), Ray and RLlib (their tests start a local Ray instance and a simulated
+# two-node cluster themselves; RLlib pins gymnasium==1.2.2, so the suite runs with that version) and the
+# test tools. torch is pinned again on the line that pulls RLlib.
 $(VENV)/.dev-installed: $(VENV)/.base-installed
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e '.[rl,dev,scip,tether]'
+	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,dev,scip,tether,ray]'
 	touch $@
 
 # The main demo: plan the corridor (MILP, HiGHS), fly it with the expert (replanner + MPC) in the
@@ -38,11 +40,12 @@ demo: $(VENV)/.base-installed
 		--video $(OUT)/corridor_expert.mp4 --json $(OUT)/corridor_expert.json --plot $(OUT)/corridor_expert.png
 	@echo "demo outputs in $(OUT)/"
 
+# --dist loadgroup: the tests marked xdist_group("ray") share one worker, so at most one Ray instance runs
 test: $(VENV)/.dev-installed
-	$(BIN)/python -m pytest -q -n 2
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup
 
 test-slow: $(VENV)/.dev-installed
-	$(BIN)/python -m pytest -q -n 2 -m slow --timeout 3600
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup -m slow --timeout 3600
 
 bench-expert: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/expert.py --episodes 50

@@ -200,7 +200,7 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
             results.append(r)
             print(f"  [{k}/{len(jobs)}] {r['scenario']} {r['controller']} seed {r['seed']}: "
                   f"rho {r['robustness']:+.3f} {'ok' if r['success'] else 'fail'}", flush=True)
-        print(f"  {engine.describe()}: {pool.placement_summary()}", flush=True)
+        print(f"  {pool.describe()}: {pool.placement_summary()}", flush=True)
     with open(out / "episodes.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=[k for k in results[0] if k != "positions"])
         writer.writeheader()

@@ -259,6 +259,19 @@ class Engine:
                                                            for k, v in files.items())).hexdigest()[:16]
         return SharedFiles(path.name, digest, path.is_dir(), ray.put(files))
 
+    def describe(self) -> str:
+        """E.g. ``2 local worker processes`` or ``Ray: 4 CPUs on 2 nodes (the cluster at 'auto')``."""
+        if self.config.name == "local":
+            return f"{self._pool._max_workers if self._pool else self.config.workers} local worker processes"
+        import ray
+
+        nodes = sum(1 for n in ray.nodes() if n.get("Alive"))
+        where = self.config.resolved_address()
+        where = (f"the cluster at {where!r}" if where and self._owns_ray else
+                 "a private local instance" if self._owns_ray else "the Ray instance this process had started")
+        return (f"Ray: {ray.cluster_resources().get('CPU', 0):g} CPUs on {nodes} node{'s' if nodes != 1 else ''} "
+                f"({where})")
+
     def nodes(self) -> list[str]:
         """The distinct nodes the jobs so far ran on, in order of first use."""
         return list(dict.fromkeys(p.node for p in self.placements))
@@ -310,7 +323,8 @@ def runtime_env(ship_code: bool) -> dict[str, Any] | None:
         return None
     root = Path(__file__).resolve().parent.parent
     modules = [str(root / name) for name in SHIPPED_PACKAGES if (root / name / "__init__.py").is_file()]
-    return {"py_modules": modules, "excludes": ["__pycache__", "*.pyc"]}
+    # results/ holds published models and figures (megabytes) that no worker reads
+    return {"py_modules": modules, "excludes": ["__pycache__", "*.pyc", "results/"]}
 
 
 def connect_ray(config: EngineConfig, num_cpus: int | None = None) -> bool:
@@ -322,6 +336,10 @@ def connect_ray(config: EngineConfig, num_cpus: int | None = None) -> bool:
     except ImportError:
         raise EngineError("--engine ray needs Ray: pip install 'impact_env[ray]'") from None
     if ray.is_initialized():
+        if config.ship_code:  # Ray uploads local folders only for a job's own runtime environment (ray.init)
+            raise EngineError("--ship-code needs to start the Ray connection itself, but Ray is already initialised "
+                              "in this process: call ray.init(runtime_env=impact_env.sweep.runtime_env(True)) "
+                              "yourself, or leave Ray uninitialised")
         return False
     address = config.resolved_address()
     options: dict[str, Any] = {"runtime_env": runtime_env(config.ship_code), "logging_level": "WARNING",
