@@ -182,6 +182,7 @@ class Engine:
     placements: list[Placement] = field(default_factory=list)
     _pool: ProcessPoolExecutor | None = None
     _owns_ray: bool = False  # this engine called ray.init, so it calls ray.shutdown
+    _remotes: dict = field(default_factory=dict)  # job function -> its Ray remote function
 
     def map(self, fn: Callable[[Any], Any], jobs: Iterable[Any]) -> Iterator[Any]:
         """``fn(job)`` for every job, yielded in the jobs' order as soon as each (and all before it) is done.
@@ -216,14 +217,16 @@ class Engine:
         import ray
         from ray.exceptions import RayError, RayTaskError
 
-        def run(job):
-            return _located(fn, job)
+        if fn not in self._remotes:
+            def run(job):
+                return _located(fn, job)
 
-        # one remote function per sweep: Ray sends it to each worker once and keeps it there, so module-level
-        # caches of a script's function (sent by value) live as long as the worker, as in a local pool
-        run.__name__ = run.__qualname__ = getattr(fn, "__name__", "job")
-        remote = ray.remote(num_cpus=1, scheduling_strategy="SPREAD", max_retries=0)(run)
-        refs = [remote.remote(job) for job in jobs]
+            # one remote function per job function: Ray sends it to each worker once and keeps it there, so
+            # module-level caches of a script's function (sent by value) live as long as the worker, across
+            # map calls, as in a local pool
+            run.__name__ = run.__qualname__ = getattr(fn, "__name__", "job")
+            self._remotes[fn] = ray.remote(num_cpus=1, scheduling_strategy="SPREAD", max_retries=0)(run)
+        refs = [self._remotes[fn].remote(job) for job in jobs]
         for k, ref in enumerate(refs):
             try:
                 result, where = ray.get(ref)

@@ -180,3 +180,15 @@ def test_shared_files_reach_ray_workers_by_content(tmp_path):
 def test_ship_code_needs_its_own_ray_connection():
     with pytest.raises(EngineError, match="--ship-code needs to start the Ray connection itself"):
         open_engine(EngineConfig("ray", ship_code=True))
+
+
+def test_a_list_of_scenarios_plans_alike_on_ray_and_on_local_processes(tmp_path, capsys):
+    from planners.plan import Plan
+
+    names = "throw_and_catch_exp,corridor"
+    for engine in ("local", "ray"):
+        assert main(["plan", names, "--engine", engine, "--workers", "2", "--out", str(tmp_path / engine)]) == 0
+    assert "planning 2 scenarios on Ray: 2 CPUs" in capsys.readouterr().out
+    for name in names.split(","):
+        local, on_ray = (Plan.load(tmp_path / e / f"{name}.json") for e in ("local", "ray"))
+        assert local.fingerprint() == on_ray.fingerprint() and local.robustness > 0

@@ -60,3 +60,10 @@ def test_engine_arguments_and_ray_address_from_the_environment(monkeypatch):
     monkeypatch.setenv("RAY_ADDRESS", "10.0.0.5:6379")
     assert config.resolved_address() == "10.0.0.5:6379" and "cluster at 10.0.0.5:6379" in config.describe()
     assert engine_config(parser.parse_args([])).describe() == "3 local worker processes"
+
+
+def test_a_list_to_plan_takes_impact_scenarios_only(capsys):
+    from impact_env.cli import main
+
+    assert main(["plan", "corridor,L", "--workers", "1"]) == 2
+    assert "plan tether stations one at a time (L)" in capsys.readouterr().err
