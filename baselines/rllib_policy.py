@@ -7,7 +7,7 @@ checkpoint that ``impact-env train ... --engine rllib`` writes also gets a ``pol
 that is all a controller reads:
 
 - ``policy.json`` (format ``impact_env.rllib_policy/1``): the scenario, which policy acts for which robot, the
-  network (``model_config``: hidden sizes, activation, shared value layers or not), and per robot the
+  network (``model_config``: hidden sizes, activation, shared value layers or not, a free log-std), and per robot the
   observation filter's mean and standard deviation (RLlib's ``MeanStdFilter``; none if training did not
   normalise);
 - ``<policy>.npz``: the policy network's inference weights, read with ``allow_pickle=False``.
@@ -36,7 +36,7 @@ FORMAT = "impact_env.rllib_policy/1"
 POLICY_FOLDER = "policy"
 FINAL_CHECKPOINT = "checkpoint"
 ACTIVATIONS = ("tanh", "relu")
-_MODEL_KEYS = {"fcnet_hiddens", "fcnet_activation", "vf_share_layers"}
+_MODEL_KEYS = {"fcnet_hiddens", "fcnet_activation", "vf_share_layers", "free_log_std"}
 
 
 # ------------------------------------------------------------------------------------------------- export
@@ -112,9 +112,10 @@ def read_policy_json(folder: Path) -> dict[str, Any]:
     hidden = model["fcnet_hiddens"]
     if not (isinstance(hidden, list) and hidden and all(type(h) is int and 1 <= h <= 4096 for h in hidden)):
         raise ModelFileError(f"{path}: model_config.fcnet_hiddens must be a list of layer sizes, got {hidden!r}")
-    if model["fcnet_activation"] not in ACTIVATIONS or not isinstance(model["vf_share_layers"], bool):
-        raise ModelFileError(f"{path}: model_config.fcnet_activation must be one of {ACTIVATIONS} and "
-                             f"vf_share_layers true or false, got {model!r}")
+    if model["fcnet_activation"] not in ACTIVATIONS or not isinstance(model["vf_share_layers"], bool) \
+            or not isinstance(model["free_log_std"], bool):
+        raise ModelFileError(f"{path}: model_config.fcnet_activation must be one of {ACTIVATIONS}, and "
+                             f"vf_share_layers and free_log_std true or false, got {model!r}")
     filters = meta.get("observation_filter")
     if filters is not None:
         if not isinstance(filters, dict) or set(filters) != set(agents):

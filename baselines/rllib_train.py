@@ -11,9 +11,12 @@ Hyperparameters come from the same rl-baselines3-zoo file as stable-baselines3's
 per ``n_steps * n_envs`` env steps, minibatches of ``batch_size``, ``n_epochs`` passes, the same gamma, GAE
 lambda, clip range, entropy and value coefficients, gradient clipping and learning-rate schedule, separate
 policy and value networks of ``net_arch`` with tanh (SB3's default), and no KL penalty (SB3 has none).
-``normalize: true`` becomes RLlib's per-agent ``MeanStdFilter`` on observations. What does not carry over:
-VecNormalize's reward scaling (RLlib has no such connector; PPO standardises advantages either way) and
-``log_std_init`` (RLlib's Gaussian head outputs its log-std, starting near std 1).
+``normalize: true`` becomes RLlib's per-agent ``MeanStdFilter`` on observations. The policy starts as SB3's
+does: a state-independent log-std (``free_log_std``) at ``log_std_init``, orthogonal weights with gain sqrt(2)
+in the hidden layers and 0.01 in the policy's output layer, zero biases (RLlib's defaults instead output the
+log-std from the network, near std 1, and start the means far from zero; a first run with them had not touched
+the object after 150k steps). What does not carry over: VecNormalize's reward scaling (RLlib has no such
+connector; PPO standardises advantages either way).
 
 Every ``eval_freq`` env steps the current policies fly ``eval_episodes`` seeded episodes of the central
 Gymnasium env through the same controller as ``impact-env run --controller rllib:...``
@@ -30,6 +33,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -96,8 +100,13 @@ def rllib_settings(entry: dict[str, Any], timesteps: int) -> dict[str, Any]:
         # lin_X: X decaying linearly to 0 at the end of the run, as SB3's schedule over its progress
         "lr": [[0, lr_start], [max(1, timesteps), 0.0]] if callable(lr) else lr_start,
         "model_config": {"fcnet_hiddens": [int(h) for h in net_arch], "fcnet_activation": activation,
-                         "vf_share_layers": False},
+                         "vf_share_layers": False, "free_log_std": True,
+                         **({"fcnet_kernel_initializer": "orthogonal_",
+                             "fcnet_kernel_initializer_kwargs": {"gain": math.sqrt(2)},
+                             "fcnet_bias_initializer": "zeros_"} if kwargs.get("ortho_init", True) else {})},
         "normalize_observations": bool(entry.get("normalize", False)),
+        "log_std_init": float(kwargs.get("log_std_init", 0.0)),
+        "ortho_init": bool(kwargs.get("ortho_init", True)),
     }
 
 
@@ -137,6 +146,7 @@ def build_algorithm(config: RLlibTrainConfig, settings: dict[str, Any], robots: 
     settings = dict(settings)
     model_config = settings.pop("model_config")
     normalize = settings.pop("normalize_observations")
+    log_std_init, ortho_init = settings.pop("log_std_init"), settings.pop("ortho_init")
     policy_ids = robots if config.policies == "independent" else ["shared"]
     runners: dict[str, Any] = {"num_env_runners": config.env_runners,
                                "num_envs_per_env_runner": config.envs_per_runner,
@@ -155,7 +165,28 @@ def build_algorithm(config: RLlibTrainConfig, settings: dict[str, Any], robots: 
         .training(**settings)
         .debugging(seed=config.seed, log_level="ERROR")
     )
-    return algo_config.build_algo(), model_config, normalize
+    algo = algo_config.build_algo()
+    _start_like_sb3(algo, log_std_init, ortho_init)
+    return algo, model_config, normalize
+
+
+def _start_like_sb3(algo: Any, log_std_init: float, ortho_init: bool) -> None:
+    """Set every policy's log-std to ``log_std_init`` and (``ortho_init``) its output layer to SB3's orthogonal
+    init with gain 0.01, on the learner, then send the weights to the env runners."""
+    def init(learner: Any, _: Any = None) -> None:
+        import torch
+
+        for module_id in learner.module.keys():
+            pi = learner.module[module_id].pi
+            with torch.no_grad():
+                pi.log_std.fill_(log_std_init)
+                if ortho_init:
+                    out = [m for m in pi.net.modules() if isinstance(m, torch.nn.Linear)][-1]
+                    torch.nn.init.orthogonal_(out.weight, gain=0.01)
+                    out.bias.zero_()
+
+    algo.learner_group.foreach_learner(init)
+    algo.env_runner_group.sync_weights(from_worker_or_learner_group=algo.learner_group, inference_only=True)
 
 
 def _evaluate(scenario, folder: Path, eval_options: dict[str, Any], episodes: int, seed: int) -> tuple[list, list]:
@@ -249,24 +280,21 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
         steps = _lifetime_steps(algo)
         next_eval = (steps // config.eval_freq + 1) * config.eval_freq
         next_checkpoint = (steps // config.checkpoint_freq + 1) * config.checkpoint_freq
-        best = max((float(np.mean(r)) for r in evals["results"]), default=-np.inf)
-        deadline = None if config.max_minutes is None else start + 60.0 * config.max_minutes
-        iteration = 0
-        while steps < timesteps and (deadline is None or time.perf_counter() < deadline):
-            before = steps
-            result = algo.train()
-            iteration += 1
-            steps = _lifetime_steps(algo, result)
+
+        def log_iteration(result: dict[str, Any], iteration: int, before: int, steps: int) -> str:
+            """progress.csv's row, the evaluation and checkpoint when due, and the line to print."""
+            nonlocal next_eval, next_checkpoint
             timers = result.get("timers", {})
             sampling = float(timers.get("env_runner_sampling_timer", float("nan")))
             sampled = steps - before
-            writer.writerow([result.get("training_iteration", iteration), steps,
-                             f"{time.perf_counter() - start:.2f}", f"{float(result.get('time_this_iter_s', 0)):.3f}",
-                             f"{sampling:.3f}", f"{float(timers.get('learner_update_timer', float('nan'))):.3f}",
-                             sampled, f"{sampled / sampling:.1f}" if sampling > 0 else ""])
+            number = result.get("training_iteration", iteration)
+            writer.writerow([number, steps, f"{time.perf_counter() - start:.2f}",
+                             f"{float(result.get('time_this_iter_s', 0)):.3f}", f"{sampling:.3f}",
+                             f"{float(timers.get('learner_update_timer', float('nan'))):.3f}", sampled,
+                             f"{sampled / sampling:.1f}" if sampling > 0 else ""])
             progress.flush()
-            line = (f"  iteration {result.get('training_iteration', iteration)}: {steps} env steps, "
-                    f"{sampled / sampling:.0f} env steps/s sampling" if sampling > 0 else f"  {steps} env steps")
+            line = f"  iteration {number}: {steps} env steps"
+            line += f", {sampled / sampling:.0f} env steps/s sampling" if sampling > 0 else ""
             if steps >= next_eval or steps >= timesteps:
                 line += evaluate(steps)
                 while next_eval <= steps:
@@ -275,7 +303,21 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
                 save(run_dir / "checkpoints" / f"step_{steps}")
                 while next_checkpoint <= steps:
                     next_checkpoint += config.checkpoint_freq
-            say(line, flush=True)
+            return line
+
+        best = max((float(np.mean(r)) for r in evals["results"]), default=-np.inf)
+        deadline = None if config.max_minutes is None else start + 60.0 * config.max_minutes
+        iteration = 0
+        interrupted = False
+        try:
+            while steps < timesteps and (deadline is None or time.perf_counter() < deadline):
+                before = steps
+                result = algo.train()
+                iteration += 1
+                steps = _lifetime_steps(algo, result)
+                say(log_iteration(result, iteration, before, steps), flush=True)
+        except KeyboardInterrupt:  # Ctrl-C: keep what was learned, say how to continue
+            interrupted = True
         progress.close()
         if not evals["timesteps"] or evals["timesteps"][-1] != steps:  # always one evaluation at the end
             say(f"  final{evaluate(steps)[1:]}", flush=True)
@@ -285,7 +327,7 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
                 "max_minutes": config.max_minutes, "env_runners": config.env_runners,
                 "envs_per_runner": config.envs_per_runner, "seed": config.seed, "multiagent": True,
                 "env_options": config.env_options, "rllib_settings": {k: v for k, v in settings.items()},
-                "ray_version": ray.__version__, "address": config.address,
+                "ray_version": ray.__version__, "address": config.address, "interrupted": interrupted,
                 "wall_time_s": time.perf_counter() - start}
         old = run_dir / "train.json"
         if config.resume and old.is_file():
@@ -296,6 +338,10 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
         if owns_ray:
             ray.shutdown()
     say(f"saved {final}; fly it with: impact-env run {config.scenario} --controller rllib:{run_dir}", flush=True)
+    if interrupted:
+        print(f"interrupted at {steps} env steps; continue with the same command and --resume --trust-pickle",
+              flush=True)
+        raise KeyboardInterrupt
     return run_dir
 
 

@@ -37,7 +37,7 @@ TINY_PPO = """impact_env/ThrowAndCatchExp-v0:
   batch_size: 200
   n_epochs: 1
   learning_rate: lin_3e-4
-  policy_kwargs: "dict(net_arch=[16, 16])"
+  policy_kwargs: "dict(net_arch=[16, 16], log_std_init=-0.5)"
 """
 
 
@@ -94,6 +94,8 @@ def test_rllib_iterations_checkpoint_restore_and_fly(rllib_run, tmp_path, capsys
         "R1": "R1", "R2": "R2"}
     policy = run / "checkpoint" / "policy"
     assert sorted(p.name for p in policy.iterdir()) == ["R1.npz", "R2.npz", "policy.json"]
+    with np.load(policy / "R1.npz", allow_pickle=False) as weights:  # started at SB3's log_std_init
+        assert np.all(np.abs(weights["pi.log_std"] + 0.5) < 0.05) and weights["pi.log_std"].shape == (3,)
     with np.load(run / "eval" / "evaluations.npz", allow_pickle=False) as ev:
         assert list(ev["timesteps"]) == [400, 800] and ev["results"].shape == (2, 5)
 

@@ -15,7 +15,8 @@ from impact_env.scenario import load_scenario
 
 GOOD = {"format": "impact_env.rllib_policy/1", "scenario": "throw_and_catch_exp",
         "agent_policies": {"R1": "R1", "R2": "R2"},
-        "model_config": {"fcnet_hiddens": [16, 16], "fcnet_activation": "tanh", "vf_share_layers": False},
+        "model_config": {"fcnet_hiddens": [16, 16], "fcnet_activation": "tanh", "vf_share_layers": False,
+                         "free_log_std": True},
         "observation_filter": None}
 
 
