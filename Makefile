@@ -1,7 +1,11 @@
 # Two entry points from a fresh clone (only Python 3.11 needed):
 #   make demo   - create .venv, install the package, run the main demo (video + JSON + plots in out/)
 #   make test   - create .venv, install with the [rl,dev,scip,tether,ray] extras, run the default (fast) test suite
-# Further targets: make test-slow (long checks), make bench (benchmarks), make lint,
+# Further targets: make test-slow (long checks), make fuzz (10 minutes of property-based fuzzing),
+#   make bench (benchmarks), make bench-ray (local processes vs Ray, RLlib vs SB3 sampling), make lint,
+#   make wheel-check (sdist + wheel, smoke test of the wheel in a fresh venv), make docs (the documentation
+#   site, warnings as errors), make docs-check (its links and a headless-Chromium look at an environment page),
+#   make docs-media (re-make the GIFs and figures the site shows),
 #   make results (retrain the RL baselines and rerun the expert-vs-learned benchmark: ~3 h).
 
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
@@ -9,7 +13,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 OUT := out
 
-.PHONY: demo test test-slow bench bench-expert results lint clean
+.PHONY: demo test test-slow fuzz bench bench-expert bench-ray results lint clean wheel-check docs docs-check docs-media
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -47,8 +51,21 @@ test: $(VENV)/.dev-installed
 test-slow: $(VENV)/.dev-installed
 	$(BIN)/python -m pytest -q -n 2 --dist loadgroup -m slow --timeout 3600
 
+# The fuzzers of tests/fuzz/ drawing fresh inputs for FUZZ_SECONDS per fuzzer (7 fuzzers on 2 processes:
+# 170 s each is about 10 minutes), then a table of the inputs tried.
+FUZZ_SECONDS ?= 170
+fuzz: $(VENV)/.dev-installed
+	mkdir -p $(OUT)
+	rm -f $(OUT)/fuzz_report.jsonl
+	IMPACT_ENV_FUZZ_SECONDS=$(FUZZ_SECONDS) IMPACT_ENV_FUZZ_REPORT=$(OUT)/fuzz_report.jsonl \
+		$(BIN)/python -m pytest -q -n 2 -m slow tests/fuzz --timeout 3600
+
 bench-expert: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/expert.py --episodes 50
+
+# the same bench on local processes and on Ray, and RLlib's sampling against SB3's SubprocVecEnv (docs/ray.md)
+bench-ray: $(VENV)/.dev-installed
+	$(BIN)/python benchmarks/ray_overhead.py
 
 bench: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/env_throughput.py
@@ -60,8 +77,28 @@ bench: $(VENV)/.base-installed
 results: $(VENV)/.dev-installed
 	bash baselines/reproduce.sh
 
+# the docs tools on top of the dev install (torch stays the pinned CPU build installed above)
+$(VENV)/.docs-installed: $(VENV)/.dev-installed
+	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,dev,scip,tether,ray,docs]'
+	touch $@
+
+wheel-check: $(VENV)/.dev-installed
+	bash .ci/wheel_check.sh $(BIN)/python
+
+# the site in site/; the tutorial notebook runs at TUTORIAL_SIZE (small: seconds of PPO; full: the real run)
+TUTORIAL_SIZE ?= small
+docs: $(VENV)/.docs-installed
+	rm -rf .cache/mkdocs-jupyter  # the notebook runs on every build
+	TUTORIAL_SIZE=$(TUTORIAL_SIZE) NO_MKDOCS_2_WARNING=1 SDL_VIDEODRIVER=dummy MPLBACKEND=Agg $(BIN)/mkdocs build --strict
+
+docs-check: docs
+	$(BIN)/python -m pytest -q -p no:cacheprovider tests/docs_site_check.py
+
+docs-media: $(VENV)/.base-installed
+	SDL_VIDEODRIVER=dummy MPLBACKEND=Agg $(BIN)/python scripts/make_docs_media.py
+
 lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check impact_env planners baselines tests benchmarks
 
 clean:
-	rm -rf $(VENV) $(OUT) *.egg-info
+	rm -rf $(VENV) $(OUT) *.egg-info site

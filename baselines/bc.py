@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import copy
 import json
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +24,8 @@ from typing import Any
 import numpy as np
 
 from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
-from baselines.record import dataset_id
+from baselines.record import dataset_id, datasets_path, use_datasets_path
+from baselines.run_meta import scenario_fingerprint
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario
 
@@ -35,26 +35,30 @@ MIN_OBS_STD = 1e-2  # features constant in the demonstrations (e.g. a passive di
 @dataclass
 class BCConfig:
     scenario: str
-    dataset_dir: str = "datasets"
+    dataset_dir: str | None = None  # default: Minari's own folder (see baselines.record)
     epochs: int = 30
     batch_size: int = 256
     learning_rate: float = 1e-3
     ent_weight: float = 1e-3
     validation_share: float = 0.1  # of the episodes (at least one when there are two or more)
     seed: int = 0
-    out: str = "runs"
+    out: str | None = None  # the run folder; default <runs_dir>/bc_<scenario>_s<seed>
+    runs_dir: str = "runs"
     net_arch: tuple[int, ...] = (128, 128)
 
 
-def load_demonstrations(scenario_name: str, dataset_dir: str | Path) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The (observations, actions) of every episode of ``impact_env/<scenario>/expert-v0`` in ``dataset_dir``."""
-    os.environ["MINARI_DATASETS_PATH"] = str(Path(dataset_dir).resolve())
+def load_demonstrations(scenario_name: str,
+                        dataset_dir: str | Path | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The (observations, actions) of every episode of ``impact_env/<scenario>/expert-v0`` in ``dataset_dir``
+    (default: Minari's own folder)."""
+    use_datasets_path(dataset_dir)
     import minari
 
     name = dataset_id(scenario_name)
     if name not in minari.list_local_datasets():
-        raise ImpactEnvError(f"no dataset {name!r} in {dataset_dir}/: record one with "
-                             f"`impact-env record {scenario_name} --out {dataset_dir}`")
+        where = "" if dataset_dir is None else f" --out {dataset_dir}"
+        raise ImpactEnvError(f"no dataset {name!r} in {datasets_path(dataset_dir)}: record one with "
+                             f"`impact-env record {scenario_name}{where}`")
     return [(np.asarray(ep.observations[:-1], dtype=np.float32), np.asarray(ep.actions, dtype=np.float32))
             for ep in minari.load_dataset(name).iterate_episodes()]
 
@@ -122,7 +126,7 @@ def behaviour_clone(config: BCConfig) -> Path:
         policy.load_state_dict(best[1])
         print(f"  kept epoch {best[2]} (lowest validation error {best[0]:.3g})")
 
-    run_dir = Path(config.out) / f"bc_{scenario.name}_s{config.seed}"
+    run_dir = Path(config.out) if config.out else Path(config.runs_dir) / f"bc_{scenario.name}_s{config.seed}"
     run_dir.mkdir(parents=True, exist_ok=True)
     policy.set_training_mode(False)
     model.save(run_dir / "model.zip")
@@ -130,6 +134,7 @@ def behaviour_clone(config: BCConfig) -> Path:
     (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
     (run_dir / "train.json").write_text(json.dumps({
         "algo": "ppo", "method": "behaviour cloning", "scenario": scenario.name,
+        "scenario_fingerprint": scenario_fingerprint(scenario),
         "dataset": dataset_id(scenario.name), "episodes_train": len(train_eps), "episodes_validation": len(val_eps),
         "samples": len(obs), "epochs": config.epochs, "batch_size": config.batch_size,
         "learning_rate": config.learning_rate, "ent_weight": config.ent_weight, "seed": config.seed,

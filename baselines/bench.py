@@ -1,7 +1,7 @@
 """Expert-versus-learned benchmark: the same seeded episodes for every controller on every scenario.
 
     impact-env bench corridor,throw_and_catch_exp --controllers expert,ppo:runs/ppo_{scenario}_s0/model.zip,zero \
-        --thrust-noise 0.05 --init-noise 0.05
+        --thrust-noise 0.05 --initial-position-noise-m 0.05
 
 Controllers: ``expert``, ``random``, ``zero``, or a saved stable-baselines3 model as ``label:path.zip``
 (or just ``path.zip``); ``{scenario}`` in a path is replaced by each scenario's name, since a policy is
@@ -244,38 +244,47 @@ def markdown_table(summary: list[dict[str, Any]]) -> str:
 
 def _figure(results, summary, scenarios, controllers, path: Path) -> None:
     from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
     from baselines import tether
-    from impact_env.plotting import draw_scenario
+    from impact_env.plotting import OBJECT_TRACE_COLOURS, draw_scenario, trace_colours
 
     n_c = len(controllers)
-    fig = Figure(figsize=(3.2 * (n_c + 1), 3.6 * len(scenarios)), layout="constrained")
+    fig = Figure(figsize=(3.2 * (n_c + 1) + 1.6, 3.6 * len(scenarios)), layout="constrained")
     axes = fig.subplots(len(scenarios), n_c + 1, squeeze=False)
     labels = [c.label for c in controllers]
     for i, s in enumerate(scenarios):
         rows = {r["controller"]: r for r in summary if r["scenario"] == s}
         ax = axes[i][0]
         ax.bar(labels, [rows[c]["robustness_mean"] for c in labels],
-               yerr=[rows[c]["robustness_std"] for c in labels], color="tab:blue", alpha=0.8)
+               yerr=[rows[c]["robustness_std"] for c in labels], color="0.55", alpha=0.9, capsize=3)
         ax.axhline(0.0, color="k", lw=0.8)
         for k, c in enumerate(labels):
             ax.text(k, 0, f"{100 * rows[c]['success_rate']:.0f}%", ha="center", va="bottom", fontsize=8)
         ax.set_title(f"{s}: robustness (m), success %", fontsize=9)
         ax.tick_params(axis="x", labelrotation=30, labelsize=8)
+        ax.legend(handles=[Patch(fc="0.55", label="mean robustness +- std"),
+                           Line2D([], [], ls="", marker="$\\%$", color="k", label="success rate")], fontsize=7,
+                  loc="lower left")
         if tether.is_station(s):
             from impact_env.station import load_station
             from impact_env.tether_plotting import draw_station
 
             scenario, draw = load_station(s), draw_station
+            names, colours = ["cargo"], [OBJECT_TRACE_COLOURS[0]]  # a station's trace is the cargo's path
         else:
             scenario, draw = load_scenario(s), draw_scenario
+            names = [body.name for body in scenario.bodies]
+            colours = trace_colours(scenario)  # the colours of every other figure: robots blues, objects oranges
         for k, c in enumerate(labels):
             ax = axes[i][k + 1]
             draw(scenario, ax)
             ax.get_legend() and ax.get_legend().remove()
             traj = next(r["positions"] for r in results if r["scenario"] == s and r["controller"] == c
                         and r["positions"] is not None)
-            for b in range(traj.shape[1]):
-                ax.plot(traj[:, b, 0], traj[:, b, 1], lw=1.2)
+            for b, name in enumerate(names[:traj.shape[1]]):
+                ax.plot(traj[:, b, 0], traj[:, b, 1], lw=1.2, color=colours[b], zorder=5, label=name)
             ax.set_title(f"{c} (seed 0)", fontsize=9)
+        axes[i][-1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, title="paths")
     fig.savefig(path, dpi=100)

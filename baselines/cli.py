@@ -11,33 +11,44 @@ import numpy as np
 # Nothing from the [rl] extra is imported here: `impact-env` loads this module at start-up, also in a base
 # install (make demo), so stable-baselines3, yaml and minari are imported only by the command handlers.
 from baselines import ALGOS, rllib_cli
+from impact_env.cli_options import add_transport_options, transport_options
 from impact_env.envs.core import REWARD_MODES
 from impact_env.sweep import add_engine_arguments, engine_config
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("train", help="train a PPO or SAC baseline on a scenario (stable-baselines3)")
-    p.add_argument("algo", choices=ALGOS)
-    p.add_argument("scenario", help="shipped name or path to a .toml file")
-    p.add_argument("--timesteps", type=int, default=None, help="default: n_timesteps of the hyperparameter file")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--n-envs", type=int, default=None, help="parallel envs (subprocesses); default from the file")
+    p = subparsers.add_parser("train", help="train a PPO or SAC baseline on a scenario (stable-baselines3)",
+                              description="Train a PPO or SAC policy. Progress is a bar on a terminal and one line per "
+                                          "rollout otherwise; Ctrl-C saves the model reached (continue with --resume).")
+    p.add_argument("algo", choices=ALGOS, help="the algorithm")
+    p.add_argument("scenario", help="a shipped scenario name (impact-env scenarios) or a .toml file")
+    p.add_argument("--timesteps", type=int, default=None,
+                   help="environment steps to train (default: n_timesteps of the hyperparameter file; PPO rounds up "
+                        "to whole rollouts)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the algorithm and the environments")
+    p.add_argument("--n-envs", type=int, default=None,
+                   help="parallel environments, in subprocesses when more than one (default: n_envs of the file)")
     p.add_argument("--max-minutes", type=float, default=None,
-                   help="wall-clock budget: stop before --timesteps when it runs out")
-    p.add_argument("--out", default="runs", help="runs/<algo>_<scenario>_s<seed>/ gets model.zip, logs, checkpoints")
-    p.add_argument("--hyperparams", default=None, help="an rl-zoo style YAML file (default baselines/hyperparams)")
+                   help="wall-clock budget: stop before --timesteps when it runs out (default: none)")
+    p.add_argument("--out", default=None, metavar="RUN_DIR",
+                   help="the run folder: model.zip, vecnormalize.json, train.json, eval/, tb/, checkpoints/ (default: "
+                        "<--runs-dir>/<algo>_<scenario>_s<seed>)")
+    p.add_argument("--runs-dir", default="runs", help="parent of the default run folder")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the run saved in the run folder (after Ctrl-C, --max-minutes or a shorter "
+                        "--timesteps) up to --timesteps")
+    p.add_argument("--hyperparams", default=None, metavar="YAML",
+                   help="an rl-baselines3-zoo style YAML file (default: baselines/hyperparams/<algo>.yml)")
     p.add_argument("--multiagent", action="store_true",
                    help="one shared policy for every robot on the PettingZoo env (parameter sharing)")
-    p.add_argument("--eval-freq", type=int, default=20_000, help="env steps between evaluations")
-    p.add_argument("--reward", choices=REWARD_MODES, default="dense", help="see impact_env.envs.core")
-    p.add_argument("--fuel-penalty", type=float, default=0.0)
-    p.add_argument("--restitution", type=float, default=None)
-    p.add_argument("--thrust-noise", type=float, default=0.0)
-    p.add_argument("--init-noise", type=float, default=0.0)
+    p.add_argument("--eval-freq", type=int, default=None, metavar="STEPS",
+                   help="environment steps between evaluations (default: a fifth of the run, at most 20,000; "
+                        "there is always one at the end)")
+    add_transport_options(p, REWARD_MODES)
     p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
                    help="tether stations only: the tether physics (see impact_env.tether_physics)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--verbose", type=int, default=0)
+    p.add_argument("--no-progress", action="store_true", help="neither a progress bar nor progress lines")
+    p.add_argument("--verbose", type=int, default=0, help="stable-baselines3's verbosity (0, 1, 2)")
     rllib_cli.add_arguments(p)
     p.set_defaults(func=_run)
 
@@ -47,11 +58,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--controllers", default="expert,random,zero",
                    help="comma-separated: expert, random, zero, label:path/to/model.zip (stable-baselines3), "
                         "label:rllib:RUN_OR_CHECKPOINT (RLlib) ({scenario} in a path becomes each scenario's name)")
-    p.add_argument("--episodes", type=int, default=10)
+    p.add_argument("--episodes", type=int, default=10, help="seeded episodes per scenario and controller")
     p.add_argument("--out", default="bench", help="output folder (tables, CSV, figure)")
-    p.add_argument("--thrust-noise", type=float, default=0.0, help="std of multiplicative thrust noise (0.05 = 5%%)")
-    p.add_argument("--init-noise", type=float, default=0.0, help="objects start within this radius (m)")
-    p.add_argument("--restitution", type=float, default=None, help="simulate with this restitution")
+    p.add_argument("--thrust-noise", type=float, default=0.0, metavar="STD",
+                   help="standard deviation of multiplicative thrust noise (0.05 = 5%%)")
+    p.add_argument("--initial-position-noise-m", type=float, default=0.0, metavar="R",
+                   help="objects start uniformly within this radius (m) of their position")
+    p.add_argument("--restitution", type=float, default=None, metavar="E",
+                   help="simulate with this restitution instead of the scenario's")
     p.add_argument("--trust-pickle", action="store_true",
                    help="also load pickled files of model folders (old vecnormalize.pkl, unknown pickled model "
                         "entries); a pickle can run any code: only for files you made yourself")
@@ -67,30 +81,38 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="required: converting unpickles the old file, which can run code; only for your own files")
     p.set_defaults(func=_convert)
 
-    p = subparsers.add_parser("record", help="record expert episodes as a Minari dataset")
-    p.add_argument("scenario", help="shipped name or path to a .toml file")
-    p.add_argument("--episodes", type=int, default=20)
-    p.add_argument("--out", default="datasets", help="Minari datasets folder (MINARI_DATASETS_PATH)")
-    p.add_argument("--plan", default=None, help="a saved plan; planned with the MILP if omitted")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--thrust-noise", type=float, default=0.0)
-    p.add_argument("--init-noise", type=float, default=0.0)
+    p = subparsers.add_parser("record", help="record expert episodes as a Minari dataset (with per-step infos)")
+    p.add_argument("scenario", help="a shipped scenario name (impact-env scenarios) or a .toml file")
+    p.add_argument("--episodes", type=int, default=20, help="episodes to record (seeds --seed, --seed + 1, ...)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="Minari datasets folder (default: Minari's own, $MINARI_DATASETS_PATH or ~/.minari/datasets, "
+                        "so minari.load_dataset finds it without settings)")
+    p.add_argument("--plan", default=None, metavar="JSON", help="a saved plan; planned with the MILP if omitted")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    p.add_argument("--thrust-noise", type=float, default=0.0, metavar="STD",
+                   help="standard deviation of multiplicative thrust noise")
+    p.add_argument("--initial-position-noise-m", type=float, default=0.0, metavar="R",
+                   help="objects start uniformly within this radius (m) of their position")
     p.set_defaults(func=_record)
 
     p = subparsers.add_parser("bc", help="behaviour cloning from a recorded expert dataset (see `record`)")
-    p.add_argument("scenario", help="shipped name or path to a .toml file")
-    p.add_argument("--dataset", default="datasets", help="the folder `impact-env record --out` wrote")
-    p.add_argument("--epochs", type=int, default=30)
-    p.add_argument("--batch-size", type=int, default=256)
-    p.add_argument("--lr", type=float, default=1e-3)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default="runs", help="runs/bc_<scenario>_s<seed>/ gets model.zip")
+    p.add_argument("scenario", help="a shipped scenario name (impact-env scenarios) or a .toml file")
+    p.add_argument("--dataset", default=None, metavar="DIR",
+                   help="the Minari datasets folder `impact-env record --out` wrote (default: Minari's own)")
+    p.add_argument("--epochs", type=int, default=30, help="passes over the demonstrations")
+    p.add_argument("--batch-size", type=int, default=256, help="minibatch size")
+    p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate")
+    p.add_argument("--seed", type=int, default=0, help="seed of the policy and the minibatches")
+    p.add_argument("--out", default=None, metavar="RUN_DIR",
+                   help="the run folder: model.zip, vecnormalize.json, train.json (default: "
+                        "<--runs-dir>/bc_<scenario>_s<seed>)")
+    p.add_argument("--runs-dir", default="runs", help="parent of the default run folder")
     p.set_defaults(func=_bc)
 
     p = subparsers.add_parser("curves", help="plot the evaluation curves of training runs")
-    p.add_argument("runs", nargs="+", help="run folders written by `impact-env train`")
-    p.add_argument("--out", default="curves.png")
-    p.add_argument("--title", default="")
+    p.add_argument("runs", nargs="+", help="run folders written by `impact-env train` (its --out)")
+    p.add_argument("--out", default="curves.png", help="output image")
+    p.add_argument("--title", default="", help="figure title")
     p.add_argument("--labels", default=None, help="comma-separated legend labels, one per run")
     p.add_argument("--table", default=None, help="also write a markdown table of the runs to this file")
     p.set_defaults(func=_curves)
@@ -137,19 +159,21 @@ def _bc(args: argparse.Namespace) -> int:
 
     run_dir = behaviour_clone(BCConfig(scenario=args.scenario, dataset_dir=args.dataset, epochs=args.epochs,
                                        batch_size=args.batch_size, learning_rate=args.lr, seed=args.seed,
-                                       out=args.out))
+                                       out=args.out, runs_dir=args.runs_dir))
     print(f"saved {run_dir / 'model.zip'}; fly it with: impact-env run {args.scenario} "
           f"--controller {run_dir / 'model.zip'}")
     return 0
 
 
 def _record(args: argparse.Namespace) -> int:
-    from baselines.record import dataset_id, mean_return, record
+    from baselines.record import datasets_path, mean_return, record
 
-    options = {"thrust_noise": args.thrust_noise, "initial_position_noise_m": args.init_noise}
+    options = {"thrust_noise": args.thrust_noise, "initial_position_noise_m": args.initial_position_noise_m}
     ds = record(args.scenario, args.episodes, args.out, args.plan, options, args.seed)
-    print(f"wrote Minari dataset {dataset_id(ds.spec.dataset_id.split('/')[1])} in {args.out}/: "
-          f"{ds.total_episodes} episodes, {ds.total_steps} steps, mean return {mean_return(ds):+.3f}")
+    print(f"wrote Minari dataset {ds.spec.dataset_id} in {datasets_path(args.out)}: {ds.total_episodes} episodes, "
+          f"{ds.total_steps} steps, mean return {mean_return(ds):+.3f}; load it with "
+          f"minari.load_dataset({ds.spec.dataset_id!r})"
+          + ("" if args.out is None else f" and MINARI_DATASETS_PATH={args.out}"))
     return 0
 
 
@@ -162,7 +186,7 @@ def _bench(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise ImpactEnvError(f"--episodes must be >= 1, got {args.episodes}")
     scenarios = args.scenarios.split(",")
-    options = {"thrust_noise": args.thrust_noise, "initial_position_noise_m": args.init_noise}
+    options = {"thrust_noise": args.thrust_noise, "initial_position_noise_m": args.initial_position_noise_m}
     if args.restitution is not None:
         options["restitution"] = args.restitution
     from baselines.tether import is_station
@@ -179,23 +203,28 @@ def _bench(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     from baselines.train import TrainConfig, train
 
-    options = {"reward_mode": args.reward, "fuel_penalty": args.fuel_penalty, "thrust_noise": args.thrust_noise,
-               "initial_position_noise_m": args.init_noise}
-    if args.restitution is not None:
-        options["restitution"] = args.restitution
+    options = transport_options(args)
+    if options["restitution"] is None:
+        del options["restitution"]
     from baselines.tether import is_station
 
     if is_station(args.scenario):
         options["fidelity"] = args.fidelity
     if args.engine == "rllib":
-        return rllib_cli.run(args, options)
+        try:
+            return rllib_cli.run(args, options)
+        except KeyboardInterrupt:  # the run was saved, and the way to resume printed
+            return 130
     rllib_cli.check_sb3_options(args)
     config = TrainConfig(algo=args.algo, scenario=args.scenario, timesteps=args.timesteps, seed=args.seed,
-                         n_envs=args.n_envs, out=args.out, env_options=options, eval_freq=args.eval_freq,
-                         multiagent=args.multiagent, progress_bar=not args.no_progress,
-                         hyperparams_file=args.hyperparams, verbose=args.verbose,
-                         max_minutes=args.max_minutes)
-    run_dir = train(config)
+                         n_envs=args.n_envs, out=args.out, runs_dir=args.runs_dir, env_options=options,
+                         eval_freq=args.eval_freq, multiagent=args.multiagent, progress_bar=not args.no_progress,
+                         hyperparams_file=args.hyperparams, verbose=args.verbose, max_minutes=args.max_minutes,
+                         resume=args.resume)
+    try:
+        run_dir = train(config)
+    except KeyboardInterrupt:  # train() saved the model and said so
+        return 130
     print(f"saved {run_dir / 'model.zip'}; fly it with: impact-env run {args.scenario} "
           f"--controller {run_dir / 'model.zip'}")
     return 0

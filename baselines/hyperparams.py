@@ -14,14 +14,10 @@ from typing import Any
 
 import yaml
 
-from impact_env.errors import ImpactEnvError
+from impact_env.errors import HyperparameterError
 
 ACTIVATIONS = {"nn.ReLU": "ReLU", "nn.Tanh": "Tanh", "nn.ELU": "ELU", "nn.LeakyReLU": "LeakyReLU"}
 ZOO_ONLY = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_wrapper", "callback"}
-
-
-class HyperparameterError(ImpactEnvError, ValueError):
-    """A hyperparameter file or entry is malformed."""
 
 
 def load(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:

@@ -227,6 +227,7 @@ def preflight(path: Path, trust_pickle: bool = False) -> None:
     meta = read_train_json(path.parent)
     data = read_zip_data(path)
     infer_algo(path, data, meta.get("algo"))
+    check_rl_zoo3(path, data, trust_pickle)
     if trust_pickle:
         return
     for key in pickled_entries(data):
@@ -305,6 +306,53 @@ def _recorded_shape(entry: dict[str, Any]) -> tuple[int, ...] | None:
     return None
 
 
+def rl_zoo3_entries(data: dict[str, Any]) -> list[str]:
+    """Pickled entries of a model zip that name rl_zoo3's code (its schedules, wrappers): read from the pickles'
+    bytes, which spell out module names, without unpickling anything."""
+    import base64
+    import binascii
+
+    out = []
+    for key in pickled_entries(data):
+        try:
+            raw = base64.b64decode(data[key][":serialized:"], validate=False)
+        except (binascii.Error, TypeError, ValueError):
+            continue
+        if b"rl_zoo3" in raw:
+            out.append(key)
+    return out
+
+
+def rl_zoo3_normalization(path: Path) -> Path | None:
+    """The ``vecnormalize.pkl`` rl_zoo3 keeps in a folder named after the model (``<env>/vecnormalize.pkl`` beside
+    ``<env>.zip``), when ``path`` is laid out that way and no converted statistics sit beside it."""
+    candidate = path.parent / path.stem / LEGACY_NORMALIZATION_FILE
+    if candidate.is_file() and not (path.parent / NORMALIZATION_FILE).is_file() \
+            and not (path.parent / LEGACY_NORMALIZATION_FILE).is_file():
+        return candidate
+    return None
+
+
+def check_rl_zoo3(path: Path, data: dict[str, Any], trust_pickle: bool) -> None:
+    """A clear message for a model trained with rl_zoo3 that impact-env cannot fly as it is."""
+    stats = rl_zoo3_normalization(path)
+    if stats is not None:
+        raise ModelFileError(
+            f"{path} looks like an rl_zoo3 run: its observation statistics are in {stats}, a pickle, and the policy "
+            f"would fly without them. Copy that file beside the model as {path.parent / LEGACY_NORMALIZATION_FILE} "
+            f"and convert the folder once with `impact-env convert-model {path.parent} {TRUST_FLAG}` (only for runs "
+            "you made yourself)")
+    entries = rl_zoo3_entries(data)
+    if trust_pickle and entries:
+        import importlib.util
+
+        if importlib.util.find_spec("rl_zoo3") is None:
+            raise ModelFileError(
+                f"{path} was saved by rl_zoo3: its entries {entries} are rl_zoo3 code, and rl_zoo3 is not installed, "
+                f"so {TRUST_FLAG} cannot unpickle them. Load it without {TRUST_FLAG} (impact-env rebuilds schedules "
+                "and spaces itself), or `pip install rl_zoo3`")
+
+
 def load_model(path: Path, algo: str | None, observation_space: Any, action_space: Any,
                trust_pickle: bool = False) -> Any:
     """Load a PPO or SAC ``model.zip`` on the CPU without decoding any pickled entry (unless trusted)."""
@@ -312,6 +360,7 @@ def load_model(path: Path, algo: str | None, observation_space: Any, action_spac
 
     data = read_zip_data(path)
     algo = infer_algo(path, data, algo)
+    check_rl_zoo3(path, data, trust_pickle)
     cls = {"ppo": PPO, "sac": SAC}[algo]
     if trust_pickle:
         warn_trusted(path)
@@ -323,5 +372,8 @@ def load_model(path: Path, algo: str | None, observation_space: Any, action_spac
     try:
         return cls.load(str(path), device="cpu", custom_objects=custom)
     except Exception as exc:  # noqa: BLE001 - torch, zipfile and SB3 raise many types for a broken file
+        hint = ""
+        if isinstance(exc, ModuleNotFoundError) and exc.name and exc.name.split(".")[0] == "rl_zoo3":
+            hint = f" (saved by rl_zoo3: load it without {TRUST_FLAG}, or pip install rl_zoo3)"
         raise ModelFileError(f"{path} could not be loaded as a {algo.upper()} model: {type(exc).__name__}: "
-                             f"{str(exc)[:300]}") from None
+                             f"{str(exc)[:300]}{hint}") from None

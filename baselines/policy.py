@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from baselines import model_files
+from baselines import model_files, run_meta
 from impact_env.envs.core import ACTION_PER_ROBOT, OBS_PER_BODY
 from impact_env.errors import ControllerError
 
@@ -25,15 +26,19 @@ class SB3Controller:
 
     name = "sb3"
 
-    def __init__(self, scenario: Any, model_path: str | Path, trust_pickle: bool = False) -> None:
+    def __init__(self, scenario: Any, model_path: str | Path, trust_pickle: bool = False,
+                 allow_other_scenario: bool = False) -> None:
         from gymnasium import spaces
 
         from impact_env.envs.core import TransportCore
 
         path = Path(model_path)
+        self.model_path = path
         if not path.is_file():
             raise ControllerError(f"model file {str(path)!r} does not exist")
         self.meta = model_files.read_train_json(path.parent)
+        run_meta.check_scenario(self.meta, scenario, str(path), allow_other_scenario)
+        self._warned = False
         self.scenario = scenario
         self.multiagent = bool(self.meta.get("multiagent"))
         self.tether = hasattr(scenario, "anchors")  # a tether station: discrete commands (baselines/tether.py)
@@ -54,6 +59,12 @@ class SB3Controller:
         return obs if self._normalization is None else self._normalization.apply(obs)
 
     def reset(self, env: Any, seed: int | None) -> None:
+        if not self._warned:
+            self._warned = True
+            differences = run_meta.option_differences(self.meta, env.unwrapped.core)
+            if differences:
+                print(f"impact-env: warning: {self.model_path} was trained with other environment options ("
+                      + "; ".join(differences) + ")", file=sys.stderr, flush=True)
         if self.tether:
             return
         self._n_bodies = len(env.unwrapped.scenario.bodies)
@@ -77,7 +88,8 @@ class SB3Controller:
         return np.concatenate(out)
 
 
-def make_sb3_controller(scenario: Any, model: str | None = None, trust_pickle: bool = False, **_: Any) -> SB3Controller:
+def make_sb3_controller(scenario: Any, model: str | None = None, trust_pickle: bool = False,
+                        allow_other_scenario: bool = False, **_: Any) -> SB3Controller:
     if model is None:
         raise ControllerError("the sb3 controller needs a model: --controller path/to/model.zip")
-    return SB3Controller(scenario, model, trust_pickle=trust_pickle)
+    return SB3Controller(scenario, model, trust_pickle=trust_pickle, allow_other_scenario=allow_other_scenario)

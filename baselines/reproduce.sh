@@ -10,7 +10,7 @@
 # runs-quick/ instead of baselines/results/ (its numbers are meaningless).
 set -euo pipefail
 BIN=${BIN:-.venv/bin}
-NOISE="--thrust-noise 0.05 --init-noise 0.05"
+NOISE="--thrust-noise 0.05 --initial-position-noise-m 0.05"
 SCENARIOS="corridor obstacle_avoidance throw_and_catch_exp"
 export OMP_NUM_THREADS=1   # one core per training run
 if [[ "${QUICK:-0}" == 1 ]]; then
@@ -20,7 +20,7 @@ else
     PPO_LONG=2000000; PPO_SHORT=1000000; SAC_STEPS=300000; LONG=58; SHORT=14; EPISODES=20; DEMOS=30
     EVAL_PPO=50000; EVAL_SAC=20000; PPO_REWARD=600000; RUNS=runs; RESULTS=baselines/results; DATASETS=datasets
 fi
-train() { "$BIN/impact-env" train --out "$RUNS" "$@" $NOISE --no-progress; }  # a later --out wins
+train() { "$BIN/impact-env" train --runs-dir "$RUNS" "$@" $NOISE --no-progress; }  # --out names the run folder
 side_by_side() {  # the two training commands given as strings, one per core; fails if either fails
     $1 & local a=$!
     $2 & local b=$!
@@ -47,7 +47,7 @@ record() {  # expert demonstrations as Minari datasets
 
 bc() {  # behaviour cloning from them
     for s in $SCENARIOS; do
-        "$BIN/impact-env" bc $s --dataset "$DATASETS" --out "$RUNS"
+        "$BIN/impact-env" bc $s --dataset "$DATASETS" --runs-dir "$RUNS"
     done
 }
 
@@ -66,8 +66,8 @@ publish() {  # the trained models (no checkpoints) and the learning curves
 
 reward() {  # the corridor reward investigation: PPO with the "conjuncts" reward, then also with quiet exploration
     local quiet=baselines/hyperparams/experiments/ppo_quiet.yml
-    side_by_side "train ppo corridor --reward conjuncts --timesteps $PPO_REWARD --n-envs 2 --eval-freq $EVAL_PPO --out $RUNS/conjuncts" \
-                 "train ppo corridor --reward conjuncts --hyperparams $quiet --timesteps $PPO_REWARD --n-envs 2 --eval-freq $EVAL_PPO --out $RUNS/quiet"
+    side_by_side "train ppo corridor --reward-mode conjuncts --timesteps $PPO_REWARD --n-envs 2 --eval-freq $EVAL_PPO --out $RUNS/conjuncts/ppo_corridor_s0" \
+                 "train ppo corridor --reward-mode conjuncts --hyperparams $quiet --timesteps $PPO_REWARD --n-envs 2 --eval-freq $EVAL_PPO --out $RUNS/quiet/ppo_corridor_s0"
     "$BIN/impact-env" curves "$RUNS/ppo_corridor_s0" "$RUNS/conjuncts/ppo_corridor_s0" "$RUNS/quiet/ppo_corridor_s0" \
         "$RUNS/sac_corridor_s0" --labels "PPO dense,PPO conjuncts,PPO conjuncts + quiet exploration,SAC dense" \
         --title "corridor: reward investigation" --out "$RESULTS/reward_investigation.png" --table "$RESULTS/reward_investigation.md"

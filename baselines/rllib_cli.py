@@ -57,15 +57,9 @@ def run(args: argparse.Namespace, env_options: dict[str, Any]) -> int:
     options = {k: v for k, v in env_options.items() if k != "fidelity" and v is not None}
     config = RLlibTrainConfig(
         scenario=args.scenario, policies=args.policies, timesteps=args.timesteps, seed=args.seed,
-        env_runners=args.env_runners, envs_per_runner=args.n_envs or 1, out=getattr(args, "runs_dir", None) or "runs",
-        env_options=options, hyperparams_file=args.hyperparams, max_minutes=args.max_minutes, address=args.address,
-        ship_code=args.ship_code, resume=bool(getattr(args, "resume", False)),
-        trust_pickle=bool(getattr(args, "trust_pickle", False)), verbose=not args.no_progress,
-        **({"eval_freq": args.eval_freq} if args.eval_freq else {}))
-    out = getattr(args, "out", None)
-    if out and getattr(args, "runs_dir", None) is None:  # main's --out is the parent folder of the run
-        config.out = out
-    elif out:  # ecosystem's --out is the run folder itself
-        config.run_dir = out
+        env_runners=args.env_runners, envs_per_runner=args.n_envs or 1, out=args.runs_dir, run_dir=args.out,
+        env_options=options, eval_freq=args.eval_freq, hyperparams_file=args.hyperparams,
+        max_minutes=args.max_minutes, address=args.address, ship_code=args.ship_code, resume=args.resume,
+        trust_pickle=args.trust_pickle, verbose=not args.no_progress)
     train_rllib(config)
     return 0

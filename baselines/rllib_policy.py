@@ -42,15 +42,19 @@ _MODEL_KEYS = {"fcnet_hiddens", "fcnet_activation", "vf_share_layers", "free_log
 # ------------------------------------------------------------------------------------------------- export
 
 
-def export_policy(algo: Any, folder: Path, scenario: str, agent_policies: dict[str, str],
-                  model_config: dict[str, Any], observation_filter: bool) -> Path:
-    """Write ``folder/policy.json`` and one ``.npz`` of inference weights per policy of ``algo``."""
+def export_policy(algo: Any, folder: Path, scenario: Any, agent_policies: dict[str, str],
+                  model_config: dict[str, Any], observation_filter: bool, env_options: dict[str, Any]) -> Path:
+    """Write ``folder/policy.json`` and one ``.npz`` of inference weights per policy of ``algo``; ``scenario`` and
+    ``env_options`` are recorded, so that flying it elsewhere is refused or warned about as for SB3 models."""
+    from baselines.run_meta import scenario_fingerprint
+
     folder.mkdir(parents=True, exist_ok=True)
     for policy_id in sorted(set(agent_policies.values())):
         state = algo.get_module(policy_id).get_state(inference_only=True)
         np.savez(folder / f"{policy_id}.npz", **{k: np.asarray(v) for k, v in state.items()})
     filters = _filter_statistics(algo, list(agent_policies)) if observation_filter else None
-    meta = {"format": FORMAT, "scenario": scenario, "agent_policies": agent_policies,
+    meta = {"format": FORMAT, "scenario": scenario.name, "scenario_fingerprint": scenario_fingerprint(scenario),
+            "env_options": dict(env_options), "agent_policies": agent_policies,
             "model_config": {k: model_config[k] for k in sorted(_MODEL_KEYS)}, "observation_filter": filters}
     (folder / "policy.json").write_text(json.dumps(meta, indent=1))
     return folder
@@ -116,6 +120,11 @@ def read_policy_json(folder: Path) -> dict[str, Any]:
             or not isinstance(model["free_log_std"], bool):
         raise ModelFileError(f"{path}: model_config.fcnet_activation must be one of {ACTIVATIONS}, and "
                              f"vf_share_layers and free_log_std true or false, got {model!r}")
+    for key in ("scenario", "scenario_fingerprint"):
+        if meta.get(key) is not None and not isinstance(meta[key], str):
+            raise ModelFileError(f"{path}: {key} must be a string, got {meta[key]!r}")
+    if not isinstance(meta.get("env_options", {}), dict):
+        raise ModelFileError(f"{path}: env_options must be an object, got {meta['env_options']!r}")
     filters = meta.get("observation_filter")
     if filters is not None:
         if not isinstance(filters, dict) or set(filters) != set(agents):
@@ -173,10 +182,11 @@ class RLlibController:
 
     name = "rllib"
 
-    def __init__(self, scenario: Any, path: str | Path) -> None:
+    def __init__(self, scenario: Any, path: str | Path, allow_other_scenario: bool = False) -> None:
         import torch  # noqa: F401 - fail here, with the import error, rather than in act()
         from gymnasium import spaces
 
+        from baselines.run_meta import check_scenario
         from impact_env.envs.core import TransportCore
 
         if hasattr(scenario, "anchors"):
@@ -184,6 +194,8 @@ class RLlibController:
                                   "model")
         self.folder = resolve_policy_dir(path)
         self.meta = read_policy_json(self.folder)
+        check_scenario(self.meta, scenario, str(self.folder), allow_other_scenario)
+        self._warned = False
         core = TransportCore(scenario)
         robots = [r.name for r in scenario.robots]
         if sorted(self.meta["agent_policies"]) != sorted(robots):
@@ -207,7 +219,16 @@ class RLlibController:
             self.filters[agent] = (mean, std, f["clip"], np.float32(f["epsilon"]))
 
     def reset(self, env: Any, seed: int | None) -> None:
-        pass
+        if not self._warned:  # flying with other options than trained is an evaluation, never an accident
+            import sys
+
+            from baselines.run_meta import option_differences
+
+            self._warned = True
+            differences = option_differences(self.meta, env.unwrapped.core)
+            if differences:
+                print(f"impact-env: warning: {self.folder} was trained with other environment options ("
+                      + "; ".join(differences) + ")", file=sys.stderr, flush=True)
 
     def agent_observations(self, observation: np.ndarray) -> dict[str, np.ndarray]:
         """Each robot's observation (own body first, then the others in order), filtered as in training."""
@@ -237,8 +258,9 @@ class RLlibController:
         return np.concatenate(actions).astype(np.float32)
 
 
-def make_rllib_controller(scenario: Any, model: str | None = None, **_: Any) -> RLlibController:
+def make_rllib_controller(scenario: Any, model: str | None = None, allow_other_scenario: bool = False,
+                          **_: Any) -> RLlibController:
     """Factory of the ``impact_env.controllers`` entry point ``rllib``: ``--controller rllib:PATH``."""
     if model is None:
         raise ControllerError("the rllib controller needs a checkpoint: --controller rllib:RUN_OR_CHECKPOINT")
-    return RLlibController(scenario, model)
+    return RLlibController(scenario, model, allow_other_scenario=allow_other_scenario)

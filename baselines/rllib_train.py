@@ -57,9 +57,9 @@ class RLlibTrainConfig:
     seed: int = 0
     env_runners: int = 1  # sampling processes (Ray actors); 0 samples in the driver
     envs_per_runner: int = 1
-    out: str = "runs"
+    out: str = "runs"  # the parent of the default run folder (--runs-dir)
     env_options: dict[str, Any] = field(default_factory=dict)
-    eval_freq: int = 20_000  # env steps between evaluations
+    eval_freq: int | None = None  # env steps between evaluations; default about five per run, at most 20,000
     eval_episodes: int = 5
     checkpoint_freq: int = 100_000
     hyperparams_file: str | None = None
@@ -69,7 +69,7 @@ class RLlibTrainConfig:
     resume: bool = False
     trust_pickle: bool = False  # resuming unpickles RLlib's checkpoint
     verbose: bool = True
-    run_dir: str | None = None  # default: <out>/rllib_ppo_<scenario>_<policies>_s<seed>
+    run_dir: str | None = None  # the run folder (--out); default: <out>/rllib_ppo_<scenario>_<policies>_s<seed>
 
 
 def rllib_settings(entry: dict[str, Any], timesteps: int) -> dict[str, Any]:
@@ -124,7 +124,7 @@ def _check(config: RLlibTrainConfig) -> None:
         raise EngineError(f"--n-envs (envs per env runner) must be an integer >= 1, got {config.envs_per_runner!r}")
     if config.max_minutes is not None and not config.max_minutes > 0:
         raise ImpactEnvError(f"max_minutes must be > 0, got {config.max_minutes!r}")
-    for name in ("eval_freq", "eval_episodes", "checkpoint_freq"):
+    for name in ("eval_episodes", "checkpoint_freq") + (("eval_freq",) if config.eval_freq is not None else ()):
         if not (type(getattr(config, name)) is int and getattr(config, name) >= 1):
             raise ImpactEnvError(f"{name} must be a positive integer, got {getattr(config, name)!r}")
 
@@ -202,7 +202,7 @@ def _evaluate(scenario, folder: Path, eval_options: dict[str, Any], episodes: in
 
 def train_rllib(config: RLlibTrainConfig) -> Path:
     """Train, checkpoint, evaluate and export; returns the run folder."""
-    from baselines.train import env_id_for
+    from baselines.train import default_eval_freq, env_id_for
     from impact_env.envs.transport_parallel import TransportParallelEnv
     from impact_env.scenario import load_scenario
     from impact_env.sweep import EngineConfig, connect_ray
@@ -214,6 +214,7 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
     entry = hyperparams.load("ppo", env_id, config.hyperparams_file)
     timesteps = int(config.timesteps or entry["n_timesteps"])
     settings = rllib_settings(entry, timesteps)
+    eval_freq = config.eval_freq or default_eval_freq(timesteps)
     run_dir = run_folder(config, scenario.name)
     final = run_dir / FINAL_CHECKPOINT
     if config.resume:
@@ -254,12 +255,13 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
             if folder.exists():
                 shutil.rmtree(folder)
             algo.save_to_path(str(folder.resolve()))
-            export_policy(algo, folder / POLICY_FOLDER, scenario.name, agent_policies, model_config, normalize)
+            export_policy(algo, folder / POLICY_FOLDER, scenario, agent_policies, model_config, normalize,
+                          config.env_options)
 
         def evaluate(steps: int) -> str:
             nonlocal best
             folder = run_dir / "eval" / POLICY_FOLDER
-            export_policy(algo, folder, scenario.name, agent_policies, model_config, normalize)
+            export_policy(algo, folder, scenario, agent_policies, model_config, normalize, config.env_options)
             rho, lengths = _evaluate(scenario, folder, eval_options, config.eval_episodes, config.seed)
             for key, value in (("timesteps", steps), ("results", rho), ("ep_lengths", lengths)):
                 evals[key].append(value)
@@ -278,7 +280,7 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
             writer.writerow(["iteration", "env_steps", "wall_s", "iteration_s", "sampling_s", "learning_s",
                              "sampled_env_steps", "sampling_env_steps_per_s"])
         steps = _lifetime_steps(algo)
-        next_eval = (steps // config.eval_freq + 1) * config.eval_freq
+        next_eval = (steps // eval_freq + 1) * eval_freq
         next_checkpoint = (steps // config.checkpoint_freq + 1) * config.checkpoint_freq
 
         def log_iteration(result: dict[str, Any], iteration: int, before: int, steps: int) -> str:
@@ -298,7 +300,7 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
             if steps >= next_eval or steps >= timesteps:
                 line += evaluate(steps)
                 while next_eval <= steps:
-                    next_eval += config.eval_freq
+                    next_eval += eval_freq
             if steps >= next_checkpoint:
                 save(run_dir / "checkpoints" / f"step_{steps}")
                 while next_checkpoint <= steps:

@@ -3,21 +3,32 @@
 Single agent (central control of all robots): the Gymnasium env in ``n_envs`` subprocesses, optional
 ``VecNormalize`` (observations and rewards), periodic evaluation on a separate env (best model kept; its
 returns are the task's final STL robustness whatever the training reward; ``eval/evaluations.npz``),
-checkpoints, TensorBoard logs, a progress bar; the model is saved in SB3's format (``model.zip``, plus
-the normalisation statistics as plain JSON, ``vecnormalize.json``, when normalising: never a pickle, see
-``baselines/model_files.py``; the periodic checkpoints in ``checkpoints/`` are SB3's own, pickles included,
-for resuming training, and nothing in impact-env loads them). Multi-agent (``multiagent=True``): the
-PettingZoo parallel env through SuperSuit's vector-env route, so ONE policy acts for every robot on its own
-observation (parameter sharing). Environment options (reward mode, fuel penalty, noise) pass through.
+checkpoints, TensorBoard logs with the task's own scalars (:mod:`baselines.train_callbacks`), progress as a bar
+on a terminal and as plain lines otherwise; the model is saved in SB3's format (``model.zip``, plus the
+normalisation statistics as plain JSON, ``vecnormalize.json``, when normalising: never a pickle, see
+``baselines/model_files.py``; the periodic checkpoints in ``checkpoints/`` are SB3's own, pickles included, and
+nothing in impact-env loads them). Multi-agent (``multiagent=True``): the PettingZoo parallel env through
+SuperSuit's vector-env route, so ONE policy acts for every robot on its own observation (parameter sharing).
+Environment options (reward mode, fuel penalty, noise) pass through.
+
+The run folder is ``out`` (default ``runs/<algo>_<scenario>[_ma]_s<seed>``), printed when training starts.
+Ctrl-C saves the model reached so far (``train.json`` says ``"interrupted": true``); ``resume=True``
+(``--resume``) continues a saved run in its folder up to ``timesteps``: the weights and optimiser state, the
+normalisation statistics, the step count and the evaluations are kept (SAC's replay buffer is not saved, so a
+resumed SAC run refills it). Evaluations default to about five per run (at most every 20,000 steps) and one
+at the end, so a short run has a learning curve too.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from baselines import ALGOS, hyperparams
 from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
@@ -33,16 +44,50 @@ class TrainConfig:
     timesteps: int | None = None  # default: the hyperparameter file's n_timesteps
     seed: int = 0
     n_envs: int | None = None  # default: the file's n_envs
-    out: str = "runs"
+    out: str | None = None  # the run folder; default <runs_dir>/<algo>_<scenario>[_ma]_s<seed>
+    runs_dir: str = "runs"
     env_options: dict[str, Any] = field(default_factory=dict)
-    eval_freq: int = 20_000  # env steps between evaluations (summed over envs)
+    eval_freq: int | None = None  # env steps between evaluations (summed over envs); default: ~5 per run
     eval_episodes: int = 5
     checkpoint_freq: int = 100_000
     multiagent: bool = False
-    progress_bar: bool = True
+    progress_bar: bool = True  # a bar on a terminal, lines otherwise; False: neither
     hyperparams_file: str | None = None
     verbose: int = 0
     max_minutes: float | None = None  # wall-clock budget: stop early (train.json records the steps reached)
+    resume: bool = False
+
+
+def load_world(name: str) -> Any:
+    """The Scenario, or for a tether station the Station, that ``name`` (shipped name or file) describes."""
+    from baselines import tether
+
+    if tether.is_station(name):
+        from impact_env.station import load_station
+
+        return load_station(name)
+    return load_scenario(name)
+
+
+def run_dir_for(config: TrainConfig) -> Path:
+    """The run folder: ``config.out``, or ``<runs_dir>/<algo>_<scenario>[_ma]_s<seed>``."""
+    if config.out is not None:
+        return Path(config.out)
+    name = load_world(config.scenario).name
+    return Path(config.runs_dir) / f"{config.algo}_{name}{'_ma' if config.multiagent else ''}_s{config.seed}"
+
+
+def effective_timesteps(algo: str, timesteps: int, n_envs: int, entry: dict[str, Any], multiagent: bool = False,
+                        n_agents: int = 1) -> int:
+    """The steps SB3 will really train for ``timesteps``: PPO collects whole rollouts (``n_steps`` per env)."""
+    envs = n_envs * (n_agents if multiagent else 1)
+    per_update = int(entry.get("n_steps", 2048)) * envs if algo == "ppo" else envs
+    return -(-timesteps // per_update) * per_update
+
+
+def default_eval_freq(total: int) -> int:
+    """About five evaluations per run, at most every 20,000 steps (and one more at the end)."""
+    return max(1, min(20_000, total // 5))
 
 
 def env_id_for(scenario: str) -> str:
@@ -59,19 +104,27 @@ def env_id_for(scenario: str) -> str:
 
 
 def train(config: TrainConfig) -> Path:
-    """Train and save; returns the run directory (model.zip, vecnormalize.json, logs, checkpoints)."""
+    """Train and save; returns the run directory (model.zip, vecnormalize.json, train.json, eval/, tb/, checkpoints/).
+
+    Ctrl-C (KeyboardInterrupt) saves what was trained so far and re-raises it, so the caller can exit with 130.
+    """
     from stable_baselines3 import PPO, SAC
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
     from baselines import tether
+    from baselines import train_callbacks as cb
     from impact_env.envs.transport import TransportEnv
 
     if config.algo not in ALGOS:
         raise ImpactEnvError(f"algorithm must be one of {ALGOS}, got {config.algo!r}")
     if config.max_minutes is not None and not config.max_minutes > 0:
         raise ImpactEnvError(f"max_minutes must be > 0, got {config.max_minutes!r}")
+    if config.timesteps is not None and config.timesteps < 1:
+        raise ImpactEnvError(f"timesteps must be >= 1, got {config.timesteps}")
+    if config.eval_freq is not None and config.eval_freq < 1:
+        raise ImpactEnvError(f"eval_freq must be >= 1, got {config.eval_freq}")
     station = tether.is_station(config.scenario)
     if station:  # a tether station: TetherEnv (MultiDiscrete commands), see baselines/tether.py
         from impact_env.envs.tether import TetherEnv
@@ -83,20 +136,26 @@ def train(config: TrainConfig) -> Path:
         config.env_options = tether.env_options(config.env_options, config.scenario)
     else:
         scenario, env_cls = load_scenario(config.scenario), TransportEnv
+    n_robots = scenario.n_robots if station else len(scenario.robots)
     env_id = env_id_for(config.scenario)
     entry = hyperparams.load(config.algo, env_id, config.hyperparams_file)
     n_envs = config.n_envs or int(entry.get("n_envs", 1))
     timesteps = int(config.timesteps or entry["n_timesteps"])
-    run_dir = Path(config.out) / f"{config.algo}_{scenario.name}{'_ma' if config.multiagent else ''}_s{config.seed}"
+    run_dir = run_dir_for(config)
+    previous = _previous_run(run_dir, config, scenario.name) if config.resume else None
+    if not config.resume and (run_dir / "model.zip").is_file():
+        print(f"note: {run_dir} holds a model already; it is overwritten (pass --resume to continue it)", flush=True)
     run_dir.mkdir(parents=True, exist_ok=True)
     env_kwargs = {"station" if station else "scenario": config.scenario, **config.env_options}
+    env_cls(**env_kwargs).close()  # a bad option is one clear error here, not one per worker process
 
     if config.multiagent:
         if config.algo != "ppo":
             raise ImpactEnvError("parameter sharing over PettingZoo is supported with ppo")
         venv = _pettingzoo_vec_env(env_kwargs, n_envs)
     else:
-        venv = make_vec_env(env_cls, n_envs=n_envs, seed=config.seed, env_kwargs=env_kwargs,
+        venv = make_vec_env(functools.partial(_worker_env, env_cls), n_envs=n_envs, seed=config.seed,
+                            env_kwargs=env_kwargs,
                             vec_env_cls=SubprocVecEnv if n_envs > 1 else None)
     # evaluation scores the task itself: under "dense" with no fuel penalty an episode's return is its final
     # STL robustness, whatever shaping the training env uses
@@ -108,18 +167,119 @@ def train(config: TrainConfig) -> Path:
     cls = {"ppo": PPO, "sac": SAC}[config.algo]
     model = cls(entry.get("policy", "MlpPolicy"), venv, seed=config.seed, verbose=config.verbose,
                 tensorboard_log=str(run_dir / "tb"), **hyperparams.algorithm_kwargs(entry))
+    done = 0
+    if previous is not None:
+        done = _restore(model, venv, run_dir, previous)
+    total = effective_timesteps(config.algo, timesteps, n_envs, entry, config.multiagent, n_robots)
+    if previous is not None and done >= timesteps:
+        print(f"{run_dir} has trained {done:,} steps already (>= {timesteps:,}); nothing to do", flush=True)
+        venv.close()
+        eval_env.close()
+        return run_dir
+    if previous is not None:
+        total = done + effective_timesteps(config.algo, timesteps - done, n_envs, entry, config.multiagent,
+                                           n_robots)
+    eval_freq = config.eval_freq or default_eval_freq(total)
+    print(f"run folder: {run_dir}  (model.zip, train.json, eval/, checkpoints/; TensorBoard: tensorboard --logdir "
+          f"{run_dir / 'tb'})", flush=True)
+    print(f"training {config.algo.upper()} on {scenario.name}: {total:,} steps"
+          + (f" (from {done:,}, resumed)" if done else "")
+          + (f" ({timesteps - done:,} requested, rounded up to whole rollouts of {entry.get('n_steps', 2048)} steps "
+             f"x {n_envs} envs)" if config.algo == "ppo" and total - done != timesteps - done else "")
+          + f", {n_envs} env(s), evaluation every {eval_freq:,} steps", flush=True)
+
+    count = cb.robot_object_impacts(frozenset() if station else frozenset(r.name for r in scenario.robots),
+                                    frozenset() if station else frozenset(o.name for o in scenario.objects))
     callbacks = [CheckpointCallback(max(1, config.checkpoint_freq // n_envs), str(run_dir / "checkpoints"),
-                                    save_vecnormalize=True)]
+                                    save_vecnormalize=True), cb.task_metrics_callback(count)]
     if not config.multiagent:
         # EvalCallback copies the training env's VecNormalize statistics to eval_env before evaluating
-        callbacks.append(EvalCallback(eval_env, n_eval_episodes=config.eval_episodes,
-                                              eval_freq=max(1, config.eval_freq // n_envs),
-                                              best_model_save_path=str(run_dir / "best"),
-                                              log_path=str(run_dir / "eval"), deterministic=True))
+        callbacks.append(cb.evaluation_callback(eval_env, count, previous=run_dir / "eval" / "evaluations.npz"
+                                             if previous is not None else None,
+                                             n_eval_episodes=config.eval_episodes,
+                                             eval_freq=max(1, eval_freq // n_envs),
+                                             best_model_save_path=str(run_dir / "best"),
+                                             log_path=str(run_dir / "eval"), deterministic=True))
     if config.max_minutes is not None:
-        callbacks.append(_wall_clock_budget(config.max_minutes * 60.0))
+        callbacks.append(cb.wall_clock_budget(config.max_minutes * 60.0))
+    if config.progress_bar:
+        callbacks.append(cb.progress_callback(total))
     start = time.perf_counter()
-    model.learn(total_timesteps=timesteps, callback=CallbackList(callbacks), progress_bar=config.progress_bar)
+    interrupted = False
+    try:
+        model.learn(total_timesteps=total - done, callback=CallbackList(callbacks), progress_bar=False,
+                    reset_num_timesteps=previous is None)
+    except KeyboardInterrupt:
+        interrupted = True
+    _save(model, venv, run_dir, config, scenario.name, env_id, timesteps, n_envs, interrupted,
+          time.perf_counter() - start + (previous or {}).get("wall_time_s", 0.0))
+    for env in (venv, eval_env):
+        try:
+            env.close()
+        except Exception:  # noqa: BLE001 - after Ctrl-C the worker processes may be gone already
+            pass
+    if interrupted:
+        print(f"\ninterrupted at step {model.num_timesteps:,}: saved {run_dir / 'model.zip'}; continue with "
+              f"impact-env train {config.algo} {config.scenario} --out {run_dir} --resume", flush=True)
+        raise KeyboardInterrupt
+    return run_dir
+
+
+def _worker_env(env_cls: type, **kwargs: Any):
+    """The training env (``env_cls(**kwargs)``), made inside a SubprocVecEnv worker: a worker ignores Ctrl-C,
+    which the main process handles (it saves the model); otherwise every worker would print a KeyboardInterrupt
+    traceback."""
+    import multiprocessing
+    import signal
+
+    if multiprocessing.parent_process() is not None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return env_cls(**kwargs)
+
+
+def _previous_run(run_dir: Path, config: TrainConfig, scenario_name: str) -> dict[str, Any]:
+    """The train.json of the run to resume, checked against this call's algorithm, scenario and options."""
+    from baselines.model_files import read_train_json
+
+    if not (run_dir / "model.zip").is_file():
+        raise ImpactEnvError(f"--resume: {run_dir} has no model.zip to continue (train without --resume first)")
+    meta = read_train_json(run_dir)
+    wanted = {"algo": config.algo, "scenario": scenario_name, "multiagent": config.multiagent,
+              "env_options": config.env_options}
+    for key, value in wanted.items():
+        if key in meta and meta[key] != value:
+            raise ImpactEnvError(f"--resume: {run_dir} was trained with {key} = {meta[key]!r}, this call asks for "
+                                 f"{value!r}; resume with the same options or train into another --out")
+    return meta
+
+
+def _restore(model: Any, venv: Any, run_dir: Path, meta: dict[str, Any]) -> int:
+    """Load a saved run's weights (no pickle: SB3's set_parameters reads only the tensors), optimiser state,
+    normalisation statistics and step count into a freshly built model; returns the steps already trained."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from baselines.model_files import read_normalization
+
+    model.set_parameters(str(run_dir / "model.zip"), exact_match=True, device=model.device)
+    done = int(meta.get("timesteps_trained", 0))
+    model.num_timesteps = done
+    if isinstance(venv, VecNormalize) and (run_dir / NORMALIZATION_FILE).is_file():
+        stats = read_normalization(run_dir / NORMALIZATION_FILE)
+        venv.obs_rms.mean, venv.obs_rms.var, venv.obs_rms.count = stats.mean.copy(), stats.var.copy(), stats.count
+        raw = json.loads((run_dir / NORMALIZATION_FILE).read_text()).get("ret_rms", {})
+        if raw:
+            venv.ret_rms.mean = np.asarray(raw["mean"], dtype=float)
+            venv.ret_rms.var = np.asarray(raw["var"], dtype=float)
+            venv.ret_rms.count = float(raw["count"])
+    return done
+
+
+def _save(model: Any, venv: Any, run_dir: Path, config: TrainConfig, scenario_name: str, env_id: str,
+          timesteps: int, n_envs: int, interrupted: bool, wall_time_s: float) -> None:
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from baselines.run_meta import scenario_fingerprint
+
     model.save(run_dir / "model.zip")
     if isinstance(venv, VecNormalize):
         save_normalization(venv, run_dir / NORMALIZATION_FILE)
@@ -127,27 +287,11 @@ def train(config: TrainConfig) -> Path:
         (run_dir / NORMALIZATION_FILE).unlink(missing_ok=True)  # a previous run's statistics are not this model's
     (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
     (run_dir / "train.json").write_text(json.dumps({
-        "algo": config.algo, "scenario": scenario.name, "env_id": env_id, "timesteps": timesteps,
-        "timesteps_trained": int(model.num_timesteps), "max_minutes": config.max_minutes,
+        "algo": config.algo, "scenario": scenario_name,
+        "scenario_fingerprint": scenario_fingerprint(load_world(config.scenario)), "env_id": env_id,
+        "timesteps": timesteps, "timesteps_trained": int(model.num_timesteps), "max_minutes": config.max_minutes,
         "n_envs": n_envs, "seed": config.seed, "multiagent": config.multiagent, "env_options": config.env_options,
-        "wall_time_s": time.perf_counter() - start}, indent=2))
-    venv.close()
-    eval_env.close()
-    return run_dir
-
-
-def _wall_clock_budget(seconds: float):
-    """A callback that ends training once ``seconds`` of wall clock have passed (a compute budget)."""
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    class WallClockBudget(BaseCallback):
-        def _on_training_start(self) -> None:
-            self._deadline = time.perf_counter() + seconds
-
-        def _on_step(self) -> bool:
-            return time.perf_counter() < self._deadline
-
-    return WallClockBudget()
+        "interrupted": interrupted, "wall_time_s": wall_time_s}, indent=2))
 
 
 def _pettingzoo_vec_env(env_kwargs: dict[str, Any], n_envs: int):

@@ -197,6 +197,8 @@ def table(cells: list[dict], scenarios) -> str:
 
 
 def plot(cells: list[dict], scenarios, path: str) -> None:
+    """One row per scenario: success of each stack under the combined condition (bars), then success against
+    the size of each perturbation swept (one line per stack, level 0 = nominal)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -204,12 +206,27 @@ def plot(cells: list[dict], scenarios, path: str) -> None:
 
     axes_names = [a for a in ("e", "offset", "thrust", "impact") if any(c["axis"] == a for c in cells)]
     scenarios = [s for s in scenarios if any(c["scenario"] == s for c in cells)]
-    fig, grid = plt.subplots(len(scenarios), len(axes_names), figsize=(3.2 * len(axes_names), 2.4 * len(scenarios)),
-                             squeeze=False, sharey=True)
+    ncols = 1 + len(axes_names)
+    fig, grid = plt.subplots(len(scenarios), ncols, figsize=(3.0 * ncols, 2.2 * len(scenarios)), squeeze=False)
     units = {"e": "restitution error +-", "offset": "start offset (m)", "thrust": "thrust noise (std)",
              "impact": "post-impact noise (m/s)"}
+    colours = dict(zip(STACKS, ("tab:gray", "tab:blue", "tab:orange", "tab:green")))
+
+    def success(cell: dict) -> float:
+        return 100 * float(np.mean([e["success"] for e in cell["episodes"]]))
+
+    legend_done = False
     for i, name in enumerate(scenarios):
-        for j, axis in enumerate(axes_names):
+        ax = grid[i, 0]
+        combined = {c["stack"]: c for c in cells if c["scenario"] == name and c["axis"] == "combined"}
+        stacks = [st for st in STACKS if st in combined]
+        ax.bar(range(len(stacks)), [success(combined[st]) for st in stacks], color=[colours[st] for st in stacks])
+        ax.set_xticks(range(len(stacks)), stacks, fontsize=7)
+        ax.set_ylim(0, 105)
+        ax.set_ylabel(f"{name}\nsuccess %", fontsize=8)
+        if i == 0:
+            ax.set_title("e +-0.2, 10 cm, 10 % thrust", fontsize=8)
+        for j, axis in enumerate(axes_names, start=1):
             ax = grid[i, j]
             for stack in STACKS:
                 pts = [(0.0, c) for c in cells
@@ -219,17 +236,18 @@ def plot(cells: list[dict], scenarios, path: str) -> None:
                 if len(pts) < 2:
                     continue
                 pts.sort(key=lambda p: p[0])
-                ax.plot([p[0] for p in pts], [100 * np.mean([e["success"] for e in p[1]["episodes"]]) for p in pts],
-                        marker="o", label=stack)
+                ax.plot([p[0] for p in pts], [success(p[1]) for p in pts], marker="o", label=stack,
+                        color=colours[stack])
             ax.set_ylim(-5, 105)
             if i == len(scenarios) - 1:
-                ax.set_xlabel(units[axis])
-            if j == 0:
-                ax.set_ylabel(f"{name}\nsuccess %", fontsize=8)
-    handles, labels = grid[0, 0].get_legend_handles_labels()
-    if handles:
-        fig.legend(handles, labels, loc="upper center", ncol=len(STACKS))
-    fig.tight_layout(rect=(0, 0, 1, 0.96))
+                ax.set_xlabel(units[axis], fontsize=8)
+            if not ax.lines:
+                ax.text(0.5, 0.5, "not run", ha="center", va="center", transform=ax.transAxes, fontsize=8)
+                ax.set_xticks([])
+            elif not legend_done:
+                ax.legend(fontsize=7)
+                legend_done = True
+    fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
 

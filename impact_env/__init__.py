@@ -1,14 +1,16 @@
 """impact_env: collaborative transport of free-floating objects in microgravity by impacts.
 
 Importing the package registers the Gymnasium environments (``impact_env/Corridor-v0``,
-``impact_env/ObstacleAvoidance-v0``, ``impact_env/ThrowAndCatchExp-v0`` and ``impact_env/Transport-v0``
-with ``scenario=``) and, where PettingZoo's registry exists, the parallel environment
-``impact_env/transport-v0``. ``impact_env.parallel_env``, ``impact_env.env`` and ``impact_env.raw_env``
-are PettingZoo's entry points.
+``impact_env/ObstacleAvoidance-v0``, ``impact_env/ThrowAndCatchExp-v0``, each with ``max_episode_steps`` equal
+to its task's horizon, and ``impact_env/Transport-v0``, which needs ``scenario=``). ``gym.make`` can import
+the package itself: ``gym.make("impact_env:impact_env/Corridor-v0")``. Where PettingZoo's registry exists it
+also registers ``impact_env/transport-v0``. PettingZoo's versioned module is :mod:`impact_env.transport_v0`
+(``parallel_env``, ``env``, ``raw_env``); ``impact_env.parallel_env``, ``impact_env.env`` and
+``impact_env.raw_env`` are the same functions.
 
 Tether (anchor-pull) transport: ``impact_env/Tether-v0`` with ``station=`` (a shipped name or a path) and one id
-per shipped station (``TETHER_GYM_IDS``, e.g. ``impact_env/TetherL-v0``); PettingZoo ``impact_env/tether-v0``
-(entry point :func:`impact_env.envs.tether_parallel.parallel_env`).
+per shipped station (``TETHER_GYM_IDS``, e.g. ``impact_env/TetherL-v0``); PettingZoo ``impact_env/tether-v0`` and
+the module :mod:`impact_env.tether_v0`.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from impact_env.errors import ActionError, ImpactEnvError, ScenarioError, STLBin
 from impact_env.scenario import Scenario, load_scenario, scenario_names
 from impact_env.station import Station, load_station, station_names
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 GYM_IDS = {
     "impact_env/Corridor-v0": "corridor",
@@ -36,56 +38,45 @@ TETHER_GYM_IDS = {
 }
 
 
+def _horizon_steps(task_source) -> int:
+    """Steps per episode of a scenario or station: its task's horizon (the episode's ``terminated``)."""
+    from impact_env.stl import OnlineMonitor
+
+    return OnlineMonitor(task_source.formula, task_source.region_map(), task_source.control_period_s).horizon_steps
+
+
 def _register() -> None:
     for env_id, scenario in GYM_IDS.items():
         if env_id not in gymnasium.registry:
             gymnasium.register(id=env_id, entry_point="impact_env.envs.transport:TransportEnv",
-                               kwargs={"scenario": scenario})
+                               kwargs={"scenario": scenario},
+                               max_episode_steps=_horizon_steps(load_scenario(scenario)))
     if "impact_env/Transport-v0" not in gymnasium.registry:
         gymnasium.register(id="impact_env/Transport-v0", entry_point="impact_env.envs.transport:TransportEnv")
     for env_id, station in TETHER_GYM_IDS.items():
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point="impact_env.envs.tether:TetherEnv", kwargs={"station": station})
+            gymnasium.register(id=env_id, entry_point="impact_env.envs.tether:TetherEnv", kwargs={"station": station},
+                               max_episode_steps=_horizon_steps(load_station(station)))
     if "impact_env/Tether-v0" not in gymnasium.registry:
         gymnasium.register(id="impact_env/Tether-v0", entry_point="impact_env.envs.tether:TetherEnv")
     try:
         import pettingzoo
         from pettingzoo.env_registry.registration import parallel_registry
-    except ImportError:  # an older PettingZoo without a registry: the entry points below still work
+    except ImportError:  # an older PettingZoo without a registry: the versioned modules still work
         return
     if "impact_env/transport-v0" not in parallel_registry:
-        pettingzoo.register("parallel", "impact_env/transport-v0",
-                            entry_point="impact_env.envs.transport_parallel:parallel_env")
+        pettingzoo.register("parallel", "impact_env/transport-v0", entry_point="impact_env.transport_v0:parallel_env")
     if "impact_env/tether-v0" not in parallel_registry:
-        pettingzoo.register("parallel", "impact_env/tether-v0",
-                            entry_point="impact_env.envs.tether_parallel:parallel_env")
+        pettingzoo.register("parallel", "impact_env/tether-v0", entry_point="impact_env.tether_v0:parallel_env")
 
 
 _register()
 
-
-def parallel_env(**kwargs):
-    """PettingZoo ParallelEnv, one agent per robot; see :class:`impact_env.envs.TransportParallelEnv`."""
-    from impact_env.envs.transport_parallel import parallel_env as make
-
-    return make(**kwargs)
-
-
-def env(**kwargs):
-    """PettingZoo AEC env (order-enforced) of :func:`parallel_env`."""
-    from impact_env.envs.transport_parallel import env as make
-
-    return make(**kwargs)
-
-
-def raw_env(**kwargs):
-    """PettingZoo AEC env without wrappers."""
-    from impact_env.envs.transport_parallel import raw_env as make
-
-    return make(**kwargs)
-
+from impact_env import tether_v0, transport_v0  # noqa: E402, F401 - PettingZoo's versioned modules
+from impact_env.transport_v0 import env, parallel_env, raw_env  # noqa: E402
 
 __all__ = [
     "ActionError", "ImpactEnvError", "STLBindingError", "STLError", "STLSyntaxError", "Scenario", "ScenarioError",
-    "Station", "env", "load_scenario", "load_station", "parallel_env", "raw_env", "scenario_names", "station_names",
+    "Station", "__version__", "env", "load_scenario", "load_station", "parallel_env", "raw_env", "scenario_names",
+    "station_names",
 ]

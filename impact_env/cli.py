@@ -1,8 +1,8 @@
-"""The ``impact-env`` command: list, draw and run scenarios.
+"""The ``impact-env`` command: list, draw and run scenarios and stations.
 
     impact-env scenarios
     impact-env show SCENARIO --out setup.png
-    impact-env run SCENARIO --controller zero|random [--seed N] [--episodes K]
+    impact-env run SCENARIO --controller zero|random|expert|path/to/model.zip [--seed N] [--episodes K]
                    [--video out.mp4] [--json result.json] [--plot run.png]
 
 SCENARIO is a shipped name (``impact-env scenarios``) or a path to a TOML file. Tether stations (a shipped
@@ -22,10 +22,22 @@ from pathlib import Path
 
 import numpy as np
 
+from impact_env.cli_options import Parser, add_tether_options, add_transport_options, transport_options
 from impact_env.envs.core import REWARD_MODES
 from impact_env.errors import ImpactEnvError
 
 COMMANDS_GROUP = "impact_env.commands"
+
+DESCRIPTION = """\
+Collaborative transport of free-floating objects in microgravity: by impacts (scenarios) and by tethers
+(stations). Plan, fly, train, record and benchmark from one command.
+
+examples:
+  impact-env scenarios                                 list the shipped scenarios and stations
+  impact-env plan corridor --out plan.json --plot plan.png
+  impact-env run corridor --controller expert --plan plan.json --video run.mp4
+  impact-env train ppo throw_and_catch_exp --timesteps 50000
+"""
 
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
@@ -65,13 +77,13 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _env_kwargs(args: argparse.Namespace) -> dict:
-    return {"reward_mode": args.reward, "fuel_penalty": args.fuel_penalty, "restitution": args.restitution,
-            "thrust_noise": args.thrust_noise, "initial_position_noise_m": args.init_noise}
+    return transport_options(args)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from impact_env.controllers import make_controller
     from impact_env.envs.transport import TransportEnv
+    from impact_env.plotting import count_impacts
     from impact_env.rollout import run_episode, write_video
     from impact_env.scenario import load_scenario
     from impact_env.station import is_station_file
@@ -84,13 +96,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from impact_env.tether_cli import run_station
 
         return run_station(args)
-    if args.fidelity != "kinematic" or args.energy_penalty != 0.0:
-        raise ImpactEnvError("--fidelity and --energy-penalty apply to tether stations, not to impact scenarios")
-    if args.pull_speed is not None:
-        raise ImpactEnvError("--pull-speed applies to tether stations, not to impact scenarios")
+    if (args.fidelity, args.energy_penalty, args.pull_speed_mps, args.max_active) != ("kinematic", 0.0, None, None):
+        raise ImpactEnvError("--fidelity, --energy-penalty, --pull-speed-mps and --max-active apply to tether "
+                             "stations, not to impact scenarios")
     sc = load_scenario(args.scenario)
     env = TransportEnv(sc, render_mode="rgb_array" if args.video else None, **_env_kwargs(args))
-    controller = make_controller(args.controller, sc, plan=args.plan, trust_pickle=True if args.trust_pickle else None)
+    controller = make_controller(args.controller, sc, plan=args.plan, trust_pickle=True if args.trust_pickle else None,
+                                 allow_other_scenario=True if args.allow_other_scenario else None)
     results = []
     for k in range(args.episodes):
         seed = args.seed + k
@@ -98,9 +110,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if hasattr(controller, "report"):  # e.g. the expert's planned-versus-executed numbers
             res.extra = controller.report()
         results.append(res)
+        hits, contacts = count_impacts(sc, res.impacts)
         print(f"episode {k + 1}/{args.episodes} seed={seed}: robustness={res.robustness:+.4f} m "
-              f"success={res.success} impacts={len(res.impacts)} fuel={res.fuel_Ns:.2f} N s "
-              f"({res.steps} steps, {res.wall_time_s:.2f} s)", flush=True)
+              f"success={res.success} impacts={hits} (robot-object; {contacts} contacts in all) "
+              f"fuel={res.fuel_Ns:.2f} N s ({res.steps} steps, {res.wall_time_s:.2f} s)", flush=True)
     first = results[0]
     if args.video:
         write_video(first.frames, args.video, fps=env.metadata["render_fps"])
@@ -131,42 +144,47 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _version() -> str:
+    from impact_env import __version__
+
+    return f"impact-env {__version__}"
+
+
 def build_parser() -> argparse.ArgumentParser:
     from impact_env.controllers import available_controllers
 
-    parser = argparse.ArgumentParser(prog="impact-env", description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = Parser(prog="impact-env", description=DESCRIPTION)
+    parser.add_argument("--version", action="version", version=_version())
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("scenarios", help="list the shipped scenarios and tether stations")
     p.set_defaults(func=_cmd_scenarios)
 
-    p = sub.add_parser("show", help="draw a scenario (world, obstacles, regions, bodies, start/end markers)")
-    p.add_argument("scenario", help="shipped name or path to a .toml file")
-    p.add_argument("--out", default="setup.png", help="output image (default setup.png)")
+    p = sub.add_parser("show", help="draw a scenario or station (world, obstacles, regions, bodies, start and end)")
+    p.add_argument("scenario", help="a shipped scenario or station name (impact-env scenarios) or a .toml file")
+    p.add_argument("--out", default="setup.png", help="output image")
     p.set_defaults(func=_cmd_show)
 
     p = sub.add_parser("run", help="run episodes with a controller and write a JSON summary")
-    p.add_argument("scenario", help="shipped name or path to a .toml file")
-    p.add_argument("--controller", default="zero", help=f"one of: {', '.join(available_controllers())}")
+    p.add_argument("scenario", help="a shipped scenario or station name (impact-env scenarios) or a .toml file")
+    p.add_argument("--controller", default="zero",
+                   help=f"one of {', '.join(available_controllers())}, or a saved model's path (path/to/model.zip, "
+                        "as written by impact-env train or bc)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode (episode k uses seed + k)")
-    p.add_argument("--episodes", type=int, default=1)
-    p.add_argument("--video", help="mp4 of the first episode")
-    p.add_argument("--json", help="JSON summary (success, robustness, impacts, fuel_Ns, per-episode details)")
-    p.add_argument("--plot", help="PNG of the first episode's trajectories and impacts")
-    p.add_argument("--plan", help="a saved plan (impact-env plan ... --out plan.json) for controllers that use one")
-    p.add_argument("--reward", choices=REWARD_MODES, default="dense", help="see impact_env.envs.core")
-    p.add_argument("--fuel-penalty", type=float, default=0.0)
-    p.add_argument("--restitution", type=float, default=None, help="simulate with this e (model mismatch)")
-    p.add_argument("--thrust-noise", type=float, default=0.0, help="std of multiplicative thrust noise")
-    p.add_argument("--init-noise", type=float, default=0.0, help="objects' initial position noise radius (m)")
-    p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
-                   help="stations only: tether physics (see impact_env.tether_physics)")
-    p.add_argument("--energy-penalty", type=float, default=0.0, help="stations only: reward cost per J of winch work")
-    p.add_argument("--pull-speed", type=float, default=None, metavar="MPS",
-                   help="stations only: the winches' real w (default the station's; a mismatch for a planner)")
+    p.add_argument("--episodes", type=int, default=1, help="episodes to run")
+    p.add_argument("--video", metavar="MP4", help="mp4 of the first episode")
+    p.add_argument("--json", metavar="PATH", help="JSON summary (success, robustness, impacts, fuel_Ns, per-episode "
+                                                  "details)")
+    p.add_argument("--plot", metavar="PNG", help="PNG of the first episode's trajectories, velocities and impacts")
+    p.add_argument("--plan", metavar="JSON", help="a saved plan (impact-env plan ... --out plan.json) for the expert; "
+                                                  "planned on the spot if omitted")
+    add_transport_options(p, REWARD_MODES)
+    add_tether_options(p)
     p.add_argument("--trust-pickle", action="store_true",
                    help="a controller may unpickle its files (e.g. an old model folder's vecnormalize.pkl); a "
                         "pickle can run any code: only for files you made yourself")
+    p.add_argument("--allow-other-scenario", action="store_true",
+                   help="fly a saved model on another scenario than the one it was trained on (refused otherwise)")
     p.set_defaults(func=_cmd_run)
 
     for ep in entry_points(group=COMMANDS_GROUP):

@@ -57,6 +57,14 @@ class ControllerError(ImpactEnvError, ValueError):
     """An unknown controller name, or a controller that could not be built."""
 
 
+class TetherError(ImpactEnvError, ValueError):
+    """A tether command that the world cannot carry out (unknown anchor, robot already pulling, ...)."""
+
+
+class HyperparameterError(ImpactEnvError, ValueError):
+    """A hyperparameter file (``baselines/hyperparams/*.yml``) or one of its entries is malformed."""
+
+
 class ModelFileError(ImpactEnvError, ValueError):
     """A saved model folder (model.zip, train.json, normalisation statistics) is missing, malformed or does
     not fit the scenario; names the file."""
@@ -78,5 +86,5 @@ class EngineError(ImpactEnvError, RuntimeError):
 
 TYPED_ERRORS: tuple[type[ImpactEnvError], ...] = (
     ImpactEnvError, ScenarioError, STLError, STLSyntaxError, STLBindingError, ActionError, EnvConfigError,
-    ControllerError, ModelFileError, UntrustedFileError, EngineError,
+    ControllerError, TetherError, HyperparameterError, ModelFileError, UntrustedFileError, EngineError,
 )

@@ -17,6 +17,7 @@ import numpy as np
 from impact_env.errors import ScenarioError
 
 MAX_COORDINATE_M = 1e6  # |x|, |y| of every vertex; beyond it squared edge lengths lose all precision
+MIN_EXTENT_M = 1e-6  # width and height of a box; a thinner one has edges whose squared length underflows
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +70,9 @@ class ConvexPolygon:
         if not (xmin < xmax and ymin < ymax):
             raise ScenarioError(f"{where} must have xmin < xmax and ymin < ymax, "
                                 f"got [{xmin}, {xmax}] x [{ymin}, {ymax}]")
+        if not (xmax - xmin >= MIN_EXTENT_M and ymax - ymin >= MIN_EXTENT_M):
+            raise ScenarioError(f"{where} must be at least {MIN_EXTENT_M:g} m wide and high, "
+                                f"got {xmax - xmin:g} m x {ymax - ymin:g} m")
         return cls(np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]], dtype=float))
 
     @classmethod

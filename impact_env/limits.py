@@ -109,7 +109,7 @@ def check_tunnelling(bodies: Sequence[Any], kinds: Sequence[str], restitution: f
         step = fraction * r_min
         if v_max * dt <= step:
             continue
-        need_f = v_max * control_period_s / step
+        need_f = v_max * control_period_s / step if step > 0 else math.inf  # a radius of 5e-324 m gives 0
         need = math.ceil(need_f) if need_f < 1e15 else math.inf
         moved = (f"at {v_max:.3g} m/s (1 + e times the speed set by {cause}) a body moves {v_max * dt:.3g} m per "
                  f"substep, more than {what + ' ' if what else ''}the smallest radius ({r_min:g} m)")

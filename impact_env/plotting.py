@@ -60,19 +60,37 @@ def save_scenario_figure(scenario: Scenario, path: str | Path) -> Path:
     return path
 
 
+def count_impacts(scenario: Scenario, impacts: Sequence[dict[str, Any]]) -> tuple[int, int]:
+    """(robot-object impacts, all contacts) among ``impacts``: the two numbers every figure and the CLI report."""
+    robots, objects = {b.name for b in scenario.robots}, {b.name for b in scenario.objects}
+    hits = sum(1 for m in impacts if {m["a"], m["b"]} & robots and {m["a"], m["b"]} & objects)
+    return hits, len(impacts)
+
+
+def impacts_text(scenario: Scenario, impacts: Sequence[dict[str, Any]]) -> str:
+    """``"2 robot-object impacts, 5 contacts in all"``: the wording of the CLI's lines and the figures' titles."""
+    hits, contacts = count_impacts(scenario, impacts)
+    return (f"{hits} robot-object impact{'' if hits == 1 else 's'}, {contacts} contact{'' if contacts == 1 else 's'}"
+            " in all")
+
+
 def plot_run(scenario: Scenario, times_s: np.ndarray, positions: np.ndarray, impacts: Sequence[dict[str, Any]],
              robustness: float, path: str | Path) -> Path:
-    """Save a two-panel PNG of one run: the xy view (left) and position components over time (right).
+    """Save a three-panel PNG of one run: the xy view (left), positions and velocities over time (right).
+
+    The same layout and colours as the expert's figure (:func:`planners.plotting.plot_execution`): each body
+    keeps its colour (robots blues, objects oranges) in every panel; velocities are finite differences of the
+    sampled positions.
 
     Args:
         scenario: the scenario that was run; drawn underneath the trajectories.
         times_s: (T,) sample times (s), increasing.
         positions: (T, n_bodies, 2) body positions (m), bodies in ``scenario.bodies`` order.
         impacts: impact events as dicts with keys ``'time'`` (s), ``'a'``, ``'b'`` (body or obstacle names,
-            or ``"wall"``) and ``'impulse'`` (N s). Body-body impacts are red stars at body ``a``'s position
-            (interpolated at the impact time) on the left; every impact is a dotted vertical line on the
-            right (red for body-body, grey for a wall or obstacle).
-        robustness: STL robustness of the run (m), shown in the title.
+            or ``"wall"``) and ``'impulse'`` (N s). Robot-object impacts are red stars, drawn on top of the
+            discs, at the object's position (interpolated at the impact time) on the left; every impact is a
+            dotted vertical line on the right (red for robot-object, grey for any other contact).
+        robustness: STL robustness of the run (m), shown in the title with the impact counts.
         path: where to write the PNG (``.png`` is added when there is no suffix).
 
     Raises:
@@ -94,42 +112,60 @@ def plot_run(scenario: Scenario, times_s: np.ndarray, positions: np.ndarray, imp
     path = _png_path(path)
     index = {b.name: i for i, b in enumerate(bodies)}
     colours = _trace_colours(scenario)
+    objects = {b.name for b in scenario.objects}
+    robots = {b.name for b in scenario.robots}
 
     w, h = _xy_figsize(scenario)
-    fig = _new_figure(w + 7.0, max(h, 4.5))
-    ax_xy, ax_t = fig.subplots(1, 2, gridspec_kw={"width_ratios": [w, 6.0]})
+    fig = _new_figure(w + 7.5, max(h, 5.5))
+    grid = fig.add_gridspec(2, 2, width_ratios=[w, 7.5])
+    ax_xy = fig.add_subplot(grid[:, 0])
+    ax_p = fig.add_subplot(grid[0, 1])
+    ax_v = fig.add_subplot(grid[1, 1], sharex=ax_p)
 
     handles = _draw_scenario(scenario, ax_xy)
     for i, body in enumerate(bodies):
-        (line,) = ax_xy.plot(positions[:, i, 0], positions[:, i, 1], color=colours[i], lw=1.5,
+        (line,) = ax_xy.plot(positions[:, i, 0], positions[:, i, 1], color=colours[i], lw=1.5, zorder=5,
                              label=f"{body.name} path")
-        ax_xy.plot(*positions[-1, i], "o", color=colours[i], ms=4)
+        ax_xy.plot(*positions[-1, i], "o", color=colours[i], ms=4, zorder=5)
         handles.append(line)
-    body_impacts = [m for m in impacts if m["a"] in index and m["b"] in index]
-    if body_impacts:
-        stars = np.array([[np.interp(m["time"], times_s, positions[:, index[m["a"]], c]) for c in (0, 1)]
-                          for m in body_impacts])
-        handles.append(ax_xy.scatter(stars[:, 0], stars[:, 1], marker="*", s=140, color=IMPACT_COLOUR,
-                                     edgecolor="k", linewidth=0.5, zorder=6, label="body-body impact"))
+    hits = [m for m in impacts if {m["a"], m["b"]} & robots and {m["a"], m["b"]} & objects]
+    if hits:
+        at = [index[m["a"] if m["a"] in objects else m["b"]] for m in hits]
+        stars = np.array([[np.interp(m["time"], times_s, positions[:, i, c]) for c in (0, 1)]
+                          for m, i in zip(hits, at)])
+        handles.append(ax_xy.scatter(stars[:, 0], stars[:, 1], marker="*", s=160, color=IMPACT_COLOUR,
+                                     edgecolor="k", linewidth=0.5, zorder=9, label="robot-object impact"))
     ax_xy.set_title("xy view")
     ax_xy.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
                  fontsize="small")
 
+    velocities = np.gradient(positions, times_s, axis=0) if times_s.size > 1 else np.zeros_like(positions)
     for i, body in enumerate(bodies):
-        ax_t.plot(times_s, positions[:, i, 0], color=colours[i], lw=1.5, label=f"{body.name} x")
-        ax_t.plot(times_s, positions[:, i, 1], color=colours[i], lw=1.5, ls="--", label=f"{body.name} y")
+        lw = 2.4 if body.name in objects else 1.3
+        for c, ls in ((0, "-"), (1, "--")):
+            ax_p.plot(times_s, positions[:, i, c], color=colours[i], lw=lw, ls=ls)
+            ax_v.plot(times_s, velocities[:, i, c], color=colours[i], lw=lw, ls=ls)
+    time_handles = [Line2D([], [], color=colours[i], lw=2.4 if b.name in objects else 1.3, label=b.name)
+                    for i, b in enumerate(bodies)]
+    time_handles += [Line2D([], [], color="0.3", ls="-", label="x / vx"), Line2D([], [], color="0.3", ls="--",
+                                                                                label="y / vy"),
+                     Line2D([], [], color=IMPACT_COLOUR, ls=":", label="robot-object impact"),
+                     Line2D([], [], color="0.6", ls=":", label="other contact")]
     for m in impacts:
-        between_bodies = m["a"] in index and m["b"] in index
-        ax_t.axvline(m["time"], color=IMPACT_COLOUR if between_bodies else "0.6", ls=":", lw=1.0)
-    ax_t.set_xlabel("time (s)")
-    ax_t.set_ylabel("position (m)")
-    ax_t.set_title("positions over time (x solid, y dashed; impacts dotted)")
-    ax_t.grid(True, alpha=0.3)
-    ax_t.legend(loc="best", fontsize="small", ncol=2)
-
-    count = len(body_impacts)
-    fig.suptitle(f"{scenario.name}: robustness rho = {robustness:.3f} m  "
-                 f"({count} body-body impact{'' if count == 1 else 's'})")
+        hit = {m["a"], m["b"]} & robots and {m["a"], m["b"]} & objects
+        for ax in (ax_p, ax_v):
+            ax.axvline(m["time"], color=IMPACT_COLOUR if hit else "0.6", ls=":", lw=1.0)
+    for ax in (ax_p, ax_v):
+        ax.grid(True, alpha=0.3)
+    ax_p.set_ylabel("position (m)")
+    ax_p.set_title("positions (x solid, y dashed)")
+    ax_p.tick_params(labelbottom=False)
+    ax_v.set_ylabel("velocity (m/s)")
+    ax_v.set_xlabel("time (s)")
+    ax_v.set_title("velocities (vx solid, vy dashed); impacts dotted")
+    ax_p.legend(handles=time_handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+                fontsize="small")
+    fig.suptitle(f"{scenario.name}: robustness rho = {robustness:.3f} m  ({impacts_text(scenario, impacts)})")
     fig.savefig(path, dpi=DPI)
     fig.clear()
     return path
@@ -156,6 +192,11 @@ def _png_path(path: str | Path) -> Path:
         path = path.with_suffix(".png")
     path.parent.mkdir(parents=True, exist_ok=True)
     return path
+
+
+def trace_colours(scenario: Scenario) -> list[str]:
+    """Each body's colour in every figure, in ``scenario.bodies`` order: robots blues, objects oranges."""
+    return _trace_colours(scenario)
 
 
 def _trace_colours(scenario: Scenario) -> list[str]:

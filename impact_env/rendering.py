@@ -55,6 +55,30 @@ THRUST = (200, 0, 160)
 IMPACT = (230, 30, 30)
 
 
+def prepare_display() -> None:
+    """Quiet, working SDL set-up before ``pygame.display.init()`` (human mode).
+
+    SDL prints ``error: XDG_RUNTIME_DIR is invalid or not set in the environment`` when that variable does not
+    name a folder, which is the rule on servers and in containers: give it a private temporary folder then. On
+    Linux without ``DISPLAY`` or ``WAYLAND_DISPLAY`` there is no screen to open a window on: SDL's ``offscreen``
+    driver is used (the frames are drawn, nothing is shown) with one warning that says so, unless
+    ``SDL_VIDEODRIVER`` is set already.
+    """
+    import sys
+    import tempfile
+
+    runtime = os.environ.get("XDG_RUNTIME_DIR")
+    if not runtime or not os.path.isdir(runtime):
+        os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="impact_env_xdg_")
+    headless = sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    if headless and "SDL_VIDEODRIVER" not in os.environ:
+        import gymnasium
+
+        os.environ["SDL_VIDEODRIVER"] = "offscreen"
+        gymnasium.logger.warn("no display (DISPLAY and WAYLAND_DISPLAY are unset): render_mode='human' draws "
+                              "off-screen; use render_mode='rgb_array' to get the frames")
+
+
 @dataclass
 class RenderFrame:
     """What one picture shows. Per-body sequences follow ``scenario.bodies`` (robots first, then objects)."""
@@ -176,6 +200,7 @@ class Renderer:
         self._static = self._draw_static(label_font)
         self._canvas = pygame.Surface(self.size_px)
         if self.render_mode == "human":
+            prepare_display()
             pygame.display.init()
             self._window = pygame.display.set_mode(self.size_px)
             pygame.display.set_caption(f"impact_env: {self.scenario.name}")

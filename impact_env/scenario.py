@@ -165,8 +165,14 @@ def _read_source(name_or_path: str | Path) -> tuple[str, str]:
                                 f"{exc.start}); TOML files must be UTF-8") from None
     name = str(name_or_path)
     if name not in scenario_names():
-        raise ScenarioError(f"unknown scenario {name!r}; shipped scenarios: {', '.join(scenario_names())} "
-                            "(or pass a path to a .toml file)")
+        from impact_env.names import shipped_names, suggestion
+        from impact_env.station import station_names
+
+        if name in station_names():
+            raise ScenarioError(f"{name!r} is a tether station, not an impact scenario: load it with "
+                                "impact_env.station.load_station (or use a Tether env)")
+        raise ScenarioError(f"unknown scenario {name!r}{suggestion(name, shipped_names())}; shipped scenarios: "
+                            f"{', '.join(scenario_names())} (or pass a path to a .toml file)")
     return resources.files(_SCENARIO_PACKAGE).joinpath(f"{name}.toml").read_text(encoding="utf-8"), name
 
 
@@ -236,7 +242,10 @@ def _finite(value: int | float) -> bool:
 
 
 def _short(value: Any) -> str:
-    text = repr(value)
+    try:
+        text = repr(value)
+    except (ValueError, RecursionError):  # an integer of thousands of digits; a list nested thousands deep
+        return f"a {type(value).__name__}"
     return text if len(text) <= 60 else text[:57] + "..."
 
 

@@ -229,8 +229,10 @@ def load_station(name_or_path: str | Path) -> Station:
     else:
         name = str(name_or_path)
         if name not in station_names():
-            raise ScenarioError(f"unknown station {name!r}; shipped stations: {', '.join(station_names())} "
-                                "(or pass a path to a .toml file)")
+            from impact_env.names import shipped_names, suggestion
+
+            raise ScenarioError(f"unknown station {name!r}{suggestion(name, shipped_names())}; shipped stations: "
+                                f"{', '.join(station_names())} (or pass a path to a .toml file)")
         text, source = resources.files(_STATION_PACKAGE).joinpath(f"{name}.toml").read_text(encoding="utf-8"), name
     try:
         data = tomllib.loads(text)

@@ -39,8 +39,12 @@ def run_station(args: argparse.Namespace) -> int:
                                  ("--fuel-penalty", args.fuel_penalty, 0.0)):
         if value != default:
             raise ImpactEnvError(f"{flag} applies to impact scenarios, not to station {st.name!r}")
-    options = {"fidelity": args.fidelity, "reward_mode": args.reward, "energy_penalty": args.energy_penalty,
-               "initial_position_noise_m": args.init_noise, "pull_speed_mps": args.pull_speed}
+    if args.reward_mode not in ("dense", "sparse"):
+        raise ImpactEnvError(f"--reward-mode {args.reward_mode} applies to impact scenarios; a station takes dense or "
+                             "sparse")
+    options = {"fidelity": args.fidelity, "reward_mode": args.reward_mode, "energy_penalty": args.energy_penalty,
+               "pull_speed_mps": args.pull_speed_mps, "max_active": args.max_active,
+               "initial_position_noise_m": args.initial_position_noise_m}
     env = TetherEnv(st, render_mode="rgb_array" if args.video else None, **options)
     controller = make_controller(args.controller, st, plan=args.plan)
     results, events = [], []

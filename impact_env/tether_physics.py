@@ -49,15 +49,11 @@ from dataclasses import dataclass
 import numpy as np
 import pymunk
 
-from impact_env.errors import ImpactEnvError
+from impact_env.errors import TetherError
 from impact_env.station import Station
 
 FIDELITIES = ("kinematic", "reel", "force")
 _SLOP_M = 1e-4
-
-
-class TetherError(ImpactEnvError, ValueError):
-    """A tether command that the world cannot carry out (unknown anchor, robot already pulling, ...)."""
 
 
 @dataclass(frozen=True)

@@ -152,6 +152,9 @@ class TetherRenderer:
         self._static = surface
         self._canvas = pygame.Surface(self.size_px)
         if self.render_mode == "human":
+            from impact_env.rendering import prepare_display
+
+            prepare_display()
             pygame.display.init()
             self._window = pygame.display.set_mode(self.size_px)
             pygame.display.set_caption(f"impact_env: station {self.station.name}")

@@ -40,7 +40,8 @@ EXIT_TIME_LIMIT = 3
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``plan`` subcommand to ``impact-env`` (entry point of the ``impact_env.commands`` group)."""
     p = subparsers.add_parser("plan", help="plan impacts and trajectories with the spatially robust MILP planner",
-                              description=__doc__.split("\n")[0])
+                              description="Plan when, where and with which robot to hit each object, with "
+                                          "maximal STL robustness (a MILP, proved optimal).")
     p.add_argument("scenario", help="shipped name or path to a .toml file")
     # a free string, checked in the handler, so that a typo is a one-line error rather than argparse usage
     p.add_argument("--solver", default="highs", help=f"MILP solver: one of {', '.join(SOLVER_NAMES)} (default highs)")
@@ -178,7 +179,10 @@ def _plan_list(args: argparse.Namespace) -> int:
 def _check_options(args: argparse.Namespace) -> None:
     """Reject option values the planner would otherwise fail on deep inside, with a one-line message."""
     if args.solver not in SOLVER_NAMES:
-        raise PlannerError(f"unknown solver {args.solver!r}; choose one of: {', '.join(SOLVER_NAMES)}")
+        from impact_env.names import suggestion
+
+        raise PlannerError(f"unknown solver {args.solver!r}{suggestion(args.solver, SOLVER_NAMES)}; choose one of: "
+                           f"{', '.join(SOLVER_NAMES)}")
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         raise PlannerError(f"--time-limit must be a finite number of seconds > 0, got {args.time_limit:g}")
     if not 0.0 <= args.mip_gap < 1.0:

@@ -36,6 +36,10 @@ class PlanTimeoutError(PlannerError):
         self.mip_gap = mip_gap
 
 
+class MPCInputError(PlannerError, ValueError):
+    """A configuration value or a solve() input of the MPC has the wrong shape, range or is not finite."""
+
+
 class PlanCheckError(PlannerError, ValueError):
     """A plan violates continuity, bounds, thrust limits or the impact law; lists every violation."""
 
@@ -44,6 +48,40 @@ class PlanCheckError(PlannerError, ValueError):
         self.violations = violations
 
 
+# ------------------------------------------------------------------------------------ tether planners
+
+
+class DecompositionError(PlannerError, ValueError):
+    """A polygon the convex decomposition cannot take (not simple, too few vertices), or pieces that fail to
+    tile it (a bug: the message lists the area that is missing or doubled)."""
+
+
+class TetherInfeasibleError(InfeasiblePlanError):
+    """No anchor sequence carries the cargo into the goal box.
+
+    ``certificate`` is the proof: the backward-reachable set reached a fixed point (a level added nothing) and
+    does not contain the start; it holds the number of levels, the reachable area (m^2) and the start's
+    distance (m) to the reachable set.
+    """
+
+    def __init__(self, message: str, certificate: dict | None = None, groups: list[str] | None = None) -> None:
+        super().__init__(message, groups=groups)
+        self.certificate = dict(certificate or {})
+
+
+class TetherPlanCheckError(PlanCheckError):
+    """A tether plan leaves the free space, loses line of sight, or does not end in the goal box."""
+
+
+class SmtNoPlanError(PlannerError):
+    """The thesis's SMT pipeline found no plan within its bounds (not a proof that none exists)."""
+
+    def __init__(self, message: str, stats: dict | None = None) -> None:
+        super().__init__(message)
+        self.stats = dict(stats or {})
+
+
 PLANNER_ERRORS: tuple[type[ImpactEnvError], ...] = (
-    PlannerError, UnsupportedSpecError, SolverNotAvailableError, InfeasiblePlanError, PlanTimeoutError, PlanCheckError,
+    PlannerError, UnsupportedSpecError, SolverNotAvailableError, InfeasiblePlanError, PlanTimeoutError, MPCInputError,
+    PlanCheckError, DecompositionError, TetherInfeasibleError, TetherPlanCheckError, SmtNoPlanError,
 )

@@ -47,7 +47,7 @@ from planners.online.keep_off import boundary_keep_off, object_keep_off, robot_k
 from planners.online.mission import MissionConfig, MissionPlanner
 from planners.online.mpc import FreeflyerMPC, MPCConfig
 from planners.online.reference import ContactStrategy, PlanContact, ReferenceSelector
-from planners.plan import Plan, PlannedImpact
+from planners.plan import Plan
 
 
 @dataclass
@@ -154,7 +154,8 @@ class Expert:
         strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
         self.selector = ReferenceSelector(plan, self.grid_dt, self.dt, strategy, cfg.replan_intervals,
                                           disc_offset=cfg.disc_offset, box=self._safe_box)
-        self.mission = MissionPlanner(sc, plan, cfg.mission, planner_config) if cfg.mission_replanning else None
+        self.mission = (MissionPlanner(sc, plan, cfg.mission, planner_config, cfg.aim_final_position)
+                        if cfg.mission_replanning else None)
         self.stats = ExpertStats()
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}
         self._cache: tuple[int, np.ndarray] | None = None
@@ -376,4 +377,4 @@ def make_expert(scenario: Scenario, plan: str | None = None, **_: Any) -> Expert
     return Expert(scenario, plan=Plan.load(plan) if plan else None)
 
 
-__all__ = ["Expert", "ExpertConfig", "ExpertStats", "PlannedImpact", "make_expert"]
+__all__ = ["Expert", "ExpertConfig", "ExpertStats", "make_expert"]

@@ -42,7 +42,7 @@ class Field:
 def _brief(value: Any) -> str:
     try:
         text = repr(value)
-    except ValueError:  # an integer of thousands of digits
+    except (ValueError, RecursionError):  # an integer of thousands of digits; a list nested thousands deep
         return f"a {type(value).__name__}"
     return text if len(text) <= 60 else text[:57] + "..."
 

@@ -174,8 +174,10 @@ def plot_execution(scenario: Scenario, plan: Plan, times_s: np.ndarray, position
     for i, name in enumerate(names):
         ax.plot(*plan.position(name, t_plan).T, ":", color=colours[name], lw=1.2)
         ax.plot(positions[:, i, 0], positions[:, i, 1], "-", color=colours[name], lw=1.8, label=f"{name} executed")
-    for imp in plan.impacts:
-        ax.plot(*imp.position, "*", color=IMPACT_COLOUR, ms=12, mec="k", mew=0.5)
+    for k, imp in enumerate(plan.impacts):  # on top of the discs (zorder 4) and paths
+        ax.plot(*imp.position, "*", color=IMPACT_COLOUR, ms=12, mec="k", mew=0.5, zorder=9,
+                label="planned impact" if k == 0 else None)
+    ax.plot([], [], ":", color="0.3", label="planned paths (dotted)")
     ax.set_title("executed (solid) vs planned (dotted)")
     ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
 
@@ -206,7 +208,10 @@ def plot_execution(scenario: Scenario, plan: Plan, times_s: np.ndarray, position
     ax_v.set_xlabel("time (s); impacts: planned red dotted, executed black")
     for a in (ax_p, ax_v):
         a.grid(alpha=0.3)
-    fig.suptitle(f"{scenario.name}: executed robustness {robustness:+.3f} m (planned {plan.robustness:.3f} m)")
+    from impact_env.plotting import impacts_text
+
+    fig.suptitle(f"{scenario.name}: executed robustness {robustness:+.3f} m (planned {plan.robustness:.3f} m); "
+                 f"{impacts_text(scenario, impacts)} ({len(plan.impacts)} planned)")
     if path is not None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=DPI)

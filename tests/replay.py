@@ -4,7 +4,7 @@ Each substep sets every robot's velocity so that it lands on its planned positio
 substep. The planner treats bodies as points (Assumption 1), so around each planned impact the robot's
 path is shifted back by the sum of the radii along the impact normal (the direction of the object's
 velocity change), which puts the discs in contact exactly at the planned impact time (the two-body
-contact point of paper-scenarios.md item 5). The shift is blended in over the first half of the
+contact point of docs/background.md#planner, item 5). The shift is blended in over the first half of the
 pre-impact interval and out after the post-impact interval, so the robot's velocity at the impact is the
 planned one.
 

@@ -82,6 +82,8 @@ def test_pettingzoo_missing_and_none_actions_are_zero_thrust(pz_env):
     ({"initial_position_noise_m": 1e300}, r"only 0\.0% of the starts"),
     ({"initial_position_noise_m": math.nan}, "initial_position_noise_m"),
     ({"thrust_noise": math.inf}, "thrust_noise"),
+    ({"thrust_noise": 1e308}, r"thrust_noise must be a finite number in \[0, 10\]"),  # found by the fuzzers
+    ({"fuel_penalty": 1e300}, r"fuel_penalty must be a finite number in \[0, 1e\+06\]"),
 ])
 def test_bad_options_are_env_config_errors(kwargs, message):
     with pytest.raises(EnvConfigError, match=message):
@@ -117,3 +119,13 @@ def test_noisy_starts_are_deterministic_in_the_seed():
         a.reset(seed=seed)
         b.reset(seed=seed)
         assert a.core._state == b.core._state
+
+
+def test_deeply_nested_and_huge_actions_are_action_errors(gym_env):
+    deep = [0.0] * 6
+    for _ in range(5000):
+        deep = [deep]
+    with pytest.raises(ActionError, match="a list, which is ragged or nested too deeply"):
+        gym_env.step(deep)
+    with pytest.raises(ActionError, match="too large for a float"):
+        gym_env.step([10 ** 5000] * 6)

@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 import pettingzoo
+import pytest
 from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, render_test
 
 import impact_env
@@ -26,7 +27,26 @@ def test_render_test():
 
 
 def test_max_cycles_test():
-    max_cycles_test(sys.modules[transport_parallel.__name__])
+    """PettingZoo's test builds ``mod.parallel_env(max_cycles=...)`` with no scenario, which impact_env refuses
+    on purpose (no silent default scenario): give it the module's entry points bound to one scenario."""
+    from functools import partial
+    from types import SimpleNamespace
+
+    mod = sys.modules[transport_parallel.__name__]
+    bound = SimpleNamespace(**{name: partial(getattr(mod, name), scenario="throw_and_catch_exp")
+                               for name in ("parallel_env", "env", "raw_env")})
+    max_cycles_test(bound)
+
+
+def test_no_silent_default_scenario():
+    import gymnasium as gym
+
+    from impact_env.errors import EnvConfigError
+
+    for make in (lambda: gym.make("impact_env/Transport-v0"), lambda: gym.make("impact_env/Tether-v0"),
+                 lambda: impact_env.parallel_env(), lambda: impact_env.tether_v0.parallel_env()):
+        with pytest.raises(EnvConfigError, match="is required"):
+            make()
 
 
 def test_registry_and_spaces():

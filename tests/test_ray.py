@@ -28,7 +28,7 @@ from tests import sweep_jobs  # noqa: E402
 pytestmark = pytest.mark.xdist_group("ray")  # with --dist loadgroup: one Ray instance at a time in the suite
 
 ROOT = Path(__file__).resolve().parents[1]
-NOISE = ["--thrust-noise", "0.05", "--init-noise", "0.05"]
+NOISE = ["--thrust-noise", "0.05", "--initial-position-noise-m", "0.05"]
 TINY_PPO = """impact_env/ThrowAndCatchExp-v0:
   n_envs: 2
   n_timesteps: 800

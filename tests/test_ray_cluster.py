@@ -37,7 +37,7 @@ def _rows(path: Path) -> list[dict]:
 
 def test_a_bench_sweep_spreads_over_both_nodes_and_gives_the_local_table(cluster, tmp_path, capsys):
     common = ["bench", "throw_and_catch_exp", "--controllers", "random,zero", "--episodes", "4",
-              "--thrust-noise", "0.05", "--init-noise", "0.05"]
+              "--thrust-noise", "0.05", "--initial-position-noise-m", "0.05"]
     assert main(common + ["--engine", "ray", "--address", cluster.address, "--out", str(tmp_path / "cluster")]) == 0
     assert not ray.is_initialized()  # the bench connected, and disconnected at its end
     out = capsys.readouterr().out

@@ -236,3 +236,29 @@ def test_shipped_scenarios_pass_the_limits():
             [f"objects[{i}]" for i in range(len(scenario.objects))]
         v, _ = limits.fastest_speed(scenario.bodies, kinds, scenario.restitution, scenario.world_box, thrust=True)
         assert v * scenario.physics_dt_s <= min(b.radius_m for b in scenario.bodies)
+
+
+# found by the fuzzers (tests/fuzz/)
+
+def test_a_box_too_thin_for_its_edges_is_rejected():
+    with pytest.raises(ScenarioError, match=r"obstacles\[0\]\.box must be at least 1e-06 m wide and high"):
+        scenario_from_dict(corridor(obstacles__0__box=[-1.0, 0.0, 0.0, 3.8e-295]))
+
+
+def test_robustness_over_an_interval_far_longer_than_the_trace():
+    from impact_env.stl import parse, robustness
+
+    trace = {"O1": np.linspace([1.0, 2.0], [1.0, 8.0], 31)}
+    regions = load_scenario("corridor").region_map()
+    assert robustness(parse("F[0,99999999999999999999] true"), trace, regions, dt=0.1) == math.inf
+    far = robustness(parse("F[0,1e20] in(O1, goal)"), trace, regions, dt=0.1)
+    assert far == robustness(parse("F[0,3] in(O1, goal)"), trace, regions, dt=0.1) == pytest.approx(0.75)
+    late = robustness(parse("G[5,1e20] in(O1, goal)"), trace, regions, dt=0.1)
+    assert late == pytest.approx(regions["goal"].signed_distance_xy(1.0, 8.0))
+
+
+def test_a_subnormal_radius_is_a_scenario_error():
+    data = corridor()
+    data["robots"][0]["radius_m"] = 5e-324
+    with pytest.raises(ScenarioError, match=r"even the maximum of 1000 substeps is too few"):
+        scenario_from_dict(data)

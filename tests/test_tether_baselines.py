@@ -24,7 +24,7 @@ def test_every_tether_env_id_has_ppo_hyperparameters():
 
 def test_ppo_on_a_station_then_expert_versus_ppo_in_one_bench(tmp_path, capsys):
     runs = tmp_path / "runs"
-    assert main(["train", "ppo", "dead_end", "--timesteps", "512", "--n-envs", "1", "--out", str(runs),
+    assert main(["train", "ppo", "dead_end", "--timesteps", "512", "--n-envs", "1", "--runs-dir", str(runs),
                  "--no-progress", "--eval-freq", "100000", "--fidelity", "reel"]) == 0
     model = runs / "ppo_dead_end_s0" / "model.zip"
     meta = json.loads((runs / "ppo_dead_end_s0" / "train.json").read_text())
@@ -32,7 +32,7 @@ def test_ppo_on_a_station_then_expert_versus_ppo_in_one_bench(tmp_path, capsys):
     assert meta["env_options"]["fidelity"] == "reel"
     out = tmp_path / "bench"
     assert main(["bench", "dead_end", "--controllers", f"expert,ppo:{model},zero", "--episodes", "1",
-                 "--workers", "1", "--out", str(out), "--fidelity", "reel", "--init-noise", "0.3"]) == 0
+                 "--workers", "1", "--out", str(out), "--fidelity", "reel", "--initial-position-noise-m", "0.3"]) == 0
     rows = {r["controller"]: r for r in csv.DictReader(open(out / "summary.csv"))}
     assert float(rows["expert"]["success_rate"]) == 1.0 and float(rows["zero"]["success_rate"]) == 0.0
     assert "ppo" in rows and (out / "bench.png").stat().st_size > 1000

@@ -268,7 +268,13 @@ def test_render_test():
 
 
 def test_max_cycles_test():
-    max_cycles_test(sys.modules[tether_parallel.__name__])
+    """As for the impact env: PettingZoo's test passes no station, which is refused on purpose; bind one."""
+    from functools import partial
+    from types import SimpleNamespace
+
+    mod = sys.modules[tether_parallel.__name__]
+    max_cycles_test(SimpleNamespace(**{name: partial(getattr(mod, name), station="L")
+                                       for name in ("parallel_env", "env", "raw_env")}))
 
 
 def test_registry_and_agent_observations():
@@ -336,8 +342,8 @@ def test_cli_lists_shows_and_runs_stations(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv,message", [
     (["run", "L", "--restitution", "0.5"], "--restitution applies to impact scenarios, not to station 'L'"),
-    (["run", "corridor", "--fidelity", "reel"], "--fidelity and --energy-penalty apply to tether stations"),
-    (["run", "L", "--reward", "conjuncts"], "reward_mode must be one of ('dense', 'sparse')"),
+    (["run", "corridor", "--fidelity", "reel"], "--energy-penalty, --pull-speed-mps and --max-active apply to tether"),
+    (["run", "L", "--reward-mode", "conjuncts"], "--reward-mode conjuncts applies to impact scenarios"),
 ])
 def test_cli_station_errors_are_one_line(argv, message, capsys):
     from impact_env.cli import main

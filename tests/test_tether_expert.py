@@ -120,12 +120,12 @@ def test_plan_command_writes_a_checked_plan_and_a_figure(tmp_path, capsys):
     assert main(["run", "L", "--controller", "expert", "--plan", str(out), "--json", str(tmp_path / "r.json")]) == 0
     summary = json.loads((tmp_path / "r.json").read_text())
     assert summary["success"] and summary["controller"] == "expert"
-    # the winches 10 % slower than the station says, and a perturbed start: --pull-speed, --init-noise
-    assert main(["run", "L", "--controller", "expert", "--fidelity", "reel", "--pull-speed", "0.09", "--init-noise",
-                 "0.3", "--seed", "7", "--json", str(tmp_path / "w.json")]) == 0
+    # the winches 10 % slower than the station says, and a perturbed start
+    assert main(["run", "L", "--controller", "expert", "--fidelity", "reel", "--pull-speed-mps", "0.09",
+                 "--initial-position-noise-m", "0.3", "--seed", "7", "--json", str(tmp_path / "w.json")]) == 0
     summary = json.loads((tmp_path / "w.json").read_text())
     assert summary["success"] and summary["env_options"]["pull_speed_mps"] == 0.09
-    assert main(["run", "corridor", "--pull-speed", "0.1"]) == 2  # a station-only option
+    assert main(["run", "corridor", "--pull-speed-mps", "0.1"]) == 2  # a station-only option
 
 
 def test_plan_command_proves_infeasibility_with_exit_code_4(tmp_path, capsys):

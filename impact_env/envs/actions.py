@@ -19,7 +19,10 @@ _NUMERIC_KINDS = "iuf"  # signed and unsigned integers, floats (not bool, comple
 
 
 def _brief(value: object) -> str:
-    text = repr(value)
+    try:
+        text = repr(value)
+    except (ValueError, RecursionError):  # an integer of thousands of digits; a list nested thousands deep
+        return f"a {type(value).__name__}"
     return text if len(text) <= 80 else text[:77] + "..."
 
 
@@ -39,9 +42,9 @@ def numbers_of(action: object, shapes: tuple[tuple[int, ...], ...], what: str, l
                               f"{type(action).__name__} {_brief(action)}")
         try:
             array = np.asarray(action)
-        except (ValueError, TypeError):  # ragged nesting, e.g. [[1, 2, 3], [4, 5]]
+        except (ValueError, TypeError, RecursionError):  # ragged nesting, e.g. [[1, 2, 3], [4, 5]]; too deep
             raise ActionError(f"{what} must be a rectangular array of numbers ({layout}) of shape {expected}; "
-                              f"got the ragged {_brief(action)}") from None
+                              f"got {_brief(action)}, which is ragged or nested too deeply") from None
         if array.dtype.kind == "O":  # Python ints too large for int64, or mixed objects
             flat = array.reshape(-1).tolist()
             if not all(isinstance(x, numbers.Real) and not isinstance(x, bool) for x in flat):

@@ -47,6 +47,8 @@ REWARD_MODES = ("dense", "sparse", "conjuncts")
 OBS_PER_BODY = 7  # x, y, vx, vy, cos(heading), sin(heading), angular velocity
 ACTION_PER_ROBOT = 3  # body-frame Fx, Fy, torque, each in [-1, 1]
 _FLOAT32_LIMIT = float(np.finfo(np.float32).max) / 2  # observation bounds stay finite in float32
+MAX_THRUST_NOISE = 10.0  # std of the multiplicative noise; beyond, 0 * (1 + noise * z) overflows to NaN
+MAX_FUEL_PENALTY = 1e6  # reward per N s; beyond, a step's penalty can overflow to -inf
 
 
 def speed_bounds(scenario: Scenario, duration_s: float) -> tuple[float, float]:
@@ -106,10 +108,13 @@ class TransportCore:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         if reward_mode not in REWARD_MODES:
             raise EnvConfigError(f"reward_mode must be one of {REWARD_MODES}, got {reward_mode!r}")
-        for name, value in (("fuel_penalty", fuel_penalty), ("thrust_noise", thrust_noise),
-                            ("initial_position_noise_m", initial_position_noise_m)):
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise EnvConfigError(f"{name} must be a finite number >= 0, got {value!r}")
+        for name, value, most in (("fuel_penalty", fuel_penalty, MAX_FUEL_PENALTY),
+                                  ("thrust_noise", thrust_noise, MAX_THRUST_NOISE),
+                                  ("initial_position_noise_m", initial_position_noise_m, math.inf)):
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+                    and 0 <= value <= most):
+                limit = f"in [0, {most:g}]" if math.isfinite(most) else ">= 0"
+                raise EnvConfigError(f"{name} must be a finite number {limit}, got {value!r}")
         if restitution is not None and not (isinstance(restitution, (int, float)) and 0.0 <= restitution <= 1.0):
             raise EnvConfigError(f"restitution must be in [0, 1] or None, got {restitution!r}")
         if initial_position_noise_m > 0:

@@ -9,11 +9,16 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import EzPickle
 
+from impact_env.envs.clock import EpisodeClock, check_render_options, reject_unknown, required
 from impact_env.envs.tether_core import TetherCore
 from impact_env.station import Station
 
+STATION_HINT = "a shipped station name (impact-env scenarios), a path to a TOML file or a Station"
+STATION_EXAMPLE = ("gym.make('impact_env/Tether-v0', station='L'), or the station's own id "
+                   "gym.make('impact_env/TetherL-v0')")
 
-class TetherEnv(gym.Env, EzPickle):
+
+class TetherEnv(EpisodeClock, gym.Env, EzPickle):
     """Robots carry a free-floating cargo through a space station by pulling it toward anchors on the walls.
 
     ## Description
@@ -54,9 +59,11 @@ class TetherEnv(gym.Env, EzPickle):
     uniformly within that radius of the start (drawn from the reset seed, the disc kept inside the station).
 
     ## Episode end
-    ``terminated`` when the task's horizon is reached (600 steps of 1 s on the shipped maps); the final
-    ``info["robustness"]`` is then the trace's exact robustness and ``info["is_success"]`` says whether it is
-    positive. No truncation of its own (use ``max_episode_steps``).
+    ``terminated`` when the task's horizon is reached (``env.unwrapped.horizon_steps``: 600 steps of 1 s on the
+    shipped maps); the final ``info["robustness"]`` is then the trace's exact robustness and
+    ``info["is_success"]`` says whether it is positive. As for the impact envs, the station ids are registered
+    with ``max_episode_steps`` equal to the horizon (``TimeLimit`` also sets ``truncated`` on that last step;
+    ``terminated`` is the authoritative signal); ``impact_env/Tether-v0`` registers none.
 
     ## Info
     ``robustness`` (m), ``is_success``, ``time_s``, ``switches`` (accepted attach commands), ``snags``,
@@ -65,25 +72,36 @@ class TetherEnv(gym.Env, EzPickle):
     blocked, ``robot``, ``anchor``) and ``rejected`` (this step's ignored attaches with the reason).
 
     ## Arguments
-    ``station`` (name, path or Station; default ``"L"``), ``fidelity`` (``"kinematic"``, ``"reel"``,
-    ``"force"``), ``reward_mode``, ``energy_penalty``, ``pull_speed_mps`` (the winches' real ``w``, default the
-    station's), ``max_active`` (``k``, default the station's), ``initial_position_noise_m``, ``render_mode``
-    (``"rgb_array"`` or ``"human"``), ``render_width_px``.
+    Each keyword has the name of its ``impact-env run`` option (``energy_penalty`` is ``--energy-penalty``).
+
+    * ``station``: a shipped station name (``impact-env scenarios``), a path to a TOML file or a
+      :class:`~impact_env.station.Station`. Required by ``impact_env/Tether-v0``; the station ids
+      (``impact_env/TetherL-v0`` ...) set it.
+    * ``fidelity``: ``"kinematic"`` (the thesis's Eq. 5), ``"reel"`` (slide joints reeled in) or ``"force"``
+      (saturating tension).
+    * ``reward_mode``: ``"dense"`` or ``"sparse"``.
+    * ``energy_penalty``: reward cost per joule of winch work (>= 0).
+    * ``pull_speed_mps``: the winches' real pulling speed ``w``; None keeps the station's.
+    * ``max_active``: ``k``, how many robots may hold anchors at once; None keeps the station's.
+    * ``initial_position_noise_m``: the cargo starts uniformly within this radius (m) of its start.
+    * ``render_mode``: ``"rgb_array"``, ``"human"`` or None.
+    * ``render_width_px``: width of the rendered frame.
 
     ## Version history
-    * v0: initial release.
+    * v0: initial release (impact_env 0.2.0).
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
-    def __init__(self, station: Station | str = "L", fidelity: str = "kinematic", reward_mode: str = "dense",
+    def __init__(self, station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
                  energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
                  initial_position_noise_m: float = 0.0, render_mode: str | None = None,
-                 render_width_px: int = 600) -> None:
+                 render_width_px: int = 600, **unknown: Any) -> None:
+        reject_unknown(unknown, type(self))
         EzPickle.__init__(self, station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
                           initial_position_noise_m, render_mode, render_width_px)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        check_render_options(self.metadata, render_mode, render_width_px)
+        station = required(station, "station", STATION_HINT, STATION_EXAMPLE)
         self.core = TetherCore(station, fidelity=fidelity, reward_mode=reward_mode, energy_penalty=energy_penalty,
                                pull_speed_mps=pull_speed_mps, max_active=max_active,
                                initial_position_noise_m=initial_position_noise_m)

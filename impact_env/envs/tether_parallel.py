@@ -15,39 +15,73 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
-from impact_env.envs.tether import close_tether, render_tether
+from impact_env.envs.clock import EpisodeClock, check_max_cycles, check_render_options, reject_unknown, required
+from impact_env.envs.tether import STATION_HINT, close_tether, render_tether
 from impact_env.envs.tether_core import KEEP, TetherCore
 from impact_env.station import Station
 
 
-class TetherParallelEnv(ParallelEnv, EzPickle):
+class TetherParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
     """Tether transport with one agent per robot (agents ``robot_0 .. robot_{n-1}``).
 
-    Every agent has the same spaces: action ``Discrete(n_anchors + 2)`` (its own command: ``0`` keep, ``1``
-    release, ``2 + j`` attach to anchor ``j``; rules and errors as in :class:`~impact_env.envs.tether.TetherEnv`,
-    robots served in index order) and an observation with the central layout of ``TetherEnv`` but with the
-    agent's own robot block first and the others after it in order, so one shared policy can drive every robot.
-    ``state()`` returns the central observation. All agents receive the same team reward and terminate together
-    at the task's horizon; ``max_cycles`` truncates earlier if given. A missing agent action means keep.
+    ## Description
+    The station, task and reward of :class:`~impact_env.envs.tether.TetherEnv` with each robot an agent of a
+    PettingZoo ``ParallelEnv``; ``raw_env`` and ``env`` are its AEC forms. Import it as
+    ``from impact_env import tether_v0`` or make it with PettingZoo's registry id ``impact_env/tether-v0``.
+
+    ## Action space
+    Per agent ``Discrete(n_anchors + 2)``: its own command (``0`` keep, ``1`` release, ``2 + j`` attach to
+    anchor ``j``; rules and errors as in ``TetherEnv``, robots served in index order). A missing agent action
+    means keep.
+
+    ## Observation space
+    Per agent the central layout of ``TetherEnv`` with the agent's own robot block first and the others after
+    it in order, so one shared policy can drive every robot. ``state()`` returns the central observation.
+
+    ## Rewards
+    All agents receive the same team reward (``TetherEnv``'s).
+
+    ## Episode end
+    All agents terminate together at the task's horizon; ``max_cycles`` truncates earlier if given.
+
+    ## Arguments
+    * ``station``: a shipped station name, a path to a TOML file or a :class:`~impact_env.station.Station`;
+      required.
+    * ``fidelity``: ``"kinematic"``, ``"reel"`` or ``"force"``.
+    * ``reward_mode``: ``"dense"`` or ``"sparse"``.
+    * ``energy_penalty``: reward cost per joule of winch work (>= 0).
+    * ``pull_speed_mps``: the winches' real pulling speed; None keeps the station's.
+    * ``max_active``: ``k``; None keeps the station's.
+    * ``initial_position_noise_m``: the cargo starts uniformly within this radius (m) of its start.
+    * ``max_cycles``: truncate after this many steps (None: only the horizon ends an episode).
+    * ``render_mode``: ``"rgb_array"``, ``"human"`` or None.
+    * ``render_width_px``: width of the rendered frame.
+
+    ## Metadata
+    ``metadata["name"]`` is ``tether_<station>_v0`` (e.g. ``tether_L_v0``).
+
+    ## Version history
+    * v0: initial release (impact_env 0.2.0).
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10, "name": "impact_env_tether_v0",
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10, "name": "tether_v0",
                 "is_parallelizable": True}
 
-    def __init__(self, station: Station | str = "L", fidelity: str = "kinematic", reward_mode: str = "dense",
+    def __init__(self, station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
                  energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
                  initial_position_noise_m: float = 0.0, max_cycles: int | None = None,
-                 render_mode: str | None = None, render_width_px: int = 600) -> None:
+                 render_mode: str | None = None, render_width_px: int = 600, **unknown: Any) -> None:
+        reject_unknown(unknown, type(self))
         EzPickle.__init__(self, station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
                           initial_position_noise_m, max_cycles, render_mode, render_width_px)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
-        if max_cycles is not None and (not isinstance(max_cycles, int) or max_cycles < 1):
-            raise ValueError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
+        check_render_options(self.metadata, render_mode, render_width_px)
+        check_max_cycles(max_cycles)
+        station = required(station, "station", STATION_HINT, "impact_env.tether_v0.parallel_env(station='L')")
         self.core = TetherCore(station, fidelity=fidelity, reward_mode=reward_mode, energy_penalty=energy_penalty,
                                pull_speed_mps=pull_speed_mps, max_active=max_active,
                                initial_position_noise_m=initial_position_noise_m)
         self.station = self.core.station
+        self.metadata = dict(self.metadata, name=f"tether_{self.station.name}_v0")
         self.max_cycles = max_cycles
         self.render_mode = render_mode
         self.render_width_px = render_width_px
@@ -117,16 +151,30 @@ class TetherParallelEnv(ParallelEnv, EzPickle):
         close_tether(self)
 
 
-def parallel_env(**kwargs) -> TetherParallelEnv:
-    """The ParallelEnv; keyword arguments as :class:`TetherParallelEnv`."""
-    return TetherParallelEnv(**kwargs)
+def parallel_env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
+                 energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
+                 initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
+                 render_width_px: int = 600, **unknown: Any) -> TetherParallelEnv:
+    """The ParallelEnv; the arguments of :class:`TetherParallelEnv`."""
+    return TetherParallelEnv(station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
+                             initial_position_noise_m, max_cycles, render_mode, render_width_px, **unknown)
 
 
-def raw_env(**kwargs):
-    """The AEC form without the order-enforcing wrapper."""
-    return parallel_to_aec_wrapper(TetherParallelEnv(**kwargs))
+def raw_env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
+            energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
+            initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
+            render_width_px: int = 600, **unknown: Any):
+    """The AEC form without the order-enforcing wrapper; the arguments of :class:`TetherParallelEnv`."""
+    return parallel_to_aec_wrapper(parallel_env(station, fidelity, reward_mode, energy_penalty, pull_speed_mps,
+                                                max_active, initial_position_noise_m, max_cycles, render_mode,
+                                                render_width_px, **unknown))
 
 
-def env(**kwargs):
-    """The AEC form, order-enforced: what ``pettingzoo.test.api_test`` expects."""
-    return OrderEnforcingWrapper(raw_env(**kwargs))
+def env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
+        energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
+        initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
+        render_width_px: int = 600, **unknown: Any):
+    """The AEC form, order-enforced (what ``pettingzoo.test.api_test`` expects); the arguments of
+    :class:`TetherParallelEnv`."""
+    return OrderEnforcingWrapper(raw_env(station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
+                                         initial_position_noise_m, max_cycles, render_mode, render_width_px, **unknown))

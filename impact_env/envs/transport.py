@@ -10,12 +10,16 @@ from gymnasium import spaces
 from gymnasium.utils import EzPickle
 
 from impact_env.envs import render_support
+from impact_env.envs.clock import EpisodeClock, check_render_options, reject_unknown, required
 from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
-from impact_env.errors import EnvConfigError
 from impact_env.scenario import Scenario
 
+SCENARIO_HINT = "a shipped scenario name (impact-env scenarios), a path to a TOML file or a Scenario"
+SCENARIO_EXAMPLE = ("gym.make('impact_env/Transport-v0', scenario='corridor'), or the scenario's own id "
+                    "gym.make('impact_env/Corridor-v0')")
 
-class TransportEnv(gym.Env, EzPickle):
+
+class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     """Robots move passive free-floating objects by impacts, in a 2D frictionless microgravity world.
 
     ## Description
@@ -28,7 +32,8 @@ class TransportEnv(gym.Env, EzPickle):
     ``Box(-1, 1, (3 * n_robots,), float32)``: per robot, in scenario order, body-frame force x, force y
     and torque, as fractions of the robot's ``thrust_limit_N`` (per body axis) and ``torque_limit_Nm``.
     Values outside [-1, 1] are clipped; NaN or infinite values raise
-    :class:`~impact_env.errors.ActionError`. The wrench is held for one control period
+    :class:`~impact_env.errors.ActionError`, and so do non-numbers, ragged lists and any shape other than
+    ``(3 * n_robots,)`` or ``(n_robots, 3)``. The wrench is held for one control period
     (``control_period_s``, 0.1 s by default) of several physics substeps.
 
     ## Observation space
@@ -42,16 +47,28 @@ class TransportEnv(gym.Env, EzPickle):
     ``reward_mode="sparse"``: the final robustness on the last step, 0 before.
     ``reward_mode="conjuncts"``: the per-step increment of the mean robustness of the task's conjuncts, so
     each conjunct (e.g. each wall clearance) is credited when it changes (see impact_env.envs.core). All subtract
-    ``fuel_penalty * sum_robots |F| * dt`` (N s) if ``fuel_penalty > 0``.
+    ``fuel_penalty * sum_robots |F| * dt`` (N s) if ``fuel_penalty > 0``. A robustness of +-inf (a task that
+    holds or fails whatever happens, e.g. ``F[0,20] true``) is reported clipped to +- the diagonal of the box
+    around the world and every region, so rewards stay finite.
 
     ## Starting state
     The scenario's initial positions, velocities and headings. With ``initial_position_noise_m > 0``,
-    objects start uniformly within that radius of their scenario position (drawn from the reset seed).
+    objects start uniformly within that radius of their scenario position (drawn from the reset seed); a
+    draw whose disc would leave the world, overlap an obstacle or another body is drawn again from the same
+    generator, and a radius for which fewer than 5 % of the draws are clear is refused at construction.
 
     ## Episode end
-    ``terminated`` when the STL formula's horizon is reached (e.g. 100 s = 1000 steps for the corridor);
-    the final ``info["robustness"]`` is then the trace's exact robustness and ``info["is_success"]``
-    says whether it is positive. There is no truncation of its own (use ``max_episode_steps``).
+    ``terminated`` when the STL formula's horizon is reached (``env.unwrapped.horizon_steps`` steps of
+    ``env.unwrapped.dt_s``: 1000 steps of 0.1 s for the corridor); the final ``info["robustness"]`` is then the
+    trace's exact robustness and ``info["is_success"]`` says whether it is positive. The horizon is part of the
+    task and the time left is in the observation, so this is a true termination (do not bootstrap).
+
+    ``gym.make`` registers each shipped scenario with ``max_episode_steps`` equal to its horizon, so
+    ``env.spec.max_episode_steps`` tells the episode length; on the last step Gymnasium's ``TimeLimit`` then
+    also sets ``truncated=True``. Read ``terminated`` as the authoritative signal (stable-baselines3 does:
+    its ``TimeLimit.truncated`` is ``truncated and not terminated``). A smaller ``max_episode_steps`` passed to
+    ``gym.make`` cuts episodes short with ``truncated`` only. ``impact_env/Transport-v0`` cannot know the
+    horizon of a scenario given at ``make`` time, so it registers none.
 
     ## Info
     ``robustness`` (current estimate, m), ``is_success`` (robustness > 0), ``impacts`` (contacts that ended
@@ -59,28 +76,42 @@ class TransportEnv(gym.Env, EzPickle):
     ``fuel_Ns`` (cumulative), ``time_s``.
 
     ## Arguments
-    ``scenario`` (name, path or Scenario; default ``"corridor"``), ``reward_mode``, ``fuel_penalty``,
-    ``restitution`` (simulate with another e than the scenario's), ``thrust_noise`` (std of multiplicative
-    thrust noise), ``initial_position_noise_m``, ``render_mode`` (``"rgb_array"`` or ``"human"``),
-    ``render_width_px``.
+    Each keyword has the name of its ``impact-env run``/``train`` option (``reward_mode`` is
+    ``--reward-mode``).
+
+    * ``scenario``: a shipped name (``impact-env scenarios``), a path to a TOML file or a
+      :class:`~impact_env.scenario.Scenario`. Required by ``impact_env/Transport-v0``; the scenario ids
+      (``impact_env/Corridor-v0`` ...) set it.
+    * ``reward_mode``: ``"dense"``, ``"sparse"`` or ``"conjuncts"`` (see Rewards).
+    * ``fuel_penalty``: reward cost per N s of fuel (>= 0).
+    * ``restitution``: simulate with this restitution instead of the scenario's ``e`` (a model mismatch for the
+      planner); None keeps the scenario's.
+    * ``thrust_noise``: standard deviation of multiplicative thrust noise (0.05 = 5 %), re-clipped to the limits
+      (at most 10).
+    * ``initial_position_noise_m``: objects start uniformly within this radius (m) of their scenario position.
+    * ``render_mode``: ``"rgb_array"`` (an ``(H, W, 3)`` uint8 frame per ``render()``), ``"human"`` (a pygame
+      window) or None.
+    * ``render_width_px``: width of the rendered frame; the height follows the world's aspect ratio.
 
     ## Version history
-    * v0: initial release.
+    * v0: initial release (impact_env 0.1.0). In 0.2.0 the ids got ``max_episode_steps``, ``scenario`` became
+      required and the episode clock (``dt_s``, ``horizon_steps``, ``horizon_s``) moved onto the env; dynamics,
+      reward and observations are unchanged, so the version stays v0. Also without a new version, because no
+      episode that was valid before changes: malformed actions and options are refused, noisy starts that
+      overlapped a wall, an obstacle or a body are drawn again, and an infinite robustness is clipped.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
-    def __init__(self, scenario: Scenario | str = "corridor", reward_mode: str = "dense", fuel_penalty: float = 0.0,
-                 restitution: float | None = None, thrust_noise: float = 0.0,
+    def __init__(self, scenario: Scenario | str | None = None, reward_mode: str = "dense",
+                 fuel_penalty: float = 0.0, restitution: float | None = None, thrust_noise: float = 0.0,
                  initial_position_noise_m: float = 0.0, render_mode: str | None = None,
-                 render_width_px: int = 600) -> None:
+                 render_width_px: int = 600, **unknown: Any) -> None:
+        reject_unknown(unknown, type(self))
         EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
                           initial_position_noise_m, render_mode, render_width_px)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise EnvConfigError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
-                                 f"got {render_mode!r}")
-        if not (type(render_width_px) is int and 16 <= render_width_px <= 8192):
-            raise EnvConfigError(f"render_width_px must be an integer in 16..8192, got {render_width_px!r}")
+        check_render_options(self.metadata, render_mode, render_width_px)
+        scenario = required(scenario, "scenario", SCENARIO_HINT, SCENARIO_EXAMPLE)
         self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
                                   restitution=restitution, thrust_noise=thrust_noise,
                                   initial_position_noise_m=initial_position_noise_m)

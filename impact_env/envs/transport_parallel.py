@@ -18,44 +18,87 @@ from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from impact_env.envs import render_support
 from impact_env.envs.actions import numbers_of
+from impact_env.envs.clock import EpisodeClock, check_max_cycles, check_render_options, reject_unknown, required
 from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
-from impact_env.errors import ActionError, EnvConfigError
+from impact_env.envs.transport import SCENARIO_HINT
+from impact_env.errors import ActionError
 from impact_env.scenario import Scenario
 
 
-class TransportParallelEnv(ParallelEnv, EzPickle):
+class TransportParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
     """The transport task with one agent per robot (agent names are the robots' names).
 
-    Every agent has the same spaces: action ``Box(-1, 1, (3,))`` (its own body-frame Fx, Fy, torque as
-    fractions of its limits) and an observation with the central layout of
-    :class:`~impact_env.envs.transport.TransportEnv` (7 numbers per body, then time left) but with the
-    agent's own body first and the other bodies after it in scenario order, so one shared policy can
-    drive every robot. ``state()`` returns the central observation. All agents receive the same team
-    reward (the STL robustness reward, see ``TransportEnv``) and terminate together at the formula's
-    horizon; ``max_cycles`` truncates earlier if given. A missing agent action means zero thrust.
+    ## Description
+    The world, task and reward of :class:`~impact_env.envs.transport.TransportEnv`, with each robot an agent
+    of a PettingZoo ``ParallelEnv``; ``raw_env`` and ``env`` are its AEC forms. Import it as
+    ``from impact_env import transport_v0`` (PettingZoo's versioned module) or make it with
+    ``pettingzoo``'s registry id ``impact_env/transport-v0``.
+
+    ## Agents
+    One per robot, named as the scenario names its robots (``R1``, ``R2``: the paper's names, which plans,
+    the expert and plots use too). PettingZoo's ``api_test`` recommends ``<descriptor>_<number>`` names and
+    warns ("We recommend agents to be named in the format ..."); the warning is harmless, the names are kept so
+    that an agent is the robot of the same name everywhere.
+
+    ## Action space
+    Per agent ``Box(-1, 1, (3,), float32)``: its own body-frame Fx, Fy, torque as fractions of its limits
+    (clipped; NaN raises :class:`~impact_env.errors.ActionError`). A missing agent action means zero thrust.
+
+    ## Observation space
+    Per agent the central layout of ``TransportEnv`` (7 numbers per body, then time left) with the agent's own
+    body first and the other bodies after it in scenario order, so one shared policy can drive every robot.
+    ``state()`` returns the central observation (``state_space``).
+
+    ## Rewards
+    All agents receive the same team reward: the STL robustness reward of ``TransportEnv``.
+
+    ## Episode end
+    All agents terminate together at the formula's horizon (``horizon_steps``); ``max_cycles`` truncates earlier
+    if given (None: no earlier cut).
+
+    ## Arguments
+    The keywords of ``TransportEnv`` (same names as the CLI options), and:
+
+    * ``scenario``: a shipped name, a path to a TOML file or a :class:`~impact_env.scenario.Scenario`; required.
+    * ``reward_mode``: ``"dense"``, ``"sparse"`` or ``"conjuncts"``.
+    * ``fuel_penalty``: reward cost per N s of fuel (>= 0).
+    * ``restitution``: simulate with this restitution instead of the scenario's; None keeps it.
+    * ``thrust_noise``: standard deviation of multiplicative thrust noise.
+    * ``initial_position_noise_m``: objects start uniformly within this radius (m) of their position.
+    * ``max_cycles``: truncate after this many steps (None: only the horizon ends an episode).
+    * ``render_mode``: ``"rgb_array"``, ``"human"`` or None.
+    * ``render_width_px``: width of the rendered frame.
+
+    ## Metadata
+    ``metadata["name"]`` is ``transport_<scenario>_v0`` (e.g. ``transport_corridor_v0``), so logs and
+    SuperSuit wrappers tell the scenarios apart.
+
+    ## Version history
+    * v0: initial release (impact_env 0.1.0). In 0.2.0: explicit entry-point arguments, the per-scenario
+      metadata name, the versioned module ``impact_env.transport_v0``; dynamics, reward and observations
+      unchanged.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10, "name": "impact_env_transport_v0",
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10, "name": "transport_v0",
                 "is_parallelizable": True}
 
-    def __init__(self, scenario: Scenario | str = "corridor", reward_mode: str = "dense", fuel_penalty: float = 0.0,
-                 restitution: float | None = None, thrust_noise: float = 0.0,
+    def __init__(self, scenario: Scenario | str | None = None, reward_mode: str = "dense",
+                 fuel_penalty: float = 0.0, restitution: float | None = None, thrust_noise: float = 0.0,
                  initial_position_noise_m: float = 0.0, max_cycles: int | None = None,
-                 render_mode: str | None = None, render_width_px: int = 600) -> None:
+                 render_mode: str | None = None, render_width_px: int = 600, **unknown: Any) -> None:
+        reject_unknown(unknown, type(self))
         EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
                           initial_position_noise_m, max_cycles, render_mode, render_width_px)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise EnvConfigError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
-                                 f"got {render_mode!r}")
-        if max_cycles is not None and not (type(max_cycles) is int and max_cycles >= 1):
-            raise EnvConfigError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
-        if not (type(render_width_px) is int and 16 <= render_width_px <= 8192):
-            raise EnvConfigError(f"render_width_px must be an integer in 16..8192, got {render_width_px!r}")
+        check_render_options(self.metadata, render_mode, render_width_px)
+        check_max_cycles(max_cycles)
+        scenario = required(scenario, "scenario", SCENARIO_HINT,
+                            "impact_env.transport_v0.parallel_env(scenario='corridor')")
         self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
                                   restitution=restitution, thrust_noise=thrust_noise,
                                   initial_position_noise_m=initial_position_noise_m)
         self.scenario = self.core.scenario
-        self.metadata = dict(self.metadata, render_fps=round(1.0 / self.scenario.control_period_s))
+        self.metadata = dict(self.metadata, render_fps=round(1.0 / self.scenario.control_period_s),
+                             name=f"transport_{self.scenario.name}_v0")
         self.max_cycles = max_cycles
         self.render_mode = render_mode
         self.render_width_px = render_width_px
@@ -134,16 +177,28 @@ class TransportParallelEnv(ParallelEnv, EzPickle):
         render_support.close(self)
 
 
-def parallel_env(**kwargs) -> TransportParallelEnv:
-    """The ParallelEnv; keyword arguments as :class:`TransportParallelEnv`."""
-    return TransportParallelEnv(**kwargs)
+def parallel_env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
+                 restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
+                 max_cycles: int | None = None, render_mode: str | None = None,
+                 render_width_px: int = 600, **unknown: Any) -> TransportParallelEnv:
+    """The ParallelEnv; the arguments of :class:`TransportParallelEnv`."""
+    return TransportParallelEnv(scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
+                                initial_position_noise_m, max_cycles, render_mode, render_width_px, **unknown)
 
 
-def raw_env(**kwargs):
-    """The AEC form without the order-enforcing wrapper."""
-    return parallel_to_aec_wrapper(TransportParallelEnv(**kwargs))
+def raw_env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
+            restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
+            max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600, **unknown: Any):
+    """The AEC form without the order-enforcing wrapper; the arguments of :class:`TransportParallelEnv`."""
+    return parallel_to_aec_wrapper(parallel_env(scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
+                                                initial_position_noise_m, max_cycles, render_mode,
+                                                render_width_px, **unknown))
 
 
-def env(**kwargs):
-    """The AEC form, order-enforced: what ``pettingzoo.test.api_test`` expects."""
-    return OrderEnforcingWrapper(raw_env(**kwargs))
+def env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
+        restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
+        max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600, **unknown: Any):
+    """The AEC form, order-enforced (what ``pettingzoo.test.api_test`` expects); the arguments of
+    :class:`TransportParallelEnv`."""
+    return OrderEnforcingWrapper(raw_env(scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
+                                         initial_position_noise_m, max_cycles, render_mode, render_width_px, **unknown))

@@ -110,6 +110,12 @@ def _until(left: np.ndarray, right: np.ndarray, a_k: int, b_k: int) -> np.ndarra
     return best
 
 
+def _clamped(steps: tuple[int, int], n: int) -> tuple[int, int]:
+    """Interval offsets capped at N - 1 samples: past the end every child signal is constant (hold-last), so a
+    window reaching beyond N - 1 has the value of one that ends there, and F[0, 1e20] costs no more than N."""
+    return min(steps[0], n - 1), min(steps[1], n - 1)
+
+
 def _signal(f: Formula, pos: Mapping[str, np.ndarray], regions: Mapping[str, ConvexPolygon], dt: float,
             n: int) -> np.ndarray:
     # Every node's signal is computed on t = 0..N-1 only. Hold-last makes this exact: on the completed trace
@@ -130,10 +136,10 @@ def _signal(f: Formula, pos: Mapping[str, np.ndarray], regions: Mapping[str, Con
         stacked = np.stack([_signal(c, pos, regions, dt, n) for c in f.children])
         return stacked.min(axis=0) if isinstance(f, And) else stacked.max(axis=0)
     if isinstance(f, (Eventually, Always)):
-        a_k, b_k = interval_steps(f.a_s, f.b_s, dt)
+        a_k, b_k = _clamped(interval_steps(f.a_s, f.b_s, dt), n)
         return _window(_signal(f.child, pos, regions, dt, n), a_k, b_k, maximum=isinstance(f, Eventually))
     if isinstance(f, Until):
-        a_k, b_k = interval_steps(f.a_s, f.b_s, dt)
+        a_k, b_k = _clamped(interval_steps(f.a_s, f.b_s, dt), n)
         return _until(_signal(f.left, pos, regions, dt, n), _signal(f.right, pos, regions, dt, n), a_k, b_k)
     raise STLError(f"unknown STL node {type(f).__name__}")
 

@@ -1,4 +1,4 @@
-"""The circular two-body impact model (paper Eq. 6-7) and its closed-form inverse (paper-scenarios item 5).
+"""The circular two-body impact model (paper Eq. 6-7) and its closed-form inverse (docs/background.md#planner, item 5).
 
 Frictionless discs that do not spin exchange momentum only along the contact normal n, the line of
 centres at contact: in the contact frame the normal components follow the point-mass law (Eq. 5) and the

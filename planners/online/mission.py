@@ -8,9 +8,12 @@ drifting) nothing re-decides the impacts that follow. Here, at every observed ro
 
 1. **Prediction.** The rest of the episode is predicted from the observed states: each object flies freely
    to its next planned impact, leaves it toward the position the plan needs at the impact after (which is
-   what the local replanner aims for), and follows the plan after that; an object with no impact left flies
-   freely to the end. Robots follow the plan. The task's robustness is evaluated on the executed trace so
-   far followed by this prediction.
+   what the local replanner aims for), and follows the plan after that; after its last impact it leaves
+   with the planned velocity, corrected toward the planned end position when the expert aims there; an
+   object with no impact left flies freely to the end. The prediction models what the local layer will do:
+   a pessimistic one (measured: the corridor's catch predicted short of the goal when the local layer puts
+   the object in it) triggers replans that only lose margin. Robots follow the plan. The task's robustness
+   is evaluated on the executed trace so far followed by this prediction.
 2. **Test** (documented, configurable): re-plan when the predicted robustness is below
    ``robustness_fraction`` times the robustness the flown plan was made with (default 0.5) or below
    ``min_robustness_m`` (default 0: a predicted failure).
@@ -47,7 +50,6 @@ from impact_env.scenario import Body, Scenario
 from impact_env.stl import progress, robustness, without_constants
 from planners import bezier
 from planners.errors import PlannerError
-from planners.offline.milp.trajectories import allowed_box
 from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
 from planners.online.sampling import PlanSampler
 from planners.plan import BodyPlan, Plan, Segment
@@ -162,8 +164,9 @@ def splice(executed: Plan, remainder: Plan, t: float) -> tuple[Plan, set[int]]:
 def _initial_state(body: Body, position: np.ndarray, velocity: np.ndarray, scenario: Scenario) -> Body:
     """The body with the observed state as its initial state, nudged inside the planner's allowed box and
     with a velocity bound no smaller than its observed speed (else the derived problem starts infeasible)."""
-    x0, x1, y0, y1 = allowed_box(scenario, body)
-    eps = 1e-6
+    xmin, xmax, ymin, ymax = scenario.world_box
+    x0, x1, y0, y1 = xmin + body.radius_m, xmax - body.radius_m, ymin + body.radius_m, ymax - body.radius_m
+    eps = 1e-6  # the planner's box for a centre (the world shrunk by the radius), strictly inside
     p = (float(np.clip(position[0], x0 + eps, x1 - eps)), float(np.clip(position[1], y0 + eps, y1 - eps)))
     v = (float(velocity[0]), float(velocity[1]))
     bound = body.velocity_bound_mps
@@ -190,11 +193,14 @@ class MissionPlanner:
         plan: the offline plan.
         config: :class:`MissionConfig`.
         planner_config: options of the offline planner that re-plans keep (thrust fraction, solver, ...).
+        aim_final_position: predict, as the reference selection then flies, that after its last impact an
+            object heads for its planned end position (else that it leaves with the planned velocity).
     """
 
     def __init__(self, scenario: Scenario, plan: Plan, config: MissionConfig | None = None,
-                 planner_config: PlannerConfig | None = None) -> None:
+                 planner_config: PlannerConfig | None = None, aim_final_position: bool = False) -> None:
         self.scenario = scenario
+        self.aim_final_position = aim_final_position
         self.config = config or MissionConfig()
         self.planner_config = planner_config or PlannerConfig()
         self.dt = scenario.control_period_s
@@ -247,6 +253,9 @@ class MissionPlanner:
                     pos[later] = sampler.state(body.name, np.minimum(times[later], plan.tf_s))[:, :2]
                 else:
                     v = np.asarray(first.object_velocity_after, float)
+                    left = plan.tf_s - first.time_s
+                    if self.aim_final_position and left > 1e-6:  # what the local layer will ask for
+                        v = v + (sampler.position(body.name, plan.tf_s) - (hit + v * left)) / left
                     pos[after] = hit + np.outer(times[after] - first.time_s, v)
             out[body.name] = pos
         return out

@@ -7,16 +7,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planners.errors import PlannerError
+from planners.errors import MPCInputError
 
 SOLVERS = ("sqp", "fatrop", "ipopt")
 NX, NU = 6, 3  # state [px, py, theta, vx, vy, omega], input [Fx, Fy, tau]
 _NSI = 8  # impact slacks per node: (p, v) positive and negative parts; plus one per keep-off row
 _WEIGHTS = ("q_pos", "q_vel", "q_heading", "q_omega", "r_input", "terminal_factor")
-
-
-class MPCInputError(PlannerError, ValueError):
-    """A configuration value or a solve() input has the wrong shape, range or is not finite."""
 
 
 @dataclass

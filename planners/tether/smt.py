@@ -36,7 +36,7 @@ import shapely
 from shapely.geometry import Point, Polygon
 
 from impact_env.station import Station
-from planners.errors import PlannerError
+from planners.errors import PlannerError, SmtNoPlanError
 from planners.tether.automaton import RULES, ThesisMap, build_thesis_map, half_planes
 from planners.tether.geometry import AREA_EPS_M2, clean, polygons_of, visibility_polygon
 from planners.tether.plan import Pull, TetherPlan
@@ -51,14 +51,6 @@ def _z3():
         raise SolverNotAvailableError("the thesis pipeline needs z3: pip install 'impact_env[tether]' "
                                       "(the z3-solver package)") from None
     return z3
-
-
-class SmtNoPlanError(PlannerError):
-    """The SMT pipeline found no plan within its bounds (not a proof that none exists)."""
-
-    def __init__(self, message: str, stats: dict | None = None) -> None:
-        super().__init__(message)
-        self.stats = dict(stats or {})
 
 
 @dataclass(frozen=True)

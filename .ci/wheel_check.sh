@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Build the sdist and the wheel (python -m build: the wheel is built from the sdist, so both are checked),
+# install the wheel alone in a fresh venv and run the smoke test from a folder outside the source tree.
+# Usage: .ci/wheel_check.sh [PYTHON]   (PYTHON builds; default .venv/bin/python, which has `build`)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${1:-.venv/bin/python}
+BASE=$(command -v python3.11 || command -v python3)
+WORK=$(mktemp -d)
+trap 'rm -rf "$WORK"' EXIT
+"$PY" -m build --outdir "$WORK/dist" . > "$WORK/build.log" 2>&1 || { cat "$WORK/build.log"; exit 1; }
+ls "$WORK/dist"
+SDIST=$(ls "$WORK"/dist/*.tar.gz)
+WHEEL=$(ls "$WORK"/dist/*.whl)
+# what must ship: the package data and the project's own files
+tar -tzf "$SDIST" > "$WORK/sdist.txt"
+"$PY" -c "import sys, zipfile; print('\n'.join(zipfile.ZipFile(sys.argv[1]).namelist()))" "$WHEEL" > "$WORK/wheel.txt"
+for f in LICENSE CHANGELOG.md CITATION.cff; do
+    grep -q "/$f\$" "$WORK/sdist.txt" || { echo "sdist lacks $f"; exit 1; }
+done
+for f in impact_env/scenarios/corridor.toml impact_env/stations/L.toml baselines/hyperparams/ppo.yml planners/expert.py; do
+    grep -q "^$f\$" "$WORK/wheel.txt" || { echo "wheel lacks $f"; exit 1; }
+done
+"$BASE" -m venv "$WORK/venv"
+"$WORK/venv/bin/pip" install --quiet --upgrade pip
+"$WORK/venv/bin/pip" install --quiet "$WHEEL"
+cp scripts/smoke_installed.py "$WORK/smoke.py"
+cd "$WORK"  # outside the source tree: nothing can be imported from the checkout
+PATH="$WORK/venv/bin:$PATH" SDL_VIDEODRIVER=dummy MPLBACKEND=Agg "$WORK/venv/bin/python" smoke.py

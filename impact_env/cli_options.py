@@ -1,0 +1,110 @@
+"""What every ``impact-env`` subcommand shares: the parser class and the environment options.
+
+:class:`Parser` prints each option's default in ``--help`` and adds "did you mean" to argparse's errors for
+a mistyped subcommand, choice or option. The environment options are named exactly as the environments'
+keyword arguments, hyphenated (``--reward-mode`` is ``reward_mode=``, ``--initial-position-noise-m`` is
+``initial_position_noise_m=``), so what works on the command line works in ``gym.make`` and back.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from typing import Any
+
+from impact_env.names import suggestion
+
+# options renamed in 0.2.0 to match the environments' keywords
+RENAMED = {"--reward": "--reward-mode", "--init-noise": "--initial-position-noise-m"}
+
+REWARD_HELP = ("dense: per-step increment of the STL robustness estimate (sums to the final robustness); sparse: "
+               "the final robustness on the last step; conjuncts: increment of the mean robustness of the task's "
+               "conjuncts (impact scenarios only)")
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Descriptions as written; every option's help ends with its default unless it says it already."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        shown = not (action.default is None or action.default is False or action.default == argparse.SUPPRESS)
+        if action.option_strings and shown and "default" not in text:
+            text += " (default: %(default)s)"
+        return text
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with defaults in the help and "did you mean" in errors (subparsers inherit the class)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> None:  # noqa: D401 - argparse's hook
+        choice = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if choice:
+            options = re.findall(r"'([^']*)'", choice.group(2))
+            message += suggestion(choice.group(1), options)
+        unknown = re.search(r"unrecognized arguments: (.*)", message)
+        if unknown:
+            known = [o for a in self._all_actions() for o in a.option_strings]
+            hints = []
+            for word in unknown.group(1).split():
+                flag = word.split("=")[0]
+                if not flag.startswith("--"):
+                    continue
+                if flag in RENAMED:
+                    hints.append(f"{flag} is now {RENAMED[flag]}")
+                elif hint := suggestion(flag, known):
+                    hints.append(f"{flag}{hint}")
+            if hints:
+                message += "; " + "; ".join(hints)
+        super().error(message)
+
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        import sys
+
+        self._argv = list(sys.argv[1:] if args is None else args)
+        return super().parse_args(args, namespace)
+
+    def _all_actions(self) -> list[argparse.Action]:
+        """This parser's actions and those of the subcommand named on the command line, if any."""
+        actions = list(self._actions)
+        words = getattr(self, "_argv", [])
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                picked = next((w for w in words if w in action.choices), None)
+                if picked is not None:
+                    actions += action.choices[picked]._actions
+        return actions
+
+
+def add_transport_options(p: argparse.ArgumentParser, reward_modes: tuple[str, ...]) -> None:
+    """The impact environments' options (``TransportEnv`` keywords)."""
+    p.add_argument("--reward-mode", choices=reward_modes, default="dense", help=REWARD_HELP)
+    p.add_argument("--fuel-penalty", type=float, default=0.0, metavar="C", help="reward cost per N s of fuel")
+    p.add_argument("--restitution", type=float, default=None, metavar="E",
+                   help="simulate with this restitution instead of the scenario's (model mismatch)")
+    p.add_argument("--thrust-noise", type=float, default=0.0, metavar="STD",
+                   help="standard deviation of multiplicative thrust noise (0.05 = 5%%)")
+    p.add_argument("--initial-position-noise-m", type=float, default=0.0, metavar="R",
+                   help="objects (the cargo, for a station) start uniformly within this radius (m) of their position")
+
+
+def add_tether_options(p: argparse.ArgumentParser) -> None:
+    """The tether environments' own options (``TetherEnv`` keywords beyond the shared ones)."""
+    p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
+                   help="stations only: tether physics (kinematic: the thesis's Eq. 5; reel: slide joints reeled in; "
+                        "force: saturating winch tension)")
+    p.add_argument("--energy-penalty", type=float, default=0.0, metavar="C",
+                   help="stations only: reward cost per J of winch work")
+    p.add_argument("--pull-speed-mps", type=float, default=None, metavar="W",
+                   help="stations only: the winches' real pulling speed (default: the station's)")
+    p.add_argument("--max-active", type=int, default=None, metavar="K",
+                   help="stations only: robots that may hold anchors at once (default: the station's k)")
+
+
+def transport_options(args: argparse.Namespace) -> dict[str, Any]:
+    """``TransportEnv`` keywords from the parsed options."""
+    return {"reward_mode": args.reward_mode, "fuel_penalty": args.fuel_penalty, "restitution": args.restitution,
+            "thrust_noise": args.thrust_noise, "initial_position_noise_m": args.initial_position_noise_m}
