@@ -4,8 +4,9 @@ RLlib's env runners (separate processes, possibly on other nodes) build the env 
 Ray registers once per driver: :func:`register` names :func:`make_env`, which wraps
 :func:`impact_env.envs.transport_parallel.parallel_env` in RLlib's own PettingZoo wrapper. The wrapper lists
 the agents from a set, so their order would depend on the process's hash seed; :class:`TransportMultiAgentEnv`
-keeps the scenario's robot order instead. Keyword arguments of the env (reward mode, fuel penalty, noise,
-restitution) are the ``env_config`` dict, passed through unchanged.
+keeps the scenario's robot order instead. The ``env_config`` dict is the env's keyword arguments, passed
+through unchanged: ``scenario`` (a loaded Scenario, so that it reaches env runners on other nodes whole) and
+the options (reward mode, fuel penalty, noise, restitution).
 """
 
 from __future__ import annotations

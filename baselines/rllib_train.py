@@ -135,8 +135,9 @@ def run_folder(config: RLlibTrainConfig, scenario_name: str) -> Path:
     return Path(config.out) / f"rllib_ppo_{scenario_name}_{config.policies}_s{config.seed}"
 
 
-def build_algorithm(config: RLlibTrainConfig, settings: dict[str, Any], robots: list[str]):
-    """RLlib's PPO on the PettingZoo env with ``settings`` (:func:`rllib_settings`)."""
+def build_algorithm(config: RLlibTrainConfig, settings: dict[str, Any], scenario: Any):
+    """RLlib's PPO on the PettingZoo env of ``scenario`` (a loaded Scenario: it travels to the env runners whole,
+    so a scenario file need not exist on other nodes) with ``settings`` (:func:`rllib_settings`)."""
     from ray.rllib.algorithms.ppo import PPOConfig
     from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
@@ -147,6 +148,7 @@ def build_algorithm(config: RLlibTrainConfig, settings: dict[str, Any], robots: 
     model_config = settings.pop("model_config")
     normalize = settings.pop("normalize_observations")
     log_std_init, ortho_init = settings.pop("log_std_init"), settings.pop("ortho_init")
+    robots = [r.name for r in scenario.robots]
     policy_ids = robots if config.policies == "independent" else ["shared"]
     runners: dict[str, Any] = {"num_env_runners": config.env_runners,
                                "num_envs_per_env_runner": config.envs_per_runner,
@@ -155,7 +157,7 @@ def build_algorithm(config: RLlibTrainConfig, settings: dict[str, Any], robots: 
         runners["env_to_module_connector"] = rllib_env.observation_filter
     algo_config = (
         PPOConfig()
-        .environment(rllib_env.register(), env_config=dict(config.env_options))
+        .environment(rllib_env.register(), env_config={"scenario": scenario, **config.env_options})
         .env_runners(**runners)
         .multi_agent(policies=set(policy_ids),
                      policy_mapping_fn=(rllib_env.agent_to_policy if config.policies == "independent"
@@ -238,7 +240,7 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
                            num_cpus=max(2, config.env_runners))
     start = time.perf_counter()
     try:
-        algo, model_config, normalize = build_algorithm(config, settings, robots)
+        algo, model_config, normalize = build_algorithm(config, settings, scenario)
         evals: dict[str, list] = {"timesteps": [], "results": [], "ep_lengths": []}
         if config.resume:
             algo.restore_from_path(str(final.resolve()))

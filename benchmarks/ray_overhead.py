@@ -109,6 +109,7 @@ def rllib_sampling(env_runners: int, steps: int) -> str:
 
     from baselines import hyperparams
     from baselines.rllib_train import RLlibTrainConfig, build_algorithm, rllib_settings
+    from impact_env.scenario import load_scenario
 
     entry = hyperparams.load("ppo", "impact_env/ThrowAndCatchExp-v0")
     settings = rllib_settings(entry, 10**6)
@@ -116,7 +117,7 @@ def rllib_sampling(env_runners: int, steps: int) -> str:
     ray.init(num_cpus=max(2, env_runners), include_dashboard=False, logging_level="ERROR")
     try:
         config = RLlibTrainConfig(SCENARIO, policies="independent", env_runners=env_runners, env_options=dict(NOISE))
-        algo, _, _ = build_algorithm(config, settings, ["R1", "R2"])
+        algo, _, _ = build_algorithm(config, settings, load_scenario(SCENARIO))
         group = algo.env_runner_group
 
         def sample() -> tuple[int, float]:

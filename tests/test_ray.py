@@ -54,7 +54,7 @@ def rllib_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("rllib")
     (root / "tiny.yml").write_text(TINY_PPO)
     args = ["train", "ppo", "throw_and_catch_exp", "--engine", "rllib", "--policies", "independent",
-            "--env-runners", "1", "--hyperparams", str(root / "tiny.yml"), "--eval-freq", "400", "--out",
+            "--env-runners", "1", "--hyperparams", str(root / "tiny.yml"), "--eval-freq", "400", "--runs-dir",
             str(root / "runs"), *NOISE]
     assert main(args) == 0
     return root, args, root / "runs" / "rllib_ppo_throw_and_catch_exp_independent_s0"
@@ -108,7 +108,12 @@ def test_rllib_iterations_checkpoint_restore_and_fly(rllib_run, tmp_path, capsys
     from impact_env.envs.transport import TransportEnv
     from impact_env.scenario import load_scenario
 
-    controller = RLlibController(load_scenario("throw_and_catch_exp"), run)
+    scenario = load_scenario("throw_and_catch_exp")
+    controller = RLlibController(scenario, run)
+    # the env runners flew this scenario, not another with as many bodies: the object (third body in each
+    # robot's observation) stayed on its line y = 0 of the 4 m x 3 m table (the corridor's is at y = 2 and up)
+    mean_object_x, mean_object_y = controller.filters["R1"][0][14:16]
+    assert 0.0 < mean_object_x < 4.0 and abs(mean_object_y) < 0.3, (mean_object_x, mean_object_y)
     filters = pickle.loads((run / "checkpoint" / "env_runner" / "env_to_module_connector" / "MeanStdFilter" /
                             "state.pkl").read_bytes())  # our own test run: trusted
     env = TransportEnv("throw_and_catch_exp", thrust_noise=0.05)
