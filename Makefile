@@ -1,8 +1,8 @@
 # Two entry points from a fresh clone (only Python 3.11 needed):
 #   make demo   - create .venv, install the package, run the main demo (video + JSON + plots in out/)
-#   make test   - create .venv, install with the [rl,dev] extras, run the default (fast) test suite
+#   make test   - create .venv, install with the [rl,dev,scip,tether,ray] extras, run the default (fast) test suite
 # Further targets: make test-slow (long checks), make fuzz (10 minutes of property-based fuzzing),
-#   make bench (benchmarks), make lint,
+#   make bench (benchmarks), make bench-ray (local processes vs Ray, RLlib vs SB3 sampling), make lint,
 #   make wheel-check (sdist + wheel, smoke test of the wheel in a fresh venv), make docs (the documentation
 #   site, warnings as errors), make docs-check (its links and a headless-Chromium look at an environment page),
 #   make docs-media (re-make the GIFs and figures the site shows),
@@ -13,7 +13,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 OUT := out
 
-.PHONY: demo test test-slow fuzz bench bench-expert bench-ir results lint clean wheel-check docs docs-check docs-media
+.PHONY: demo test test-slow fuzz bench bench-expert bench-ir bench-ray results lint clean wheel-check docs docs-check docs-media
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -26,10 +26,12 @@ $(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml
 
 # The dev install: torch pinned to the CPU build first (an unpinned torch pulls several GB of CUDA
 # wheels), then stable-baselines3, supersuit, SCIP (so the tests cover that planner backend too), z3 (the
-# tether planners' thesis pipeline) and the test tools.
+# tether planners' thesis pipeline), Ray and RLlib (their tests start a local Ray instance and a simulated
+# two-node cluster themselves; RLlib pins gymnasium==1.2.2, so the suite runs with that version) and the
+# test tools. torch is pinned again on the line that pulls RLlib.
 $(VENV)/.dev-installed: $(VENV)/.base-installed
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e '.[rl,dev,scip,tether]'
+	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,dev,scip,tether,ray]'
 	touch $@
 
 # The main demo: plan the corridor (MILP, HiGHS), fly it with the expert (replanner + MPC) in the
@@ -42,11 +44,12 @@ demo: $(VENV)/.base-installed
 		--video $(OUT)/corridor_expert.mp4 --json $(OUT)/corridor_expert.json --plot $(OUT)/corridor_expert.png
 	@echo "demo outputs in $(OUT)/"
 
+# --dist loadgroup: the tests marked xdist_group("ray") share one worker, so at most one Ray instance runs
 test: $(VENV)/.dev-installed
-	$(BIN)/python -m pytest -q -n 2
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup
 
 test-slow: $(VENV)/.dev-installed
-	$(BIN)/python -m pytest -q -n 2 -m slow --timeout 3600
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup -m slow --timeout 3600
 
 # The fuzzers of tests/fuzz/ drawing fresh inputs for FUZZ_SECONDS per fuzzer (7 fuzzers on 2 processes:
 # 170 s each is about 10 minutes), then a table of the inputs tried.
@@ -65,6 +68,10 @@ bench-expert: $(VENV)/.base-installed
 bench-ir: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/impact_robust.py --workers 2
 
+# the same bench on local processes and on Ray, and RLlib's sampling against SB3's SubprocVecEnv (docs/ray.md)
+bench-ray: $(VENV)/.dev-installed
+	$(BIN)/python benchmarks/ray_overhead.py
+
 bench: $(VENV)/.base-installed
 	$(BIN)/python benchmarks/env_throughput.py
 	$(BIN)/python benchmarks/planner.py
@@ -77,7 +84,7 @@ results: $(VENV)/.dev-installed
 
 # the docs tools on top of the dev install (torch stays the pinned CPU build installed above)
 $(VENV)/.docs-installed: $(VENV)/.dev-installed
-	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,dev,scip,docs]'
+	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,dev,scip,tether,ray,docs]'
 	touch $@
 
 wheel-check: $(VENV)/.dev-installed

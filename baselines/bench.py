@@ -5,9 +5,14 @@
 
 Controllers: ``expert``, ``random``, ``zero``, or a saved stable-baselines3 model as ``label:path.zip``
 (or just ``path.zip``); ``{scenario}`` in a path is replaced by each scenario's name, since a policy is
-trained per scenario. The expert's plan is computed once per scenario and shared. Episodes run in
-parallel worker processes. The nominal environment is deterministic, so every seed would replay the same
-episode: pass noise options (thrust noise, initial position noise, restitution) to make the seeds differ.
+trained per scenario. An RLlib policy is ``rllib:CHECKPOINT`` or ``label:rllib:CHECKPOINT`` (a run folder
+of ``impact-env train ppo SCENARIO --engine rllib``, or one of its checkpoints). The expert's plan is computed
+once per scenario and shared. Plans and episodes run on the sweep engine (:mod:`impact_env.sweep`): local
+worker processes, or Ray tasks with ``--engine ray`` (on a cluster the model folders and plans travel to the
+workers through Ray's object store). The results are the same on either engine, bit for bit, except the
+controller's time per step, a wall-clock measurement. The nominal environment is deterministic, so every seed
+would replay the same episode: pass noise options (thrust noise, initial position noise, restitution) to make
+the seeds differ.
 
 Writes ``episodes.csv`` (one row per episode), ``summary.csv`` and
 ``summary.md`` (per scenario and controller: success rate, mean and std of the final STL robustness, fuel,
@@ -18,10 +23,8 @@ side by side).
 from __future__ import annotations
 
 import csv
-import multiprocessing
-import os
+import json
 import statistics
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,6 +33,7 @@ import numpy as np
 
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario
+from impact_env.sweep import EngineConfig, local_path, open_engine
 
 _CACHE: dict[tuple[str, str], Any] = {}
 
@@ -37,24 +41,45 @@ _CACHE: dict[tuple[str, str], Any] = {}
 @dataclass(frozen=True)
 class ControllerSpec:
     label: str
-    name: str  # what make_controller takes
+    name: str  # what make_controller takes: expert, random, zero, path/to/model.zip, rllib:CHECKPOINT
     options: tuple[tuple[str, str], ...] = ()
     trust_pickle: bool = False  # a model folder's pickles may be unpickled (--trust-pickle)
 
+    @property
+    def kind(self) -> str:
+        """``sb3`` (a model.zip), ``rllib`` (an RLlib checkpoint) or the controller's name."""
+        return "sb3" if self.name.endswith(".zip") else "rllib" if self.name.startswith("rllib:") else self.name
+
 
 def model_path(spec: ControllerSpec, scenario: str) -> str:
-    """The model file of ``spec`` for ``scenario`` (``{scenario}`` in the path is the scenario's name)."""
-    return spec.name.replace("{scenario}", scenario)
+    """The model file (or RLlib checkpoint) of ``spec`` for ``scenario`` (``{scenario}`` becomes its name)."""
+    name = spec.name.removeprefix("rllib:") if spec.kind == "rllib" else spec.name
+    return name.replace("{scenario}", scenario)
+
+
+# the files of an SB3 run folder that a controller reads (not its checkpoints, logs and evaluations)
+_SB3_FILES = ("model.zip", "vecnormalize.json", "vecnormalize.pkl", "train.json")
 
 
 def parse_controllers(text: str, scenarios: list[str] | None = None,
                       trust_pickle: bool = False) -> list[ControllerSpec]:
-    """``expert,random,zero,label:path.zip`` -> specs; model files must exist for every scenario, and are checked
-    (train.json, the zip's JSON, pickles: :func:`baselines.model_files.preflight`) before any worker starts."""
+    """``expert,random,zero,label:path.zip,label:rllib:CHECKPOINT`` -> specs; model files must exist for every
+    scenario, and are checked (train.json, the zip's JSON, pickles: :func:`baselines.model_files.preflight`; an
+    RLlib checkpoint's exported policy, :func:`baselines.rllib_policy.resolve_policy_dir`) before any worker
+    starts."""
     from baselines.model_files import preflight
 
     specs = []
     for item in filter(None, (s.strip() for s in text.split(","))):
+        if item.startswith("rllib:") or ":rllib:" in item:
+            from baselines.rllib_policy import resolve_policy_dir
+
+            label, _, target = ("rllib", "", item) if item.startswith("rllib:") else item.partition(":")
+            spec = ControllerSpec(label, target)
+            for name in (scenarios or [""]) if "{scenario}" in target else [""]:
+                resolve_policy_dir(model_path(spec, name))
+            specs.append(spec)
+            continue
         label, _, path = item.partition(":") if ":" in item else ("", "", item)
         target = path or item
         if target.endswith(".zip"):
@@ -71,14 +96,30 @@ def parse_controllers(text: str, scenarios: list[str] | None = None,
     return specs
 
 
-def _episode(job: tuple[str, ControllerSpec, int, str | None, dict[str, Any]]) -> dict[str, Any]:
-    from baselines import tether
+def _controller(scenario_name: str, scenario: Any, spec: ControllerSpec, files: Any):
+    """The worker's controller for (scenario, spec), built once per worker process (the expert compiles its
+    MPCs once); ``files`` is the shared plan file or model folder (see :meth:`impact_env.sweep.Engine.share`)."""
     from impact_env.controllers import make_controller
+
+    key = (scenario_name, spec.name, getattr(files, "digest", files))
+    if key not in _CACHE:
+        path = None if files is None else local_path(files)
+        if spec.kind == "sb3":
+            _CACHE[key] = make_controller(str(Path(path) / "model.zip"), scenario,
+                                          trust_pickle=True if spec.trust_pickle else None)
+        elif spec.kind == "rllib":
+            _CACHE[key] = make_controller(f"rllib:{path}", scenario)
+        else:
+            _CACHE[key] = make_controller(spec.name, scenario, plan=path if spec.name == "expert" else None)
+    return _CACHE[key]
+
+
+def _episode(job: tuple[str, ControllerSpec, int, Any, dict[str, Any]]) -> dict[str, Any]:
+    from baselines import tether
     from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import robot_object_impacts, run_episode
 
-    scenario_name, spec, seed, plan_path, env_options = job
-    key = (scenario_name, spec.name)
+    scenario_name, spec, seed, files, env_options = job
     station = tether.is_station(scenario_name)
     if station:
         from impact_env.station import load_station
@@ -88,11 +129,7 @@ def _episode(job: tuple[str, ControllerSpec, int, str | None, dict[str, Any]]) -
     else:
         scenario = load_scenario(scenario_name)
         env_options = {k: v for k, v in env_options.items() if k != "fidelity"}  # a tether-only option
-    if key not in _CACHE:  # one controller per worker process (the expert compiles its MPCs once)
-        _CACHE[key] = make_controller(model_path(spec, scenario_name), scenario,
-                                      plan=plan_path if spec.name == "expert" else None,
-                                      trust_pickle=True if spec.trust_pickle else None)
-    controller = _CACHE[key]
+    controller = _controller(scenario_name, scenario, spec, files)
     env = tether.make_env(scenario, **env_options) if station else TransportEnv(scenario, **env_options)
     res = run_episode(env, controller, seed=seed)
     hits = 0 if station else len(robot_object_impacts(scenario, res.impacts))
@@ -101,12 +138,29 @@ def _episode(job: tuple[str, ControllerSpec, int, str | None, dict[str, Any]]) -
             "controller_ms": float(np.mean(res.controller_ms)), "positions": res.positions if seed == 0 else None}
 
 
+def plan_expert(name: str) -> dict[str, Any]:
+    """The expert's plan of one scenario (the spatially robust MILP) or station (the exact tether planner), as
+    JSON data: a sweep job, so that several scenarios are planned side by side."""
+    from baselines import tether
+
+    if tether.is_station(name):
+        from impact_env.station import load_station
+        from planners.tether.reachability import plan_reachability
+
+        return plan_reachability(load_station(name)).to_dict()
+    from planners.offline.sr_planner import plan_spatially_robust
+
+    return plan_spatially_robust(load_scenario(name)).to_dict()
+
+
 def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes: int, out: Path,
-              workers: int | None = None, env_options: dict[str, Any] | None = None) -> list[dict[str, Any]]:
+              workers: int | None = None, env_options: dict[str, Any] | None = None,
+              engine: EngineConfig | None = None) -> list[dict[str, Any]]:
     """Run every (scenario, controller, seed) and write the outputs; returns the summary rows.
 
     ``env_options`` (TransportEnv keywords such as ``thrust_noise``) apply to every episode; they are
-    checked once here, so a bad value is one clear error rather than one per worker.
+    checked once here, so a bad value is one clear error rather than one per worker. ``engine`` says where the
+    plans and episodes run (default: ``workers`` local processes).
     """
     from baselines import tether
     from impact_env.envs.core import TransportCore
@@ -118,26 +172,35 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
         else:
             TransportCore(name, **{k: v for k, v in env_options.items() if k != "fidelity"})
     out.mkdir(parents=True, exist_ok=True)
-    plan_paths: dict[str, str | None] = {}
-    for name in scenarios:
-        plan_paths[name] = None
-        if any(c.name == "expert" for c in controllers) and tether.is_station(name):
-            plan_paths[name] = tether.save_expert_plan(name, out)
-        elif any(c.name == "expert" for c in controllers):
-            from planners.offline.sr_planner import plan_spatially_robust
+    engine = engine or EngineConfig("local", workers)
+    n_jobs = len(scenarios) * len(controllers) * episodes
+    with open_engine(engine, n_jobs=n_jobs) as pool:
+        planned = [s for s in scenarios if any(c.name == "expert" for c in controllers)]
+        plan_files: dict[str, Path] = {}
+        for name, plan in zip(planned, pool.map(plan_expert, planned)):
+            plan_files[name] = out / "plans" / f"{name}.json"
+            plan_files[name].parent.mkdir(parents=True, exist_ok=True)
+            plan_files[name].write_text(json.dumps(plan, indent=1))
+        shared: dict[tuple[str, str], Any] = {}
+        for s in scenarios:
+            for c in controllers:
+                if c.name == "expert":
+                    shared[s, c.name] = pool.share(plan_files[s])
+                elif c.kind == "sb3":
+                    folder = Path(model_path(c, s)).parent
+                    shared[s, c.name] = pool.share(folder, include=_SB3_FILES)
+                elif c.kind == "rllib":
+                    from baselines.rllib_policy import resolve_policy_dir
 
-            plan_paths[name] = str(plan_spatially_robust(load_scenario(name)).save(out / "plans" / f"{name}.json"))
-    jobs = [(s, c, seed, plan_paths[s], env_options)
-            for s in scenarios for c in controllers for seed in range(episodes)]
-    workers = workers or min(len(jobs), os.cpu_count() or 1)
-    # spawn, not fork: a forked worker inherits the parent's torch/OpenMP thread-pool locks (held if the parent
-    # trained or ran a policy earlier, as a test session or notebook does) and deadlocks on its first forward pass
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+                    shared[s, c.name] = pool.share(resolve_policy_dir(model_path(c, s)))
+        jobs = [(s, c, seed, shared.get((s, c.name)), env_options)
+                for s in scenarios for c in controllers for seed in range(episodes)]
         results = []
         for k, r in enumerate(pool.map(_episode, jobs), 1):
             results.append(r)
             print(f"  [{k}/{len(jobs)}] {r['scenario']} {r['controller']} seed {r['seed']}: "
                   f"rho {r['robustness']:+.3f} {'ok' if r['success'] else 'fail'}", flush=True)
+        print(f"  {pool.describe()}: {pool.placement_summary()}", flush=True)
     with open(out / "episodes.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=[k for k in results[0] if k != "positions"])
         writer.writeheader()

@@ -10,9 +10,10 @@ import numpy as np
 
 # Nothing from the [rl] extra is imported here: `impact-env` loads this module at start-up, also in a base
 # install (make demo), so stable-baselines3, yaml and minari are imported only by the command handlers.
-from baselines import ALGOS
+from baselines import ALGOS, rllib_cli
 from impact_env.cli_options import add_transport_options, transport_options
 from impact_env.envs.core import REWARD_MODES
+from impact_env.sweep import add_engine_arguments, engine_config
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -48,16 +49,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="tether stations only: the tether physics (see impact_env.tether_physics)")
     p.add_argument("--no-progress", action="store_true", help="neither a progress bar nor progress lines")
     p.add_argument("--verbose", type=int, default=0, help="stable-baselines3's verbosity (0, 1, 2)")
+    rllib_cli.add_arguments(p)
     p.set_defaults(func=_run)
 
     p = subparsers.add_parser("bench", help="the same seeded episodes for several controllers: table and figure")
     p.add_argument("scenarios", nargs="?", default="corridor,obstacle_avoidance,throw_and_catch_exp",
                    help="comma-separated scenario names (default: all three)")
     p.add_argument("--controllers", default="expert,random,zero",
-                   help="comma-separated: expert, random, zero, label:path/to/model.zip "
-                        "({scenario} in a path becomes each scenario's name)")
+                   help="comma-separated: expert, random, zero, label:path/to/model.zip (stable-baselines3), "
+                        "label:rllib:RUN_OR_CHECKPOINT (RLlib) ({scenario} in a path becomes each scenario's name)")
     p.add_argument("--episodes", type=int, default=10, help="seeded episodes per scenario and controller")
-    p.add_argument("--workers", type=int, default=None, help="parallel processes (default: CPU count)")
     p.add_argument("--out", default="bench", help="output folder (tables, CSV, figure)")
     p.add_argument("--thrust-noise", type=float, default=0.0, metavar="STD",
                    help="standard deviation of multiplicative thrust noise (0.05 = 5%%)")
@@ -70,6 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "entries); a pickle can run any code: only for files you made yourself")
     p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
                    help="tether stations only: the tether physics (see impact_env.tether_physics)")
+    add_engine_arguments(p)
     p.set_defaults(func=_bench)
 
     p = subparsers.add_parser("convert-model", help="rewrite old model folders without pickles (vecnormalize.pkl "
@@ -192,7 +194,7 @@ def _bench(args: argparse.Namespace) -> int:
     if any(is_station(s) for s in scenarios):
         options["fidelity"] = args.fidelity
     summary = run_bench(scenarios, parse_controllers(args.controllers, scenarios, args.trust_pickle), args.episodes,
-                        Path(args.out), args.workers, options)
+                        Path(args.out), env_options=options, engine=engine_config(args))
     print(markdown_table(summary))
     print(f"wrote {args.out}/summary.md, summary.csv, episodes.csv, bench.png")
     return 0
@@ -208,6 +210,12 @@ def _run(args: argparse.Namespace) -> int:
 
     if is_station(args.scenario):
         options["fidelity"] = args.fidelity
+    if args.engine == "rllib":
+        try:
+            return rllib_cli.run(args, options)
+        except KeyboardInterrupt:  # the run was saved, and the way to resume printed
+            return 130
+    rllib_cli.check_sb3_options(args)
     config = TrainConfig(algo=args.algo, scenario=args.scenario, timesteps=args.timesteps, seed=args.seed,
                          n_envs=args.n_envs, out=args.out, runs_dir=args.runs_dir, env_options=options,
                          eval_freq=args.eval_freq, multiagent=args.multiagent, progress_bar=not args.no_progress,

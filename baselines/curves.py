@@ -43,6 +43,8 @@ def load_curve(run_dir: str | Path) -> Curve:
     meta = read_train_json(run)
     mode = meta.get("env_options", {}).get("reward_mode", "dense")
     label = f"{meta.get('algo', run.name)} ({mode})" if meta else run.name
+    if meta.get("engine") == "rllib":  # impact-env train ... --engine rllib
+        label = f"RLlib {meta.get('algo', 'ppo')}, {meta.get('policies', '?')} policies ({mode})"
     return Curve(label, meta, timesteps, rho, (rho > 0).mean(axis=1))
 
 

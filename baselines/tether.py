@@ -10,7 +10,6 @@ noise, fuel penalty, restitution, post-impact velocity noise) do not apply; the 
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 from impact_env.errors import ImpactEnvError
@@ -49,14 +48,6 @@ def make_env(name: str, **options: Any):
     from impact_env.envs.tether import TetherEnv
 
     return TetherEnv(name, **options)
-
-
-def save_expert_plan(name: str, out: Path) -> str:
-    """Plan the station with the exact planner and save it where the bench's workers can read it."""
-    from impact_env.station import load_station
-    from planners.tether.reachability import plan_reachability
-
-    return str(plan_reachability(load_station(name)).save(out / "plans" / f"{name}.json"))
 
 
 def spaces_of(station: Any):

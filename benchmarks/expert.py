@@ -9,15 +9,19 @@ MPC) in the Gymnasium env, in the same run:
 
 Prints a markdown table: success rate, final robustness (mean, min), impacts, fuel, MPC solve time per
 robot per step (median, p99), replans per episode, and the episode's wall time as a multiple of real
-time (simulated seconds per wall second). Episodes run in parallel worker processes. Usage:
+time (simulated seconds per wall second). Episodes run on the sweep engine (:mod:`impact_env.sweep`): local
+worker processes, or Ray tasks with ``--engine ray [--address ADDR]``; the table's columns are the same either
+way except the timings (MPC ms, speed vs real time). Usage:
 
     python benchmarks/expert.py [--scenarios corridor,throw_and_catch_exp] [--episodes 50] [--workers 2]
+    python benchmarks/expert.py --engine ray --address auto --episodes 200
 
 ``--timing`` instead measures the time of one ``Expert.act`` (both robots) against the stack before this
 package's online layer was reworked (``--baseline-ref``, a git commit: its ``impact_env`` and ``planners``
 are exported to a temporary folder and imported by the baseline's workers). The stacks' episodes are
 interleaved in one pool, so machine load hits all of them alike; the load average is printed with the
-table. Mission replan steps are reported apart (a replan is a MILP solve inside one act).
+table. Mission replan steps are reported apart (a replan is a MILP solve inside one act). It runs on local
+processes only (each baseline job needs a fresh process of its own).
 
     python benchmarks/expert.py --timing [--scenarios throw_and_catch_exp] [--episodes 10]
 """
@@ -41,6 +45,7 @@ import numpy as np
 from impact_env.envs.transport import TransportEnv
 from impact_env.rollout import robot_object_impacts, run_episode
 from impact_env.scenario import load_scenario, scenario_names
+from impact_env.sweep import Engine, add_engine_arguments, engine_config, open_engine
 from planners.offline.sr_planner import plan_spatially_robust
 from planners.plan import Plan
 
@@ -67,26 +72,24 @@ def _episode(args: tuple[str, dict, int, bool]) -> dict:
             "realtime": env.core.time_s / res.wall_time_s, "failures": expert.stats.mpc_failures}
 
 
-def rows(scenario_name: str, episodes: int, workers: int) -> list[str]:
+def rows(scenario_name: str, episodes: int, engine: Engine) -> list[str]:
     scenario = load_scenario(scenario_name)
     plan = plan_spatially_robust(scenario)
     out = []
-    # spawn: the parent has already run the planner's solver threads, which a forked worker must not inherit
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-        for mismatch in (False, True):
-            jobs = [(scenario_name, plan.to_dict(), s, mismatch) for s in range(episodes)]
-            results = list(pool.map(_episode, jobs))
-            ms = np.concatenate([r["mpc_ms"] for r in results])
-            rho = [r["robustness"] for r in results]
-            label = "e +-0.1, 5 cm, 5 % thrust" if mismatch else "nominal"
-            out.append(
-                f"| {scenario_name} | {label} | {episodes} | {100 * np.mean([r['success'] for r in results]):.0f}% | "
-                f"{np.mean(rho):.3f} ({min(rho):+.3f}) | {statistics.mean(r['impacts'] for r in results):.1f} | "
-                f"{statistics.mean(r['fuel'] for r in results):.1f} | "
-                f"{np.median(ms):.2f} / {np.percentile(ms, 99):.2f} | "
-                f"{statistics.mean(r['replans'] for r in results):.0f} | "
-                f"{statistics.median(r['realtime'] for r in results):.0f}x |")
-            print(out[-1], flush=True)
+    for mismatch in (False, True):
+        jobs = [(scenario_name, plan.to_dict(), s, mismatch) for s in range(episodes)]
+        results = list(engine.map(_episode, jobs))
+        ms = np.concatenate([r["mpc_ms"] for r in results])
+        rho = [r["robustness"] for r in results]
+        label = "e +-0.1, 5 cm, 5 % thrust" if mismatch else "nominal"
+        out.append(
+            f"| {scenario_name} | {label} | {episodes} | {100 * np.mean([r['success'] for r in results]):.0f}% | "
+            f"{np.mean(rho):.3f} ({min(rho):+.3f}) | {statistics.mean(r['impacts'] for r in results):.1f} | "
+            f"{statistics.mean(r['fuel'] for r in results):.1f} | "
+            f"{np.median(ms):.2f} / {np.percentile(ms, 99):.2f} | "
+            f"{statistics.mean(r['replans'] for r in results):.0f} | "
+            f"{statistics.median(r['realtime'] for r in results):.0f}x |")
+        print(out[-1], flush=True)
     return out
 
 
@@ -193,20 +196,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scenarios", default=",".join(scenario_names()))
     parser.add_argument("--episodes", type=int, default=50)
-    parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    add_engine_arguments(parser, default_workers=min(2, os.cpu_count() or 1))
     parser.add_argument("--timing", action="store_true", help="act time against --baseline-ref (see the doc)")
     parser.add_argument("--baseline-ref", default=BASELINE_REF)
     args = parser.parse_args()
     if args.timing:
+        if args.engine != "local":
+            raise SystemExit("--timing runs on local processes only (each baseline job needs its own process)")
         names = args.scenarios.split(",") if args.scenarios != ",".join(scenario_names()) else ["throw_and_catch_exp"]
         timing(names, args.episodes, args.workers, args.baseline_ref)
         return
-    print(f"{args.episodes} episodes per row, {args.workers} worker processes; planned rho in the planner table\n")
-    print("| scenario | simulator | episodes | success | robustness mean (min) | impacts | fuel N s | "
-          "MPC ms median / p99 | replans | speed vs real time |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for name in args.scenarios.split(","):
-        rows(name, args.episodes, args.workers)
+    with open_engine(engine_config(args)) as engine:
+        print(f"{args.episodes} episodes per row on {engine.describe()}; planned rho in the planner table\n")
+        print("| scenario | simulator | episodes | success | robustness mean (min) | impacts | fuel N s | "
+              "MPC ms median / p99 | replans | speed vs real time |")
+        print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+        for name in args.scenarios.split(","):
+            rows(name, args.episodes, engine)
+        print(f"\n{engine.placement_summary()}")
 
 
 if __name__ == "__main__":

@@ -15,7 +15,9 @@ Perturbations, one axis at a time around nominal, plus the combined condition:
 - ``combined``: e +-0.2, 10 cm, 10 % thrust noise.
 
 Every cell (scenario, stack, condition) is cached as JSON in ``--out`` when done, so an interrupted run
-resumes where it stopped; episodes run in ``--workers`` spawned processes. Prints the markdown table
+resumes where it stopped; episodes run on the sweep engine (:mod:`impact_env.sweep`): ``--workers`` spawned
+processes, or Ray tasks with ``--engine ray [--address ADDR]`` (the cells are the same either way, timings
+aside). Prints the markdown table
 (success rate, mean and min robustness, unplanned contacts per episode, mission replans per episode and
 their solve time) and draws success against perturbation size.
 
@@ -29,13 +31,13 @@ from __future__ import annotations
 import argparse
 import inspect
 import json
-import multiprocessing
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+
+from impact_env.sweep import EngineConfig, add_engine_arguments, engine_config, open_engine
 
 SHIPPED = ("corridor", "obstacle_avoidance", "throw_and_catch_exp")
 NEW = ("ping_pong_stop", "relay", "two_objects")
@@ -141,10 +143,9 @@ def plan_for(scenario_name: str, out: Path) -> dict:
     return plan.to_dict()
 
 
-def run(scenarios, stacks, axes, seeds_shipped, seeds_new, out: Path, workers: int) -> None:
+def run(scenarios, stacks, axes, seeds_shipped, seeds_new, out: Path, engine: EngineConfig) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    ctx = multiprocessing.get_context("spawn")  # the parent runs HiGHS threads: never fork after that
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    with open_engine(engine) as pool:
         for name in scenarios:
             plan = plan_for(name, out)
             seeds = seeds_shipped if name in SHIPPED else seeds_new
@@ -274,7 +275,7 @@ def main() -> None:
     parser.add_argument("--axes", default="combined,e,offset,thrust,impact")
     parser.add_argument("--seeds", type=int, default=50, help="seeds per random cell, shipped scenarios")
     parser.add_argument("--seeds-new", type=int, default=20, help="seeds per random cell, the new scenarios")
-    parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    add_engine_arguments(parser, default_workers=min(2, os.cpu_count() or 1))
     parser.add_argument("--out", default="benchmarks/results/robustness")
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true", help="print the table of the cached cells")
@@ -290,7 +291,7 @@ def main() -> None:
     if not args.table_only:
         if "impact" in axes and not has_impact_noise():
             print("the simulator has no impact_velocity_noise_mps option yet: the impact axis is left out")
-        run(scenarios, stacks, axes, args.seeds, args.seeds_new, out, args.workers)
+        run(scenarios, stacks, axes, args.seeds, args.seeds_new, out, engine_config(args))
     cells = load_cells(out)
     print(table(cells, scenarios))
     if args.plot:

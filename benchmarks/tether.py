@@ -12,9 +12,13 @@ snags, attachments). The baseline of the exact planner's times is the z3 pipelin
 literature figure is the thesis's 13 minutes for its full automaton with dReach on "a simple problem".
 
 Timings on a shared machine are noisy (the load average is printed; the CPU seconds of the cold plan are
-this process's, less sensitive to the load than the wall time); compare within one run. Usage:
+this process's, less sensitive to the load than the wall time); compare within one run. The planner timings run
+in this process, one at a time; the flown episodes (the last two tables) run on the sweep engine
+(:mod:`impact_env.sweep`): local worker processes, or Ray tasks with ``--engine ray [--address ADDR]``, with the
+same results either way. Usage:
 
     python benchmarks/tether.py [--stations L,T,...] [--repeats 3] [--z3-timeout 20] [--no-smt] [--episodes 50]
+                                [--engine ray] [--workers 2]
 
 The last table is the expert's success rate over ``--episodes`` seeded episodes per station under ``reel`` with
 the winches 10 % slower and 10 % faster than planned and the cargo starting up to 0.3 m from its start point.
@@ -32,6 +36,7 @@ import numpy as np
 from impact_env.envs.tether import TetherEnv
 from impact_env.rollout import run_episode
 from impact_env.station import load_station, station_names
+from impact_env.sweep import add_engine_arguments, engine_config, open_engine
 from planners.errors import PlannerError
 from planners.tether.automaton import build_thesis_map
 from planners.tether.expert import TetherExpert
@@ -66,10 +71,13 @@ def smt_row(station, rule: str, timeout_s: float) -> str:
         return f"{time.perf_counter() - t0:.2f} s, {why}"
 
 
-def flown(station, fidelity: str, seed: int = 0) -> dict:
+def flown(job: tuple[str, str]) -> dict:
+    """The station's plan flown once (seed 0) by a fresh tether expert at one fidelity level (a sweep job)."""
+    name, fidelity = job
+    station = load_station(name)
     env = TetherEnv(station, fidelity=fidelity)
     expert = TetherExpert(station)
-    res = run_episode(env, expert, seed=seed)
+    res = run_episode(env, expert, seed=0)
     gx, gy = station.goal_center_m
     p = np.asarray(res.positions)[:, 0]
     closest = float(np.min(np.hypot(p[:, 0] - gx, p[:, 1] - gy)))
@@ -79,6 +87,18 @@ def flown(station, fidelity: str, seed: int = 0) -> dict:
             "switches": info["switches"]}
 
 
+def perturbed(job: tuple[str, float, int]) -> dict:
+    """One seeded reel episode with the winches ``factor`` times the planned speed, cargo start within 0.3 m; a
+    fresh expert per episode, so that the result depends on the job alone (a sweep job)."""
+    name, factor, seed = job
+    station = load_station(name)
+    env = TetherEnv(station, fidelity="reel", pull_speed_mps=station.pull_speed_mps * factor,
+                    initial_position_noise_m=0.3)
+    res = run_episode(env, TetherExpert(station), seed=seed)
+    env.close()
+    return {"success": res.success, "switches": res.final_info["switches"], "rho": res.robustness}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--stations", default=",".join(station_names()))
@@ -86,6 +106,7 @@ def main() -> None:
     parser.add_argument("--z3-timeout", type=float, default=20.0, help="z3's limit per check (s)")
     parser.add_argument("--no-smt", action="store_true", help="skip the z3 pipeline (fast run)")
     parser.add_argument("--episodes", type=int, default=50, help="perturbed reel episodes per station (0 skips)")
+    add_engine_arguments(parser, default_workers=min(2, os.cpu_count() or 1))
     args = parser.parse_args()
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; times are medians of {args.repeats}")
     print("\n| station | regions | thesis pipeline, z3, region rule | z3, line-of-sight rule | exact cold s (CPU s) | "
@@ -105,37 +126,39 @@ def main() -> None:
         timing += " (" + " / ".join(f"{100 * r.bang_bang_fraction:.0f}" for r in refined) + ")"
         print(f"| {name} | {regions} | {z_region} | {z_sight} | {cold:.3f} ({cold_cpu:.3f}) | {warm:.4f} | "
               f"{plan.switches} | {plan.path_length_m:.1f} | {times} | {timing} |", flush=True)
-    print("\nThe plans flown by the tether expert in pymunk (seed 0): success, robustness (m), closest approach to "
-          "the goal centre (m), snags, attachments")
-    print("\n| station | kinematic | reel | force |")
-    print("|---|---|---|---|")
-    for name in args.stations.split(","):
-        st = load_station(name)
-        cells = []
-        for fid in ("kinematic", "reel", "force"):
-            r = flown(st, fid)
-            cells.append(f"{'yes' if r['success'] else 'NO'}, {r['rho']:+.2f}, {r['closest']:.2f}, {r['snags']}, "
-                         f"{r['switches']}")
-        print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
-    if args.episodes > 0:
-        print(f"\nThe expert under reel, {args.episodes} seeded episodes per cell, cargo start within 0.3 m of its "
-              "start point: success rate, mean attachments, mean robustness (m)")
-        print("\n| station | w 10 % slow | w 10 % fast |")
-        print("|---|---|---|")
-        for name in args.stations.split(","):
-            st = load_station(name)
+    names = args.stations.split(",")
+    with open_engine(engine_config(args)) as engine:
+        print("\nThe plans flown by the tether expert in pymunk (seed 0): success, robustness (m), closest approach "
+              "to the goal centre (m), snags, attachments")
+        print("\n| station | kinematic | reel | force |")
+        print("|---|---|---|---|")
+        fidelities = ("kinematic", "reel", "force")
+        results = iter(engine.map(flown, [(name, fid) for name in names for fid in fidelities]))
+        for name in names:
             cells = []
-            for factor in (0.9, 1.1):
-                env = TetherEnv(st, fidelity="reel", pull_speed_mps=st.pull_speed_mps * factor,
-                                initial_position_noise_m=0.3)
-                expert = TetherExpert(st)
-                runs = [run_episode(env, expert, seed=seed) for seed in range(args.episodes)]
-                wins = sum(r.success for r in runs)
-                cells.append(f"{wins}/{args.episodes} ({100 * wins / args.episodes:.0f} %), "
-                             f"{np.mean([r.final_info['switches'] for r in runs]):.1f}, "
-                             f"{np.mean([r.robustness for r in runs]):+.2f}")
-                env.close()
+            for _ in fidelities:
+                r = next(results)
+                cells.append(f"{'yes' if r['success'] else 'NO'}, {r['rho']:+.2f}, {r['closest']:.2f}, "
+                             f"{r['snags']}, {r['switches']}")
             print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+        if args.episodes > 0:
+            print(f"\nThe expert under reel, {args.episodes} seeded episodes per cell, cargo start within 0.3 m of its "
+                  "start point: success rate, mean attachments, mean robustness (m)")
+            print("\n| station | w 10 % slow | w 10 % fast |")
+            print("|---|---|---|")
+            factors = (0.9, 1.1)
+            jobs = [(name, factor, seed) for name in names for factor in factors for seed in range(args.episodes)]
+            results = iter(engine.map(perturbed, jobs))
+            for name in names:
+                cells = []
+                for _ in factors:
+                    runs = [next(results) for _ in range(args.episodes)]
+                    wins = sum(r["success"] for r in runs)
+                    cells.append(f"{wins}/{args.episodes} ({100 * wins / args.episodes:.0f} %), "
+                                 f"{np.mean([r['switches'] for r in runs]):.1f}, "
+                                 f"{np.mean([r['rho'] for r in runs]):+.2f}")
+                print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+        print(f"\nflown episodes: {engine.describe()}, {engine.placement_summary()}")
 
 
 if __name__ == "__main__":

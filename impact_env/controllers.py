@@ -63,7 +63,9 @@ def available_controllers() -> list[str]:
 
 
 def make_controller(spec: str, scenario: Any, **options: Any) -> Controller:
-    """Build a controller from its name (``zero``, ``random`` or a registered one) or a ``model.zip`` path.
+    """Build a controller from its name (``zero``, ``random`` or a registered one), a ``model.zip`` path, or
+    ``name:ARGUMENT`` for a registered controller that loads something (``rllib:runs/ppo_x``: ARGUMENT is
+    passed as ``model=``).
 
     Registered factories are called as ``factory(scenario, **options)``; options that are None are left
     out (e.g. ``plan=None`` when ``--plan`` was not given).
@@ -72,6 +74,9 @@ def make_controller(spec: str, scenario: Any, **options: Any) -> Controller:
         return BUILTIN[spec]()  # they take no options
     if spec.endswith(".zip"):  # a saved stable-baselines3 model: the "sb3" controller of baselines/
         spec, options = "sb3", {**options, "model": spec}
+    elif ":" in spec and spec.partition(":")[0] in {ep.name for ep in entry_points(group=ENTRY_POINT_GROUP)}:
+        spec, model = spec.split(":", 1)
+        options = {**options, "model": model}
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         if ep.name == spec:
             return ep.load()(scenario, **{k: v for k, v in options.items() if v is not None})

@@ -78,7 +78,13 @@ class UntrustedFileError(ModelFileError):
     """
 
 
+class EngineError(ImpactEnvError, RuntimeError):
+    """An execution engine (``--engine local|ray`` for sweeps, ``--engine rllib`` for training) cannot run: Ray
+    is not installed, the cluster at ``--address`` cannot be reached, a job failed on a worker, or an engine
+    option is out of range. The message says which, and what to install or start."""
+
+
 TYPED_ERRORS: tuple[type[ImpactEnvError], ...] = (
     ImpactEnvError, ScenarioError, STLError, STLSyntaxError, STLBindingError, ActionError, EnvConfigError,
-    ControllerError, TetherError, HyperparameterError, ModelFileError, UntrustedFileError,
+    ControllerError, TetherError, HyperparameterError, ModelFileError, UntrustedFileError, EngineError,
 )

@@ -3,6 +3,10 @@
     impact-env plan SCENARIO [--planner sr|ir] [--solver highs|scip|gurobi] [--time-limit S] [--mip-gap G]
                     [--threads N] [--intervals N] [--degree D] [--copy-intervals W] [--smooth]
                     [--out plan.json] [--plot plan.png] [--quiet]
+    impact-env plan corridor,relay,two_objects [--planner sr|ir] --out plans/ [--plot figures/] [--engine ray]
+
+A comma-separated list of scenarios is planned side by side on the sweep engine (planners/offline/batch.py):
+``--out`` and ``--plot`` are then folders (one ``<scenario>.json`` / ``.png`` each).
 
 Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``). Prints a header with the
 model size, a progress line at most once a second during the solve, then the robustness, solve time, gap
@@ -68,12 +72,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "kept); a node count, not a time, so the plan is the same on a busy machine; 0 skips it "
                         "(default 20)")
     p.add_argument("--seed", type=int, default=0, help="solver random seed (solve times vary with it)")
-    p.add_argument("--out", help="write the plan as JSON (planners.plan.Plan.save)")
-    p.add_argument("--plot", help="write a PNG of the plan: xy view, positions and velocities over time")
+    p.add_argument("--out", help="write the plan as JSON (planners.plan.Plan.save); a folder for a list of scenarios")
+    p.add_argument("--plot", help="write a PNG of the plan: xy view, positions and velocities over time (a folder "
+                                  "for a list of scenarios)")
     p.add_argument("--quiet", action="store_true", help="no header and no progress lines; only the result")
     from planners.tether.cli import add_arguments as add_tether_arguments
 
     add_tether_arguments(p)  # a tether station (impact-env plan L) is planned by planners/tether/cli.py
+    from impact_env.sweep import add_engine_arguments
+
+    add_engine_arguments(p)  # a list of scenarios (impact-env plan a,b,c) is planned side by side
     p.set_defaults(func=_cmd_plan)
 
 
@@ -83,6 +91,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     from planners.offline.ir_planner import IRPlannerConfig, build_ir_model, plan_impact_robust
     from planners.offline.sr_planner import PlannerConfig, build_model, plan_spatially_robust
 
+    if "," in args.scenario:
+        return _plan_list(args)
     if is_station_file(args.scenario):
         from planners.tether.cli import plan_station
 
@@ -137,6 +147,54 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         png = Path(args.plot) if Path(args.plot).suffix else Path(args.plot).with_suffix(".png")
         plot_plan(scenario, plan, png)
         print(f"wrote {png}")
+    return code
+
+
+def _plan_list(args: argparse.Namespace) -> int:
+    """``impact-env plan a,b,c [--out DIR] [--plot DIR] [--engine ray]``: one job per scenario; exit 0 if every
+    plan was found, 3 if one hit the time limit (its best plan kept), 2 if one has none."""
+    from impact_env.station import is_station_file
+    from impact_env.sweep import engine_config, open_engine
+    from planners.offline.batch import plan_scenarios
+    from planners.offline.ir_planner import IRPlannerConfig
+    from planners.offline.sr_planner import PlannerConfig
+
+    names = [n.strip() for n in args.scenario.split(",") if n.strip()]
+    stations = [n for n in names if is_station_file(n)]
+    if stations:
+        raise PlannerError(f"plan tether stations one at a time ({', '.join(stations)}); lists are for impact "
+                           "scenarios")
+    _check_options(args)
+    common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth,
+                  solver=args.solver, time_limit_s=args.time_limit, mip_gap=args.mip_gap,
+                  threads=args.threads, seed=args.seed, refine_nodes=args.refine_nodes)
+    config = (IRPlannerConfig(copy_intervals=args.copy_intervals, **common) if args.planner == "ir"
+              else PlannerConfig(**common))
+    with open_engine(engine_config(args), n_jobs=len(names)) as engine:
+        if not args.quiet:
+            print(f"planning {len(names)} scenarios on {engine.describe()}", flush=True)
+        outcomes = plan_scenarios(names, config, engine)
+    code = 0
+    for o in outcomes:
+        print(f"\n== {o.scenario} ({o.wall_s:.1f} s)")
+        if o.plan is None:
+            print(f"impact-env: error: {o.scenario}: {o.error}", file=sys.stderr, flush=True)
+            code = 2
+            continue
+        if o.timed_out:
+            print(f"impact-env: warning: {o.scenario}: time limit reached; keeping the best plan found",
+                  file=sys.stderr, flush=True)
+            code = code or EXIT_TIME_LIMIT
+        print(format_summary(o.plan) + f"\nplan fingerprint {o.plan.fingerprint()}")
+        if args.out:
+            print(f"wrote {o.plan.save(Path(args.out) / f'{o.scenario}.json')}")
+        if args.plot:
+            from impact_env.scenario import load_scenario
+            from planners.plotting import plot_plan
+
+            Path(args.plot).mkdir(parents=True, exist_ok=True)
+            plot_plan(load_scenario(o.scenario), o.plan, Path(args.plot) / f"{o.scenario}.png")
+            print(f"wrote {Path(args.plot) / f'{o.scenario}.png'}")
     return code
 
 
