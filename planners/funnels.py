@@ -186,7 +186,12 @@ def check_impact_robust(plan: Plan, scenario: Scenario, tol: float) -> list[str]
             bad.append(f"{label}: the window [{c.window_start_s:.3f}, {c.window_end_s:.3f}] s does not match "
                        f"{c.robot}'s segments on the funnel's grid")
             continue
-        cps = np.array([s.control_points for s in nominal])
+        shapes = {np.shape(s.control_points) for s in nominal}
+        if len(shapes) != 1:
+            bad.append(f"{label}: {c.robot}'s segments in the window [{c.window_start_s:.3f}, "
+                       f"{c.window_end_s:.3f}] s have different numbers of control points")
+            continue
+        cps = np.array([s.control_points for s in nominal], dtype=float)
         if before.shape[2:] != cps.shape[1:] or after.shape[2:] != cps.shape[1:]:
             bad.append(f"{label}: copies must have {cps.shape[1]} control points like {c.robot}'s segments")
             continue
