@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reproduces baselines/results/ (the expert-vs-learned benchmark) from scratch: about 3 h on the project's
+# Reproduces baselines/results/ (the expert-vs-learned benchmark) from scratch: about 3.3 h on the project's
 # 2-core machine. Run from the repository root after `make test` (which installs the [rl] extra):
 #     bash baselines/reproduce.sh            # all stages, in order
 #     bash baselines/reproduce.sh bench      # one stage: corridor | others | record | bc | publish | reward | bench | rllib | rllib_publish
@@ -97,6 +97,7 @@ rllib_publish() {  # its export (pickle-free), learning curve and bench beside S
     fi
     "$BIN/impact-env" curves $runs --labels "$labels" --title "throw_and_catch_exp: SB3 and RLlib" \
         --out "$RESULTS/curves_rllib_throw_and_catch_exp.png" --table "$RESULTS/training_rllib_throw_and_catch_exp.md"
+    [[ "${QUICK:-0}" == 1 ]] || cp "$RESULTS/curves_rllib_throw_and_catch_exp.png" docs/img/rllib_curves_throw_and_catch_exp.png
     "$BIN/impact-env" bench throw_and_catch_exp --episodes $EPISODES $NOISE --workers 2 \
         --controllers "expert,ppo:$m/ppo_{scenario}/model.zip,rllib:rllib:$m/rllib_ppo_{scenario},random,zero" \
         --out "$RESULTS/rllib"
