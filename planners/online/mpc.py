@@ -120,8 +120,13 @@ class FreeflyerMPC:
         if cfg.fallback_solver is not None and cfg.fallback_solver != cfg.solver:
             self._solvers[cfg.fallback_solver] = self._make_solver(cfg.fallback_solver)
         self._guess: np.ndarray | None = None
-        self._lam_x = np.zeros(self._nw)
-        self._lam_g = np.zeros(self._ng)
+        # the solvers' inputs: numpy arrays bound once to every solver's zero-copy call buffer (_SolverCall)
+        self._in = {"x0": np.zeros(self._nw), "p": self._p, "lbx": self._lbx, "ubx": self._ubx,
+                    "lbg": self._lbg.copy(), "ubg": self._ubg.copy(), "lam_x0": np.zeros(self._nw),
+                    "lam_g0": np.zeros(self._ng)}
+        self._lam_x = self._in["lam_x0"]
+        self._lam_g = self._in["lam_g0"]
+        self._calls: dict[str, _SolverCall] = {}
         self._cold_multipliers()
 
     # ------------------------------------------------------------------------------------- building
@@ -260,6 +265,15 @@ class FreeflyerMPC:
                           "warm_start_mult_bound_push": 1e-6, "mu_init": 1e-3}}
         return ca.nlpsol("mpc_ipopt", "ipopt", self._nlp, opts)
 
+    def _bind(self, name: str) -> _SolverCall:
+        self._calls[name] = call = _SolverCall(self._solvers[name], self._in)
+        return call
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_calls"] = {}  # call buffers hold raw pointers into this object's arrays: bound again on use
+        return state
+
     # ------------------------------------------------------------------------------------- interface
     def reset(self) -> None:
         """Forget the warm start (call at the start of an episode or after a large state jump)."""
@@ -304,7 +318,8 @@ class FreeflyerMPC:
         p[ps["heading"]] = self.heading_ref + two_pi * round((x0[2] - self.heading_ref) / two_pi)
         p[ps["select"]] = 0.0
         p[ps["v_after"]] = 0.0
-        lbg, ubg = self._lbg.copy(), self._ubg.copy()  # all path rows off (+-inf)
+        lbg, ubg = self._in["lbg"], self._in["ubg"]
+        lbg[:], ubg[:] = self._lbg, self._ubg  # all path rows off (+-inf)
         if impact is not None:
             if not isinstance(impact, ImpactSpec):
                 raise MPCInputError(f"impact must be an ImpactSpec or None, got {type(impact).__name__}")
@@ -328,21 +343,20 @@ class FreeflyerMPC:
             active = np.flatnonzero(spec.active[1:])
             lbg[self._avoid_rows[active, j]] = offsets[1:][active]  # n . p + sigma >= offset
         p[ps["normals"]] = normals.ravel()
+        self._in["x0"][:] = guess
         names = [self.config.solver] + [s for s in self._solvers if s != self.config.solver]
         for name in names:
-            solver = self._solvers[name]
-            sol = solver(x0=guess, p=p, lbx=self._lbx, ubx=self._ubx, lbg=lbg, ubg=ubg,
-                         lam_x0=self._lam_x, lam_g0=self._lam_g)
-            stats = solver.stats()
-            w = sol["x"].full().ravel()
+            call = self._calls.get(name) or self._bind(name)
+            stats = call()
+            w = call.out["x"].copy()
             ok = bool(stats["success"]) and bool(np.all(np.isfinite(w)))
             if ok:
                 break
         self.solves += 1
         if ok:
             self.fallbacks += name != self.config.solver
-            self._lam_x = sol["lam_x"].full().ravel()[self._shift_w]
-            self._lam_g = sol["lam_g"].full().ravel()[self._shift_g]
+            self._lam_x[:] = call.out["lam_x"][self._shift_w]
+            self._lam_g[:] = call.out["lam_g"][self._shift_g]
         else:
             self.failures += 1
             if not np.all(np.isfinite(w)):
@@ -400,3 +414,32 @@ class FreeflyerMPC:
         for k in range(1, self.horizon + 1):
             w[self._vblocks[("x", k)]] = [ref[k, 0], ref[k, 1], x0[2], ref[k, 2], ref[k, 3], 0.0]
         return w
+
+
+class _SolverCall:
+    """A CasADi solver called through its zero-copy buffer (``Function.buffer``).
+
+    ``solver(x0=..., p=...)`` with numpy arguments converts each array to a CasADi matrix and each result
+    back, at a fixed cost per array (about 25 us) plus one per number: with the eight inputs and three
+    outputs of this MPC that was about a third of a solve. The buffer reads the inputs from, and writes the
+    results into, numpy arrays bound once (``inputs``: name -> array, shared by every solver of the MPC and
+    updated in place by :meth:`FreeflyerMPC.solve`); the numbers the solver sees are the same.
+    """
+
+    def __init__(self, solver: ca.Function, inputs: dict[str, np.ndarray]) -> None:
+        self.solver = solver
+        self.buffer, self._eval = solver.buffer()
+        for i, name in enumerate(solver.name_in()):
+            arr = inputs[name]
+            if arr.dtype != np.float64 or not arr.flags.c_contiguous or arr.size != solver.nnz_in(i):
+                raise MPCInputError(f"solver input {name!r} must be a contiguous float array of "
+                                    f"{solver.nnz_in(i)} numbers")
+            self.buffer.set_arg(i, memoryview(arr))
+        self.out = {name: np.zeros(solver.nnz_out(i)) for i, name in enumerate(solver.name_out())}
+        for i, name in enumerate(solver.name_out()):
+            self.buffer.set_res(i, memoryview(self.out[name]))
+
+    def __call__(self) -> dict:
+        """Solve with the bound inputs; the results are in ``out``; returns the solver's stats."""
+        self._eval()
+        return self.buffer.stats()
