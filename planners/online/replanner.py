@@ -32,6 +32,7 @@ matrix rows, bounds) with numpy, so nothing is rebuilt from Python expressions p
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -151,41 +152,74 @@ def respects(segment: Segment, velocity_bound, limits: SegmentLimits | None, tol
 _REG = 1e-6
 
 
-@lru_cache(maxsize=4)
-def _qp(degree: int) -> tuple[ca.Function, np.ndarray, int, np.ndarray]:
-    """The QP of one segment, built once: (solver, Hessian, number of rows, velocity-row pattern).
+class _SegmentQP:
+    """The QP of one segment, built once per degree (:func:`_qp`).
 
     Variables are the control points ``[x_0..x_d, y_0..y_d]``; the end positions and velocities fix the
     first two and last two control points of each axis (through their bounds). Rows: the velocity and the
     acceleration control points (sparse), then ``MAX_HALF_PLANES`` half-plane blocks of d+1 rows and
-    ``SEPARATION_SAMPLES``
-    separation rows (dense). DAQP (a dual active-set method for small dense QPs, bundled with CasADi) takes
-    about 0.15 ms here, a quarter of qrqp's time on the same problem.
+    ``SEPARATION_SAMPLES`` separation rows (dense). DAQP (a dual active-set method for small dense QPs,
+    bundled with CasADi) solves it in about 25 us. It is called through CasADi's zero-copy buffer
+    (``Function.buffer``): the numbers are written into numpy arrays bound to it once, where
+    ``solver(h=..., a=...)`` with numpy arguments spent 0.2 ms converting them to CasADi matrices and back,
+    8 times the solve. One buffer per thread (a buffer is one set of arrays).
     """
-    n = degree + 1
-    nv = 2 * n
-    # integral of |r''|^2 up to a constant factor: the squared second differences (the time scale only
-    # scales the objective, so the Hessian is a constant)
-    d2 = np.zeros((degree - 1, n))
-    for i in range(degree - 1):
-        d2[i, i:i + 3] = (1.0, -2.0, 1.0)
-    hess = np.zeros((nv, nv))
-    hess[:n, :n] = hess[n:, n:] = 2.0 * d2.T @ d2
-    hess += 2.0 * _REG * np.eye(nv)
-    na = 2 * (degree - 1)  # acceleration control points, both axes
-    rows = 2 * degree + na + MAX_HALF_PLANES * n + SEPARATION_SAMPLES
-    pattern = np.zeros((rows, nv))
-    diff = np.zeros((2 * degree + na, nv))  # velocity (per degree / T) and acceleration (per d (d-1) / T^2) rows
-    for axis in range(2):
-        for i in range(degree):
-            diff[axis * degree + i, axis * n + i:axis * n + i + 2] = (-1.0, 1.0)
+
+    def __init__(self, degree: int) -> None:
+        n = degree + 1
+        nv = 2 * n
+        # integral of |r''|^2 up to a constant factor: the squared second differences (the time scale only
+        # scales the objective, so the Hessian is a constant)
+        d2 = np.zeros((degree - 1, n))
         for i in range(degree - 1):
-            diff[2 * degree + axis * (degree - 1) + i, axis * n + i:axis * n + i + 3] = (1.0, -2.0, 1.0)
-    pattern[:2 * degree + na] = diff != 0.0
-    pattern[2 * degree + na:] = 1.0
-    solver = ca.conic("replan_qp", "daqp", {"h": ca.DM(hess).sparsity(), "a": ca.DM(pattern).sparsity()},
-                      {"error_on_fail": False})
-    return solver, hess, rows, diff
+            d2[i, i:i + 3] = (1.0, -2.0, 1.0)
+        hess = np.zeros((nv, nv))
+        hess[:n, :n] = hess[n:, n:] = 2.0 * d2.T @ d2
+        hess += 2.0 * _REG * np.eye(nv)
+        na = 2 * (degree - 1)  # acceleration control points, both axes
+        self.rows = 2 * degree + na + MAX_HALF_PLANES * n + SEPARATION_SAMPLES
+        diff = np.zeros((2 * degree + na, nv))  # velocity (per degree / T) and acceleration (per d (d-1) / T^2) rows
+        for axis in range(2):
+            for i in range(degree):
+                diff[axis * degree + i, axis * n + i:axis * n + i + 2] = (-1.0, 1.0)
+            for i in range(degree - 1):
+                diff[2 * degree + axis * (degree - 1) + i, axis * n + i:axis * n + i + 3] = (1.0, -2.0, 1.0)
+        self.diff = diff
+        # dense sparsities (the matrices are passed whole): nonzeros are the entries in column-major order
+        self.solver = ca.conic("replan_qp", "daqp", {"h": ca.Sparsity.dense(nv, nv),
+                                                     "a": ca.Sparsity.dense(self.rows, nv)}, {"error_on_fail": False})
+        self.hess = hess
+        self._local = threading.local()
+
+    def buffers(self) -> dict[str, np.ndarray]:
+        """This thread's bound arrays: inputs ``h, g, a`` (a in column-major order), ``lba, uba, lbx, ubx``
+        (and zero warm starts), output ``x``."""
+        arrays = getattr(self._local, "arrays", None)
+        if arrays is None:
+            solver = self.solver
+            buffer, evaluate = solver.buffer()
+            arrays = {name: np.zeros(solver.nnz_in(i)) for i, name in enumerate(solver.name_in())}
+            arrays["h"][:] = self.hess.ravel(order="F")
+            for i, name in enumerate(solver.name_in()):
+                buffer.set_arg(i, memoryview(arrays[name]))
+            out = {name: np.zeros(solver.nnz_out(i)) for i, name in enumerate(solver.name_out())}
+            for i, name in enumerate(solver.name_out()):
+                buffer.set_res(i, memoryview(out[name]))
+            arrays["x"] = out["x"]
+            # the buffer holds raw pointers: every bound array (the unused outputs too) must outlive it
+            self._local.arrays, self._local.out = arrays, out
+            self._local.buffer, self._local.evaluate = buffer, evaluate
+        return arrays
+
+    def solve(self) -> bool:
+        """Solve with the numbers in :meth:`buffers`; True if DAQP reports success (the result is in ``x``)."""
+        self._local.evaluate()
+        return bool(self._local.buffer.stats()["success"])
+
+
+@lru_cache(maxsize=4)
+def _qp(degree: int) -> _SegmentQP:
+    return _SegmentQP(degree)
 
 
 def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree: int = DEGREE,
@@ -197,7 +231,8 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
 
     ``around`` is the segment the separation rows are linearised about (default: the Hermite cubic).
     """
-    solver, hess, rows, diff = _qp(degree)
+    qp = _qp(degree)
+    rows, diff = qp.rows, qp.diff
     n = degree + 1
     T = t1 - t0
     p0, v0, p1, v1 = (np.asarray(a, float) for a in (p0, v0, p1, v1))
@@ -244,10 +279,13 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
             lba[r] = offset
             r += 1
     line = np.concatenate([np.linspace(p0[0], p1[0], n), np.linspace(p0[1], p1[1], n)])
-    sol = solver(h=hess, g=-2.0 * _REG * line, a=A, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
-    if not solver.stats()["success"]:
+    buf = qp.buffers()
+    buf["g"][:] = -2.0 * _REG * line
+    buf["a"][:] = A.ravel(order="F")
+    buf["lba"][:], buf["uba"][:], buf["lbx"][:], buf["ubx"][:] = lba, uba, lbx, ubx
+    if not qp.solve():
         return None
-    x = sol["x"].full().ravel()
+    x = buf["x"].copy()
     seg = Segment(t0, t1, np.column_stack([x[:n], x[n:]]))
     if not within_bounds(seg, None if velocity_bound is None else np.asarray(velocity_bound) + 1e-6,
                          None if acceleration_bound is None else np.asarray(acceleration_bound) + 1e-6):
