@@ -344,8 +344,7 @@ class FreeflyerMPC:
             lbg[self._avoid_rows[active, j]] = offsets[1:][active]  # n . p + sigma >= offset
         p[ps["normals"]] = normals.ravel()
         self._in["x0"][:] = guess
-        names = [self.config.solver] + [s for s in self._solvers if s != self.config.solver]
-        for name in names:
+        for name in self._solvers:  # the primary first, then the fallback
             call = self._calls.get(name) or self._bind(name)
             stats = call()
             w = call.out["x"].copy()
@@ -363,8 +362,9 @@ class FreeflyerMPC:
                 w = guess  # a NaN iterate is useless: keep the previous plan
             self._cold_multipliers()
         self._guess = w[self._shift_w]
-        inputs = np.clip(w[self._u_idx], -self.bounds, self.bounds)
-        predicted = np.vstack([x0, w[self._x_idx]])
+        inputs = np.minimum(np.maximum(w[self._u_idx], -self.bounds), self.bounds)
+        predicted = np.empty((n + 1, NX))
+        predicted[0], predicted[1:] = x0, w[self._x_idx]
         result = MPCResult(
             wrench=inputs[0].copy(), success=ok, solve_ms=0.0, predicted=predicted, inputs=inputs,
             status=str(stats.get("return_status", "")), iterations=int(stats.get("iter_count", 0)), solver=name,
@@ -397,7 +397,12 @@ class FreeflyerMPC:
     def _normals(self, guess: np.ndarray, x0: np.ndarray, ref: np.ndarray, centers: np.ndarray) -> np.ndarray:
         """Unit normals (N+1, 2) of the keep-off half-planes: from each centre towards the planned position
         (previous solution shifted), else the current position, else the reference, else +x."""
-        planned = np.vstack([x0[0:2], guess[self._x_idx[:, 0:2]]])
+        planned = np.empty((self.horizon + 1, 2))
+        planned[0], planned[1:] = x0[0:2], guess[self._x_idx[:, 0:2]]
+        v = planned - centers
+        norm = np.hypot(v[:, 0], v[:, 1])
+        if np.all(norm > 1e-9):  # the usual case: every node has a planned position off the centre
+            return v / norm[:, None]
         out = np.tile([1.0, 0.0], (self.horizon + 1, 1))
         todo = np.ones(self.horizon + 1, dtype=bool)
         for points in (planned, np.broadcast_to(x0[0:2], planned.shape), ref[:, 0:2]):
