@@ -72,11 +72,18 @@ def hermite(p0, v0, p1, v1, t0: float, t1: float) -> Segment:
 
 def within_bounds(segment: Segment, velocity_bound, acceleration_bound=None) -> bool:
     """Velocity (and acceleration) control points within the per-axis bounds: the hull bounds the curve."""
+    cp = segment.control_points
+    d = len(cp) - 1
+    if d == 0:
+        return velocity_bound is None or bool((0.0 <= np.asarray(velocity_bound) + 1e-9).all())
+    # the control points of Segment.velocity_control_points / acceleration_control_points, computed alike
+    first = d * np.diff(cp, axis=0)
     if velocity_bound is not None and \
-            not np.all(np.abs(segment.velocity_control_points()) <= np.asarray(velocity_bound) + 1e-9):
+            not (np.abs(first / segment.duration_s) <= np.asarray(velocity_bound) + 1e-9).all():
         return False
-    if acceleration_bound is not None and len(segment.control_points) > 2 and \
-            not np.all(np.abs(segment.acceleration_control_points()) <= np.asarray(acceleration_bound) + 1e-9):
+    if acceleration_bound is not None and d > 1 and \
+            not (np.abs((d - 1) * np.diff(first, axis=0) / segment.duration_s ** 2)
+                 <= np.asarray(acceleration_bound) + 1e-9).all():
         return False
     return True
 
@@ -189,6 +196,8 @@ class _SegmentQP:
         self.solver = ca.conic("replan_qp", "daqp", {"h": ca.Sparsity.dense(nv, nv),
                                                      "a": ca.Sparsity.dense(self.rows, nv)}, {"error_on_fail": False})
         self.hess = hess
+        self.fixed = [0, 1, n - 2, n - 1, n, n + 1, 2 * n - 2, 2 * n - 1]  # the end states' control points
+        self.ramp = np.arange(n, dtype=float)
         self._local = threading.local()
 
     def buffers(self) -> dict[str, np.ndarray]:
@@ -206,6 +215,7 @@ class _SegmentQP:
             for i, name in enumerate(solver.name_out()):
                 buffer.set_res(i, memoryview(out[name]))
             arrays["x"] = out["x"]
+            arrays["A"] = arrays["a"].reshape(self.hess.shape[0], self.rows).T  # (rows, nv) view, column-major
             # the buffer holds raw pointers: every bound array (the unused outputs too) must outlive it
             self._local.arrays, self._local.out = arrays, out
             self._local.buffer, self._local.evaluate = buffer, evaluate
@@ -232,17 +242,18 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
     ``around`` is the segment the separation rows are linearised about (default: the Hermite cubic).
     """
     qp = _qp(degree)
-    rows, diff = qp.rows, qp.diff
+    buf = qp.buffers()
+    diff = qp.diff
     n = degree + 1
     T = t1 - t0
     p0, v0, p1, v1 = (np.asarray(a, float) for a in (p0, v0, p1, v1))
-    A = np.zeros((rows, 2 * n))
-    lba = np.full(rows, -np.inf)
-    uba = np.full(rows, np.inf)
+    A, lba, uba, lbx, ubx = buf["A"], buf["lba"], buf["uba"], buf["lbx"], buf["ubx"]
+    lba[:], uba[:] = -np.inf, np.inf
     k = degree / T
     na = 2 * (degree - 1)
     A[:2 * degree] = k * diff[:2 * degree]  # velocity control points (Eq. 25)
     A[2 * degree:2 * degree + na] = degree * (degree - 1) / T ** 2 * diff[2 * degree:]  # acceleration ones
+    A[2 * degree + na:] = 0.0
     for axis in range(2):
         if velocity_bound is not None:
             lba[axis * degree:(axis + 1) * degree] = -float(velocity_bound[axis])
@@ -250,23 +261,23 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
         if acceleration_bound is not None:
             rows_a = slice(2 * degree + axis * (degree - 1), 2 * degree + (axis + 1) * (degree - 1))
             lba[rows_a], uba[rows_a] = -float(acceleration_bound[axis]), float(acceleration_bound[axis])
-    lbx = np.full(2 * n, -np.inf)
-    ubx = np.full(2 * n, np.inf)
     if limits is not None and limits.box is not None:
         x0, x1, y0, y1 = limits.box
         # never ask the fixed ends to move: a robot touching the boundary starts on it
         lbx[:n], ubx[:n] = min(x0, p0[0], p1[0]), max(x1, p0[0], p1[0])
         lbx[n:], ubx[n:] = min(y0, p0[1], p1[1]), max(y1, p0[1], p1[1])
+    else:
+        lbx[:], ubx[:] = -np.inf, np.inf
     # end states: the first two and last two control points of each axis (Eq. 8 at s = 0 and 1)
-    fixed = [0, 1, n - 2, n - 1, n, n + 1, 2 * n - 2, 2 * n - 1]
+    fixed = qp.fixed
     values = [p0[0], p0[0] + v0[0] / k, p1[0] - v1[0] / k, p1[0], p0[1], p0[1] + v0[1] / k, p1[1] - v1[1] / k, p1[1]]
     lbx[fixed] = ubx[fixed] = values
     if limits is not None:
         r = 2 * degree + na
+        idx = np.arange(n)
         for normal, offset in limits.half_planes[:MAX_HALF_PLANES]:
             normal = np.asarray(normal, float)
             lo = min(offset, normal @ p0, normal @ p1)  # never ask the fixed ends to move
-            idx = np.arange(n)
             A[r + idx, idx] = normal[0]
             A[r + idx, n + idx] = normal[1]
             lba[r:r + n] = lo
@@ -278,19 +289,29 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
             A[r, :n], A[r, n:] = normal[0] * w, normal[1] * w
             lba[r] = offset
             r += 1
-    line = np.concatenate([np.linspace(p0[0], p1[0], n), np.linspace(p0[1], p1[1], n)])
-    buf = qp.buffers()
-    buf["g"][:] = -2.0 * _REG * line
-    buf["a"][:] = A.ravel(order="F")
-    buf["lba"][:], buf["uba"][:], buf["lbx"][:], buf["ubx"][:] = lba, uba, lbx, ubx
+    g = buf["g"]  # a pull toward the straight line (the Tikhonov term)
+    g[:n], g[n:] = _linspace(p0[0], p1[0], qp.ramp), _linspace(p0[1], p1[1], qp.ramp)
+    g *= -2.0 * _REG
     if not qp.solve():
         return None
-    x = buf["x"].copy()
+    x = buf["x"]
     seg = Segment(t0, t1, np.column_stack([x[:n], x[n:]]))
     if not within_bounds(seg, None if velocity_bound is None else np.asarray(velocity_bound) + 1e-6,
                          None if acceleration_bound is None else np.asarray(acceleration_bound) + 1e-6):
         return None
     return seg
+
+
+def _linspace(start: float, stop: float, ramp: np.ndarray) -> np.ndarray:
+    """``np.linspace(start, stop, len(ramp))`` with ``ramp = arange(len)``, computed the same way (the same
+    numbers to the last bit) without its argument handling, which was a tenth of a QP call."""
+    div = len(ramp) - 1
+    delta = stop - start
+    step = delta / div
+    y = ramp / div * delta if step == 0 else ramp * step
+    y += start
+    y[-1] = stop
+    return y
 
 
 def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
