@@ -88,8 +88,8 @@ def within_bounds(segment: Segment, velocity_bound, acceleration_bound=None) -> 
     return True
 
 
-def _sample_phases() -> np.ndarray:
-    return np.linspace(0.0, 1.0, SEPARATION_SAMPLES + 2)[1:-1]  # the ends are fixed states, not choices
+_SAMPLE_PHASES = np.linspace(0.0, 1.0, SEPARATION_SAMPLES + 2)[1:-1]  # the ends are fixed states, not choices
+_SAMPLE_PHASES.flags.writeable = False
 
 
 def _separation_rows(segment: Segment, limits: SegmentLimits) -> list[tuple[np.ndarray, np.ndarray, float]]:
@@ -103,7 +103,7 @@ def _separation_rows(segment: Segment, limits: SegmentLimits) -> list[tuple[np.n
     """
     if not limits.others or limits.separation_m <= 0:
         return []
-    s = _sample_phases()
+    s = _SAMPLE_PHASES
     times = segment.t0_s + s * segment.duration_s
     mine = segment.position(times)
     chord = segment.control_points[-1] - segment.control_points[0]
@@ -198,6 +198,7 @@ class _SegmentQP:
         self.hess = hess
         self.fixed = [0, 1, n - 2, n - 1, n, n + 1, 2 * n - 2, 2 * n - 1]  # the end states' control points
         self.ramp = np.arange(n, dtype=float)
+        self.index = np.arange(n)
         self._local = threading.local()
 
     def buffers(self) -> dict[str, np.ndarray]:
@@ -274,7 +275,7 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
     lbx[fixed] = ubx[fixed] = values
     if limits is not None:
         r = 2 * degree + na
-        idx = np.arange(n)
+        idx = qp.index
         for normal, offset in limits.half_planes[:MAX_HALF_PLANES]:
             normal = np.asarray(normal, float)
             lo = min(offset, normal @ p0, normal @ p1)  # never ask the fixed ends to move
