@@ -273,11 +273,6 @@ class FreeflyerMPC:
         self._calls[name] = call = _SolverCall(self._solvers[name], self._in)
         return call
 
-    def __getstate__(self) -> dict:
-        state = self.__dict__.copy()
-        state["_calls"] = {}  # call buffers hold raw pointers into this object's arrays: bound again on use
-        return state
-
     # ------------------------------------------------------------------------------------- interface
     def reset(self) -> None:
         """Forget the warm start (call at the start of an episode or after a large state jump)."""
