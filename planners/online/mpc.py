@@ -347,7 +347,7 @@ class FreeflyerMPC:
             call = self._calls.get(name) or self._bind(name)
             stats = call()
             w = call.out["x"].copy()
-            ok = bool(stats["success"]) and bool(np.all(np.isfinite(w)))
+            ok = bool(stats["success"]) and bool(np.isfinite(w).all())
             if ok:
                 break
         self.solves += 1
@@ -372,7 +372,7 @@ class FreeflyerMPC:
             node = predicted[impact.step]
             result.impact_error = float(np.max(np.abs(np.r_[node[0:2] - impact.position,
                                                             node[3:5] - impact.velocity_before])))
-        clearances = [spec.clearance(predicted[:, 0:2]) for spec in specs if np.any(spec.active[1:])]
+        clearances = [spec.clearance(predicted[:, 0:2]) for spec in specs if spec.active[1:].any()]
         if clearances:
             result.min_clearance_m = float(min(clearances))
         result.solve_ms = (time.perf_counter() - start) * 1e3
