@@ -5,17 +5,27 @@ Control points are arrays of shape (degree + 1, dim); the phase s runs over [0, 
 
 from __future__ import annotations
 
+from functools import lru_cache
 from math import comb
 
 import numpy as np
 
 
+@lru_cache(maxsize=32)
+def _binomials(degree: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(b, d - b, C(d, b)) for b = 0..d, read-only (the control loop evaluates curves every step)."""
+    b = np.arange(degree + 1)
+    out = (b, degree - b, np.array([comb(degree, k) for k in b], dtype=float))
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
 def bernstein(degree: int, s: np.ndarray | float) -> np.ndarray:
     """Bernstein basis values, shape (len(s), degree + 1): C(d, b) (1 - s)^(d - b) s^b (Eq. 8)."""
     s = np.atleast_1d(np.asarray(s, dtype=float))
-    b = np.arange(degree + 1)
-    coef = np.array([comb(degree, k) for k in b], dtype=float)
-    return coef * (1.0 - s[:, None]) ** (degree - b) * s[:, None] ** b
+    b, rest, coef = _binomials(degree)
+    return coef * (1.0 - s[:, None]) ** rest * s[:, None] ** b
 
 
 def evaluate(control_points: np.ndarray, s: np.ndarray | float) -> np.ndarray:

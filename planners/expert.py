@@ -163,6 +163,12 @@ class Expert:
         self.stats = ExpertStats()
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}
         self._cache: tuple[int, np.ndarray] | None = None
+        # per-episode constants of every step: the horizon's node offsets (s); per robot, how far it can get
+        # within a replanned segment (m, at its velocity bound) and its largest acceleration (m/s^2)
+        self._node_offsets = self.dt * np.arange(self.mpc_config.horizon + 1)
+        self._segment_reach = {r.name: float(np.hypot(*(r.velocity_bound_mps or (1.0, 1.0))))
+                               * self.grid_dt * (cfg.replan_intervals + 1) for r in self.robots}
+        self._a_max = {r.name: float(np.hypot(*r.thrust_limit_N)) / r.mass_kg for r in self.robots}
 
     # ------------------------------------------------------------------------------------------ API
     def reset(self, env: Any = None, seed: int | None = None) -> None:
@@ -268,11 +274,10 @@ class Expert:
         nxt = min(pending, key=lambda i: i.time_s) if pending else None
         past = [i.time_s for _, i in self._impacts_by_robot[name] if i.time_s <= t + 1e-9 and i is not nxt]
         n = self.mpc_config.horizon
-        times = t + self.dt * np.arange(n + 1)
+        times = t + self._node_offsets
         limits = None
         if cfg.safe_segments:
-            speed = float(np.hypot(*(robot.velocity_bound_mps or (1.0, 1.0))))
-            reach = speed * self.grid_dt * (cfg.replan_intervals + 1)
+            reach = self._segment_reach[name]
             # only robots that either robot could reach within a replanned segment can meet it
             others = [self._planned_path(o.name) for o in self.robots if o.name != name
                       and np.hypot(*(states[self._index[o.name]][:2] - state[:2])) < 2 * reach + 2 * robot.radius_m]
@@ -284,13 +289,14 @@ class Expert:
         avoid = [object_keep_off(robot, self.objects, t, times, state[:2], object_states, self.plan.impacts,
                                  ref.approaching, cfg.object_margin_m, cfg.contact_window_s)]
         if cfg.safe_segments:
-            a_max = float(np.hypot(*robot.thrust_limit_N)) / robot.mass_kg
+            a_max = self._a_max[name]
             speed = float(np.hypot(*state[3:5]))
             reach = speed * n * self.dt + 0.5 * a_max * (n * self.dt) ** 2  # how far it can get in the horizon
             for other in self.robots:
                 if other.name != name:
                     centers = self._other_centers(other.name, step, states, n)
-                    gap = float(np.min(np.hypot(*(centers - state[:2]).T)))
+                    d = centers - state[:2]
+                    gap = float(np.hypot(d[:, 0], d[:, 1]).min())
                     if gap < 2 * reach + robot.radius_m + other.radius_m + cfg.robot_margin_m:
                         avoid.append(robot_keep_off(robot, other, centers, cfg.robot_margin_m))
             wall = boundary_keep_off(self.scenario, robot, state[:2], n + 1, reach, cfg.wall_margin_m)
@@ -326,7 +332,7 @@ class Expert:
         if name in self._predicted:
             at, pred = self._predicted[name]
             shift = step - at
-            idx = np.clip(np.arange(n + 1) + shift, 0, len(pred) - 1)
+            idx = np.minimum(np.maximum(np.arange(n + 1) + shift, 0), len(pred) - 1)
             return pred[idx]
         return np.tile(states[self._index[name]][:2], (n + 1, 1))
 

@@ -38,7 +38,7 @@ class Segment:
         return self.t1_s - self.t0_s
 
     def _phase(self, t: np.ndarray) -> np.ndarray:
-        return np.clip((np.asarray(t, dtype=float) - self.t0_s) / self.duration_s, 0.0, 1.0)
+        return np.minimum(np.maximum((np.asarray(t, dtype=float) - self.t0_s) / self.duration_s, 0.0), 1.0)
 
     def position(self, t: np.ndarray | float) -> np.ndarray:
         return bezier.evaluate(self.control_points, self._phase(t))

@@ -2,12 +2,23 @@
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
+import casadi as ca
 import numpy as np
 import pytest
 
 from impact_env.physics import World
 from planners.online.impact_model import disc_impact, required_contact
-from planners.online.replanner import bounded_segment, hermite, replan_around_impact, replan_segment
+from planners.online.replanner import (
+    SegmentLimits,
+    _linspace,
+    _qp,
+    bounded_segment,
+    hermite,
+    replan_around_impact,
+    replan_segment,
+)
 from tests.helpers import two_body
 
 
@@ -67,6 +78,50 @@ def test_bounded_qp_equals_hermite_when_bounds_are_slack_and_respects_them_when_
     tight = replan_segment(*args, velocity_bound=(0.14, 0.14))
     assert np.abs(tight.velocity_control_points()).max() <= 0.14 + 1e-6
     np.testing.assert_allclose(tight.position(10.0)[0], (1.0, 0.0), atol=1e-6)
+
+
+def _limited_problem(shift: float) -> tuple[tuple, dict]:
+    """A segment that needs every kind of row: box, an obstacle face, another robot, acceleration bounds."""
+    others = [lambda t: np.column_stack([0.5 + 0.0 * t, 0.1 + 0.02 * t])]
+    limits = SegmentLimits(box=(-0.2, 1.3, -0.3, 0.6), half_planes=[(np.array([0.0, 1.0]), -0.25)],
+                           others=others, separation_m=0.3)
+    return ((0.0, shift), (0.05, 0.0), (1.0, 0.2), (0.0, 0.1), 0.0, 6.0), \
+        {"velocity_bound": (0.4, 0.4), "limits": limits, "acceleration_bound": (0.2, 0.2)}
+
+
+def test_bounded_qp_through_the_buffer_gives_the_numbers_of_a_plain_daqp_call():
+    """bounded_segment writes the QP's numbers into arrays bound to DAQP once (the matrix in column-major
+    order): the same numbers through the ordinary call must give the same control points to the last bit."""
+    args, kwargs = _limited_problem(0.0)
+    seg = bounded_segment(*args, **kwargs)
+    assert seg is not None
+    qp = _qp(10)
+    buf = qp.buffers()
+    assert np.isfinite(buf["lba"][2 * 10 + 18:]).sum() > 11  # half-plane and separation rows are on
+    plain = qp.solver(h=ca.DM(qp.hess), g=buf["g"], a=ca.DM(buf["A"]), lba=buf["lba"], uba=buf["uba"],
+                      lbx=buf["lbx"], ubx=buf["ubx"])
+    x = plain["x"].full().ravel()
+    np.testing.assert_array_equal(seg.control_points, np.column_stack([x[:11], x[11:]]))
+    np.testing.assert_allclose(seg.position(0.0)[0], (0.0, 0.0), atol=1e-9)
+
+
+def test_bounded_qp_from_several_threads_gives_each_its_own_answer():
+    """One buffer per thread: concurrent calls neither share nor overwrite each other's numbers."""
+    problems = [_limited_problem(shift) for shift in np.linspace(-0.05, 0.01, 12)]
+    alone = [bounded_segment(*a, **k) for a, k in problems]
+    assert all(seg is not None for seg in alone)
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        together = list(pool.map(lambda p: bounded_segment(*p[0], **p[1]), problems * 5))
+    for k, seg in enumerate(together):
+        np.testing.assert_array_equal(seg.control_points, alone[k % len(problems)].control_points)
+
+
+def test_linspace_is_numpys_to_the_last_bit():
+    ramp = np.arange(11.0)
+    rng = np.random.default_rng(3)
+    for start, stop in [*rng.normal(size=(500, 2)) * 3.0, (0.7, 0.7), (0.0, 0.0), (-1e-300, 1e-300)]:
+        np.testing.assert_array_equal(_linspace(np.float64(start), np.float64(stop), ramp),
+                                      np.linspace(start, stop, 11))
 
 
 def test_replan_around_impact_joins_the_contact_and_the_plan():

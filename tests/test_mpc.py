@@ -190,6 +190,25 @@ def test_impact_node_is_met_and_prediction_jumps(robot: Body, reachable_impact, 
     assert np.all(np.abs(result.inputs) <= mpc.bounds)
 
 
+def test_the_zero_copy_call_gives_the_numbers_of_a_plain_solver_call(robot: Body, reachable_impact) -> None:
+    """solve() calls the solver through its buffer (inputs bound once, written in place): the same problem
+    through the ordinary numpy call must give the same iterate to the last bit."""
+    x0, impact = reachable_impact
+    mpc = FreeflyerMPC(robot, MPCConfig(fallback_solver=None, keep_off_rows=2))
+    ref = line_reference(DT * np.arange(11))
+    x1 = rk4_step(x0, mpc.solve(x0, ref).wrench, robot, DT)  # the next solve starts warm
+    lam_x, lam_g = mpc._lam_x.copy(), mpc._lam_g.copy()  # overwritten by the solve below
+    avoid = AvoidSpec(np.tile([1.6, 0.3], (11, 1)), 0.4, np.ones(11, dtype=bool))
+    result = mpc.solve(x1, ref, impact, avoid)
+    assert result.success
+    inputs = {name: value.copy() for name, value in mpc._in.items()}
+    inputs["lam_x0"], inputs["lam_g0"] = lam_x, lam_g
+    switched_on = np.isfinite(inputs["lbg"]) & ~np.isfinite(mpc._lbg)
+    assert switched_on.sum() == 4 + 10  # the impact node's rows and one keep-off row per node
+    plain = mpc._solvers["sqp"](**inputs)
+    np.testing.assert_array_equal(result.predicted[1:], plain["x"].full().ravel()[mpc._x_idx])
+
+
 def test_solvers_agree_on_the_optimum(robot: Body, reachable_impact) -> None:
     x0, impact = reachable_impact
     ref = line_reference(DT * np.arange(11))

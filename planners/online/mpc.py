@@ -120,8 +120,13 @@ class FreeflyerMPC:
         if cfg.fallback_solver is not None and cfg.fallback_solver != cfg.solver:
             self._solvers[cfg.fallback_solver] = self._make_solver(cfg.fallback_solver)
         self._guess: np.ndarray | None = None
-        self._lam_x = np.zeros(self._nw)
-        self._lam_g = np.zeros(self._ng)
+        # the solvers' inputs: numpy arrays bound once to every solver's zero-copy call buffer (_SolverCall)
+        self._in = {"x0": np.zeros(self._nw), "p": self._p, "lbx": self._lbx, "ubx": self._ubx,
+                    "lbg": self._lbg.copy(), "ubg": self._ubg.copy(), "lam_x0": np.zeros(self._nw),
+                    "lam_g0": np.zeros(self._ng)}
+        self._lam_x = self._in["lam_x0"]
+        self._lam_g = self._in["lam_g0"]
+        self._calls: dict[str, _SolverCall] = {}
         self._cold_multipliers()
 
     # ------------------------------------------------------------------------------------- building
@@ -230,6 +235,9 @@ class FreeflyerMPC:
 
     def _make_solver(self, name: str) -> ca.Function:
         cfg = self.config
+        # the multipliers of the parameters are never read: not computing them saves an extra derivative
+        # evaluation after every solve (a tenth of an sqpmethod solve here); x, lam_x, lam_g are unchanged
+        common = {"calc_lam_p": False}
         if name == "sqp":
             # Gauss-Newton Hessian (the cost's, constant and positive definite) and full steps, as in
             # real-time MPC. The exact Hessian is indefinite in (theta, F) once large multipliers (impact
@@ -246,19 +254,24 @@ class FreeflyerMPC:
                                             ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
                     "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False,
                                       "error_on_fail": False},
-                    "print_header": False, "print_iteration": False, "print_status": False, "print_time": False}
+                    "print_header": False, "print_iteration": False, "print_status": False, "print_time": False,
+                    **common}
             return ca.nlpsol("mpc_sqp", "sqpmethod", self._nlp, opts)
         if name == "fatrop":
             nx, nu, ng = self._stage_sizes
             opts = {"structure_detection": "manual", "N": self.horizon, "nx": nx, "nu": nu, "ng": ng,
                     "expand": True, "print_time": False,
-                    "fatrop": {"print_level": 0, "max_iter": 100, "tol": 1e-6}}
+                    "fatrop": {"print_level": 0, "max_iter": 100, "tol": 1e-6}, **common}
             return ca.nlpsol("mpc_fatrop", "fatrop", self._nlp, opts)
-        opts = {"print_time": False,
+        opts = {"print_time": False, **common,
                 "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-6, "max_iter": 100,
                           "warm_start_init_point": "yes", "warm_start_bound_push": 1e-6,
                           "warm_start_mult_bound_push": 1e-6, "mu_init": 1e-3}}
         return ca.nlpsol("mpc_ipopt", "ipopt", self._nlp, opts)
+
+    def _bind(self, name: str) -> _SolverCall:
+        self._calls[name] = call = _SolverCall(self._solvers[name], self._in)
+        return call
 
     # ------------------------------------------------------------------------------------- interface
     def reset(self) -> None:
@@ -304,7 +317,8 @@ class FreeflyerMPC:
         p[ps["heading"]] = self.heading_ref + two_pi * round((x0[2] - self.heading_ref) / two_pi)
         p[ps["select"]] = 0.0
         p[ps["v_after"]] = 0.0
-        lbg, ubg = self._lbg.copy(), self._ubg.copy()  # all path rows off (+-inf)
+        lbg, ubg = self._in["lbg"], self._in["ubg"]
+        lbg[:], ubg[:] = self._lbg, self._ubg  # all path rows off (+-inf)
         if impact is not None:
             if not isinstance(impact, ImpactSpec):
                 raise MPCInputError(f"impact must be an ImpactSpec or None, got {type(impact).__name__}")
@@ -328,29 +342,28 @@ class FreeflyerMPC:
             active = np.flatnonzero(spec.active[1:])
             lbg[self._avoid_rows[active, j]] = offsets[1:][active]  # n . p + sigma >= offset
         p[ps["normals"]] = normals.ravel()
-        names = [self.config.solver] + [s for s in self._solvers if s != self.config.solver]
-        for name in names:
-            solver = self._solvers[name]
-            sol = solver(x0=guess, p=p, lbx=self._lbx, ubx=self._ubx, lbg=lbg, ubg=ubg,
-                         lam_x0=self._lam_x, lam_g0=self._lam_g)
-            stats = solver.stats()
-            w = sol["x"].full().ravel()
-            ok = bool(stats["success"]) and bool(np.all(np.isfinite(w)))
+        self._in["x0"][:] = guess
+        for name in self._solvers:  # the primary first, then the fallback
+            call = self._calls.get(name) or self._bind(name)
+            stats = call()
+            w = call.out["x"].copy()
+            ok = bool(stats["success"]) and bool(np.isfinite(w).all())
             if ok:
                 break
         self.solves += 1
         if ok:
             self.fallbacks += name != self.config.solver
-            self._lam_x = sol["lam_x"].full().ravel()[self._shift_w]
-            self._lam_g = sol["lam_g"].full().ravel()[self._shift_g]
+            self._lam_x[:] = call.out["lam_x"][self._shift_w]
+            self._lam_g[:] = call.out["lam_g"][self._shift_g]
         else:
             self.failures += 1
             if not np.all(np.isfinite(w)):
                 w = guess  # a NaN iterate is useless: keep the previous plan
             self._cold_multipliers()
         self._guess = w[self._shift_w]
-        inputs = np.clip(w[self._u_idx], -self.bounds, self.bounds)
-        predicted = np.vstack([x0, w[self._x_idx]])
+        inputs = np.minimum(np.maximum(w[self._u_idx], -self.bounds), self.bounds)
+        predicted = np.empty((n + 1, NX))
+        predicted[0], predicted[1:] = x0, w[self._x_idx]
         result = MPCResult(
             wrench=inputs[0].copy(), success=ok, solve_ms=0.0, predicted=predicted, inputs=inputs,
             status=str(stats.get("return_status", "")), iterations=int(stats.get("iter_count", 0)), solver=name,
@@ -359,7 +372,7 @@ class FreeflyerMPC:
             node = predicted[impact.step]
             result.impact_error = float(np.max(np.abs(np.r_[node[0:2] - impact.position,
                                                             node[3:5] - impact.velocity_before])))
-        clearances = [spec.clearance(predicted[:, 0:2]) for spec in specs if np.any(spec.active[1:])]
+        clearances = [spec.clearance(predicted[:, 0:2]) for spec in specs if spec.active[1:].any()]
         if clearances:
             result.min_clearance_m = float(min(clearances))
         result.solve_ms = (time.perf_counter() - start) * 1e3
@@ -383,7 +396,12 @@ class FreeflyerMPC:
     def _normals(self, guess: np.ndarray, x0: np.ndarray, ref: np.ndarray, centers: np.ndarray) -> np.ndarray:
         """Unit normals (N+1, 2) of the keep-off half-planes: from each centre towards the planned position
         (previous solution shifted), else the current position, else the reference, else +x."""
-        planned = np.vstack([x0[0:2], guess[self._x_idx[:, 0:2]]])
+        planned = np.empty((self.horizon + 1, 2))
+        planned[0], planned[1:] = x0[0:2], guess[self._x_idx[:, 0:2]]
+        v = planned - centers
+        norm = np.hypot(v[:, 0], v[:, 1])
+        if np.all(norm > 1e-9):  # the usual case: every node has a planned position off the centre
+            return v / norm[:, None]
         out = np.tile([1.0, 0.0], (self.horizon + 1, 1))
         todo = np.ones(self.horizon + 1, dtype=bool)
         for points in (planned, np.broadcast_to(x0[0:2], planned.shape), ref[:, 0:2]):
@@ -400,3 +418,32 @@ class FreeflyerMPC:
         for k in range(1, self.horizon + 1):
             w[self._vblocks[("x", k)]] = [ref[k, 0], ref[k, 1], x0[2], ref[k, 2], ref[k, 3], 0.0]
         return w
+
+
+class _SolverCall:
+    """A CasADi solver called through its zero-copy buffer (``Function.buffer``).
+
+    ``solver(x0=..., p=...)`` with numpy arguments converts each array to a CasADi matrix and each result
+    back, at a fixed cost per array (about 25 us) plus one per number: with the eight inputs and three
+    outputs of this MPC that was about a third of a solve. The buffer reads the inputs from, and writes the
+    results into, numpy arrays bound once (``inputs``: name -> array, shared by every solver of the MPC and
+    updated in place by :meth:`FreeflyerMPC.solve`); the numbers the solver sees are the same.
+    """
+
+    def __init__(self, solver: ca.Function, inputs: dict[str, np.ndarray]) -> None:
+        self.solver = solver
+        self.buffer, self._eval = solver.buffer()
+        for i, name in enumerate(solver.name_in()):
+            arr = inputs[name]
+            if arr.dtype != np.float64 or not arr.flags.c_contiguous or arr.size != solver.nnz_in(i):
+                raise MPCInputError(f"solver input {name!r} must be a contiguous float array of "
+                                    f"{solver.nnz_in(i)} numbers")
+            self.buffer.set_arg(i, memoryview(arr))
+        self.out = {name: np.zeros(solver.nnz_out(i)) for i, name in enumerate(solver.name_out())}
+        for i, name in enumerate(solver.name_out()):
+            self.buffer.set_res(i, memoryview(self.out[name]))
+
+    def __call__(self) -> dict:
+        """Solve with the bound inputs; the results are in ``out``; returns the solver's stats."""
+        self._eval()
+        return self.buffer.stats()

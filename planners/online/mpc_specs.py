@@ -134,8 +134,8 @@ class AvoidSpec:
 
     def clearance(self, positions: np.ndarray) -> float:
         """min over active nodes 1..N of |p_k - c_k| - min_distance (m)."""
-        dist = np.hypot(*(positions - self.centers).T)
-        return float(np.min(dist[1:][self.active[1:]]) - self.min_distance)
+        d = positions - self.centers
+        return float(np.hypot(d[:, 0], d[:, 1])[1:][self.active[1:]].min() - self.min_distance)
 
 
 @dataclass
@@ -171,7 +171,7 @@ class HalfPlaneSpec:
     def clearance(self, positions: np.ndarray) -> float:
         """min over active nodes 1..N of normal . p - offset (m)."""
         gap = np.einsum("kd,kd->k", self.normals, positions) - self.offsets
-        return float(np.min(gap[1:][self.active[1:]]))
+        return float(gap[1:][self.active[1:]].min())
 
 
 @dataclass

@@ -32,6 +32,7 @@ matrix rows, bounds) with numpy, so nothing is rebuilt from Python expressions p
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -71,17 +72,24 @@ def hermite(p0, v0, p1, v1, t0: float, t1: float) -> Segment:
 
 def within_bounds(segment: Segment, velocity_bound, acceleration_bound=None) -> bool:
     """Velocity (and acceleration) control points within the per-axis bounds: the hull bounds the curve."""
+    cp = segment.control_points
+    d = len(cp) - 1
+    if d == 0:
+        return velocity_bound is None or bool((0.0 <= np.asarray(velocity_bound) + 1e-9).all())
+    # the control points of Segment.velocity_control_points / acceleration_control_points, computed alike
+    first = d * np.diff(cp, axis=0)
     if velocity_bound is not None and \
-            not np.all(np.abs(segment.velocity_control_points()) <= np.asarray(velocity_bound) + 1e-9):
+            not (np.abs(first / segment.duration_s) <= np.asarray(velocity_bound) + 1e-9).all():
         return False
-    if acceleration_bound is not None and len(segment.control_points) > 2 and \
-            not np.all(np.abs(segment.acceleration_control_points()) <= np.asarray(acceleration_bound) + 1e-9):
+    if acceleration_bound is not None and d > 1 and \
+            not (np.abs((d - 1) * np.diff(first, axis=0) / segment.duration_s ** 2)
+                 <= np.asarray(acceleration_bound) + 1e-9).all():
         return False
     return True
 
 
-def _sample_phases() -> np.ndarray:
-    return np.linspace(0.0, 1.0, SEPARATION_SAMPLES + 2)[1:-1]  # the ends are fixed states, not choices
+_SAMPLE_PHASES = np.linspace(0.0, 1.0, SEPARATION_SAMPLES + 2)[1:-1]  # the ends are fixed states, not choices
+_SAMPLE_PHASES.flags.writeable = False
 
 
 def _separation_rows(segment: Segment, limits: SegmentLimits) -> list[tuple[np.ndarray, np.ndarray, float]]:
@@ -95,7 +103,7 @@ def _separation_rows(segment: Segment, limits: SegmentLimits) -> list[tuple[np.n
     """
     if not limits.others or limits.separation_m <= 0:
         return []
-    s = _sample_phases()
+    s = _SAMPLE_PHASES
     times = segment.t0_s + s * segment.duration_s
     mine = segment.position(times)
     chord = segment.control_points[-1] - segment.control_points[0]
@@ -151,41 +159,78 @@ def respects(segment: Segment, velocity_bound, limits: SegmentLimits | None, tol
 _REG = 1e-6
 
 
-@lru_cache(maxsize=4)
-def _qp(degree: int) -> tuple[ca.Function, np.ndarray, int, np.ndarray]:
-    """The QP of one segment, built once: (solver, Hessian, number of rows, velocity-row pattern).
+class _SegmentQP:
+    """The QP of one segment, built once per degree (:func:`_qp`).
 
     Variables are the control points ``[x_0..x_d, y_0..y_d]``; the end positions and velocities fix the
     first two and last two control points of each axis (through their bounds). Rows: the velocity and the
     acceleration control points (sparse), then ``MAX_HALF_PLANES`` half-plane blocks of d+1 rows and
-    ``SEPARATION_SAMPLES``
-    separation rows (dense). DAQP (a dual active-set method for small dense QPs, bundled with CasADi) takes
-    about 0.15 ms here, a quarter of qrqp's time on the same problem.
+    ``SEPARATION_SAMPLES`` separation rows (dense). DAQP (a dual active-set method for small dense QPs,
+    bundled with CasADi) solves it in about 25 us. It is called through CasADi's zero-copy buffer
+    (``Function.buffer``): the numbers are written into numpy arrays bound to it once, where
+    ``solver(h=..., a=...)`` with numpy arguments spent 0.2 ms converting them to CasADi matrices and back,
+    8 times the solve. One buffer per thread (a buffer is one set of arrays).
     """
-    n = degree + 1
-    nv = 2 * n
-    # integral of |r''|^2 up to a constant factor: the squared second differences (the time scale only
-    # scales the objective, so the Hessian is a constant)
-    d2 = np.zeros((degree - 1, n))
-    for i in range(degree - 1):
-        d2[i, i:i + 3] = (1.0, -2.0, 1.0)
-    hess = np.zeros((nv, nv))
-    hess[:n, :n] = hess[n:, n:] = 2.0 * d2.T @ d2
-    hess += 2.0 * _REG * np.eye(nv)
-    na = 2 * (degree - 1)  # acceleration control points, both axes
-    rows = 2 * degree + na + MAX_HALF_PLANES * n + SEPARATION_SAMPLES
-    pattern = np.zeros((rows, nv))
-    diff = np.zeros((2 * degree + na, nv))  # velocity (per degree / T) and acceleration (per d (d-1) / T^2) rows
-    for axis in range(2):
-        for i in range(degree):
-            diff[axis * degree + i, axis * n + i:axis * n + i + 2] = (-1.0, 1.0)
+
+    def __init__(self, degree: int) -> None:
+        n = degree + 1
+        nv = 2 * n
+        # integral of |r''|^2 up to a constant factor: the squared second differences (the time scale only
+        # scales the objective, so the Hessian is a constant)
+        d2 = np.zeros((degree - 1, n))
         for i in range(degree - 1):
-            diff[2 * degree + axis * (degree - 1) + i, axis * n + i:axis * n + i + 3] = (1.0, -2.0, 1.0)
-    pattern[:2 * degree + na] = diff != 0.0
-    pattern[2 * degree + na:] = 1.0
-    solver = ca.conic("replan_qp", "daqp", {"h": ca.DM(hess).sparsity(), "a": ca.DM(pattern).sparsity()},
-                      {"error_on_fail": False})
-    return solver, hess, rows, diff
+            d2[i, i:i + 3] = (1.0, -2.0, 1.0)
+        hess = np.zeros((nv, nv))
+        hess[:n, :n] = hess[n:, n:] = 2.0 * d2.T @ d2
+        hess += 2.0 * _REG * np.eye(nv)
+        na = 2 * (degree - 1)  # acceleration control points, both axes
+        self.rows = 2 * degree + na + MAX_HALF_PLANES * n + SEPARATION_SAMPLES
+        diff = np.zeros((2 * degree + na, nv))  # velocity (per degree / T) and acceleration (per d (d-1) / T^2) rows
+        for axis in range(2):
+            for i in range(degree):
+                diff[axis * degree + i, axis * n + i:axis * n + i + 2] = (-1.0, 1.0)
+            for i in range(degree - 1):
+                diff[2 * degree + axis * (degree - 1) + i, axis * n + i:axis * n + i + 3] = (1.0, -2.0, 1.0)
+        self.diff = diff
+        # dense sparsities (the matrices are passed whole): nonzeros are the entries in column-major order
+        self.solver = ca.conic("replan_qp", "daqp", {"h": ca.Sparsity.dense(nv, nv),
+                                                     "a": ca.Sparsity.dense(self.rows, nv)}, {"error_on_fail": False})
+        self.hess = hess
+        self.fixed = [0, 1, n - 2, n - 1, n, n + 1, 2 * n - 2, 2 * n - 1]  # the end states' control points
+        self.ramp = np.arange(n, dtype=float)
+        self.index = np.arange(n)
+        self._local = threading.local()
+
+    def buffers(self) -> dict[str, np.ndarray]:
+        """This thread's bound arrays: inputs ``h, g, a`` (a in column-major order), ``lba, uba, lbx, ubx``
+        (and zero warm starts), output ``x``."""
+        arrays = getattr(self._local, "arrays", None)
+        if arrays is None:
+            solver = self.solver
+            buffer, evaluate = solver.buffer()
+            arrays = {name: np.zeros(solver.nnz_in(i)) for i, name in enumerate(solver.name_in())}
+            arrays["h"][:] = self.hess.ravel(order="F")
+            for i, name in enumerate(solver.name_in()):
+                buffer.set_arg(i, memoryview(arrays[name]))
+            out = {name: np.zeros(solver.nnz_out(i)) for i, name in enumerate(solver.name_out())}
+            for i, name in enumerate(solver.name_out()):
+                buffer.set_res(i, memoryview(out[name]))
+            arrays["x"] = out["x"]
+            arrays["A"] = arrays["a"].reshape(self.hess.shape[0], self.rows).T  # (rows, nv) view, column-major
+            # the buffer holds raw pointers: every bound array (the unused outputs too) must outlive it
+            self._local.arrays, self._local.out = arrays, out
+            self._local.buffer, self._local.evaluate = buffer, evaluate
+        return arrays
+
+    def solve(self) -> bool:
+        """Solve with the numbers in :meth:`buffers`; True if DAQP reports success (the result is in ``x``)."""
+        self._local.evaluate()
+        return bool(self._local.buffer.stats()["success"])
+
+
+@lru_cache(maxsize=4)
+def _qp(degree: int) -> _SegmentQP:
+    return _SegmentQP(degree)
 
 
 def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree: int = DEGREE,
@@ -197,17 +242,19 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
 
     ``around`` is the segment the separation rows are linearised about (default: the Hermite cubic).
     """
-    solver, hess, rows, diff = _qp(degree)
+    qp = _qp(degree)
+    buf = qp.buffers()
+    diff = qp.diff
     n = degree + 1
     T = t1 - t0
     p0, v0, p1, v1 = (np.asarray(a, float) for a in (p0, v0, p1, v1))
-    A = np.zeros((rows, 2 * n))
-    lba = np.full(rows, -np.inf)
-    uba = np.full(rows, np.inf)
+    A, lba, uba, lbx, ubx = buf["A"], buf["lba"], buf["uba"], buf["lbx"], buf["ubx"]
+    lba[:], uba[:] = -np.inf, np.inf
     k = degree / T
     na = 2 * (degree - 1)
     A[:2 * degree] = k * diff[:2 * degree]  # velocity control points (Eq. 25)
     A[2 * degree:2 * degree + na] = degree * (degree - 1) / T ** 2 * diff[2 * degree:]  # acceleration ones
+    A[2 * degree + na:] = 0.0
     for axis in range(2):
         if velocity_bound is not None:
             lba[axis * degree:(axis + 1) * degree] = -float(velocity_bound[axis])
@@ -215,23 +262,23 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
         if acceleration_bound is not None:
             rows_a = slice(2 * degree + axis * (degree - 1), 2 * degree + (axis + 1) * (degree - 1))
             lba[rows_a], uba[rows_a] = -float(acceleration_bound[axis]), float(acceleration_bound[axis])
-    lbx = np.full(2 * n, -np.inf)
-    ubx = np.full(2 * n, np.inf)
     if limits is not None and limits.box is not None:
         x0, x1, y0, y1 = limits.box
         # never ask the fixed ends to move: a robot touching the boundary starts on it
         lbx[:n], ubx[:n] = min(x0, p0[0], p1[0]), max(x1, p0[0], p1[0])
         lbx[n:], ubx[n:] = min(y0, p0[1], p1[1]), max(y1, p0[1], p1[1])
+    else:
+        lbx[:], ubx[:] = -np.inf, np.inf
     # end states: the first two and last two control points of each axis (Eq. 8 at s = 0 and 1)
-    fixed = [0, 1, n - 2, n - 1, n, n + 1, 2 * n - 2, 2 * n - 1]
+    fixed = qp.fixed
     values = [p0[0], p0[0] + v0[0] / k, p1[0] - v1[0] / k, p1[0], p0[1], p0[1] + v0[1] / k, p1[1] - v1[1] / k, p1[1]]
     lbx[fixed] = ubx[fixed] = values
     if limits is not None:
         r = 2 * degree + na
+        idx = qp.index
         for normal, offset in limits.half_planes[:MAX_HALF_PLANES]:
             normal = np.asarray(normal, float)
             lo = min(offset, normal @ p0, normal @ p1)  # never ask the fixed ends to move
-            idx = np.arange(n)
             A[r + idx, idx] = normal[0]
             A[r + idx, n + idx] = normal[1]
             lba[r:r + n] = lo
@@ -243,16 +290,29 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
             A[r, :n], A[r, n:] = normal[0] * w, normal[1] * w
             lba[r] = offset
             r += 1
-    line = np.concatenate([np.linspace(p0[0], p1[0], n), np.linspace(p0[1], p1[1], n)])
-    sol = solver(h=hess, g=-2.0 * _REG * line, a=A, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
-    if not solver.stats()["success"]:
+    g = buf["g"]  # a pull toward the straight line (the Tikhonov term)
+    g[:n], g[n:] = _linspace(p0[0], p1[0], qp.ramp), _linspace(p0[1], p1[1], qp.ramp)
+    g *= -2.0 * _REG
+    if not qp.solve():
         return None
-    x = sol["x"].full().ravel()
+    x = buf["x"]
     seg = Segment(t0, t1, np.column_stack([x[:n], x[n:]]))
     if not within_bounds(seg, None if velocity_bound is None else np.asarray(velocity_bound) + 1e-6,
                          None if acceleration_bound is None else np.asarray(acceleration_bound) + 1e-6):
         return None
     return seg
+
+
+def _linspace(start: float, stop: float, ramp: np.ndarray) -> np.ndarray:
+    """``np.linspace(start, stop, len(ramp))`` with ``ramp = arange(len)``, computed the same way (the same
+    numbers to the last bit) without its argument handling, which was a tenth of a QP call."""
+    div = len(ramp) - 1
+    delta = stop - start
+    step = delta / div
+    y = ramp / div * delta if step == 0 else ramp * step
+    y += start
+    y[-1] = stop
+    return y
 
 
 def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
