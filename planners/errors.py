@@ -40,6 +40,10 @@ class MPCInputError(PlannerError, ValueError):
     """A configuration value or a solve() input of the MPC has the wrong shape, range or is not finite."""
 
 
+class ReplanInputError(PlannerError, ValueError):
+    """An online replanner input out of range: a segment's times out of order, its duration, degree or bounds."""
+
+
 class PlanCheckError(PlannerError, ValueError):
     """A plan violates continuity, bounds, thrust limits or the impact law; lists every violation."""
 
@@ -83,5 +87,5 @@ class SmtNoPlanError(PlannerError):
 
 PLANNER_ERRORS: tuple[type[ImpactEnvError], ...] = (
     PlannerError, UnsupportedSpecError, SolverNotAvailableError, InfeasiblePlanError, PlanTimeoutError, MPCInputError,
-    PlanCheckError, DecompositionError, TetherInfeasibleError, TetherPlanCheckError, SmtNoPlanError,
+    ReplanInputError, PlanCheckError, DecompositionError, TetherInfeasibleError, TetherPlanCheckError, SmtNoPlanError,
 )

@@ -40,6 +40,8 @@ import casadi as ca
 import numpy as np
 
 from planners import bezier
+from planners.errors import ReplanInputError
+from planners.online.segment_feasibility import FEASIBILITY_TOL, bounds_feasible
 from planners.plan import Segment
 
 DEGREE = 10
@@ -157,6 +159,8 @@ def respects(segment: Segment, velocity_bound, limits: SegmentLimits | None, tol
 # condition number (1e9) let DAQP report optimal with bounds broken by 0.5 mm; at 1e-6 they hold to 1e-12
 # and the optimum moves by under 1 um.
 _REG = 1e-6
+FIXED_TOL_M = 1e-9  # how far an accepted answer may move a bounded control point (the fixed ones: not at all)
+ROW_TOL = FEASIBILITY_TOL  # m/s, m/s^2 or m: how far an accepted answer may break a row's bound
 
 
 class _SegmentQP:
@@ -223,9 +227,26 @@ class _SegmentQP:
         return arrays
 
     def solve(self) -> bool:
-        """Solve with the numbers in :meth:`buffers`; True if DAQP reports success (the result is in ``x``)."""
+        """Solve with the numbers in :meth:`buffers`; True if DAQP reports success and its answer ``x`` keeps
+        what the QP asked (:meth:`answer_holds`)."""
         self._local.evaluate()
-        return bool(self._local.buffer.stats()["success"])
+        return bool(self._local.buffer.stats()["success"]) and self.answer_holds()
+
+    def answer_holds(self) -> bool:
+        """True if ``x`` keeps the variables' bounds (the fixed end states among them) to ``FIXED_TOL_M`` and
+        every row to ``ROW_TOL``.
+
+        DAQP reports success on some infeasible QPs (a known DAQP defect, darnstrom/daqp#82): the answer then
+        keeps the rows but moves the fixed control points, by up to 5 cm in the relay episodes, so the segment
+        misses the contact it was for (``tests/test_segment_feasibility.py`` has such a QP). On feasible QPs
+        the fixed points hold to 1e-11 m and the rows to 1e-12: the tolerances separate the two by orders of
+        magnitude (the moved answers moved them by 1e-6 m and more)."""
+        arrays = self._local.arrays
+        x = arrays["x"]
+        if not ((x >= arrays["lbx"] - FIXED_TOL_M) & (x <= arrays["ubx"] + FIXED_TOL_M)).all():
+            return False
+        rows = arrays["A"] @ x
+        return bool(((rows >= arrays["lba"] - ROW_TOL) & (rows <= arrays["uba"] + ROW_TOL)).all())
 
 
 @lru_cache(maxsize=4)
@@ -293,14 +314,10 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
     g = buf["g"]  # a pull toward the straight line (the Tikhonov term)
     g[:n], g[n:] = _linspace(p0[0], p1[0], qp.ramp), _linspace(p0[1], p1[1], qp.ramp)
     g *= -2.0 * _REG
-    if not qp.solve():
+    if not qp.solve():  # infeasible, or an answer that breaks what was asked (see _SegmentQP.answer_holds)
         return None
     x = buf["x"]
-    seg = Segment(t0, t1, np.column_stack([x[:n], x[n:]]))
-    if not within_bounds(seg, None if velocity_bound is None else np.asarray(velocity_bound) + 1e-6,
-                         None if acceleration_bound is None else np.asarray(acceleration_bound) + 1e-6):
-        return None
-    return seg
+    return Segment(t0, t1, np.column_stack([x[:n], x[n:]]))
 
 
 def _linspace(start: float, stop: float, ramp: np.ndarray) -> np.ndarray:
@@ -321,20 +338,33 @@ def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
 
     the closed form if it respects everything; else the QP with every bound and limit; else without the
     limits (the MPC's keep-offs still guard walls and robots) but flyable (acceleration bound); else with the
-    velocity bound alone (the paper's replanner); else the closed form."""
+    velocity bound alone (the paper's replanner); else the closed form.
+
+    The end states are never given up: every answer starts at (p0, v0) and ends at (p1, v1) exactly. When
+    the acceleration bound cannot be met with them (the robot is too far from the contact, or too fast, for
+    the thrust it has in the time left), the segment asks for more thrust than the robot has and the MPC's
+    thrust limits decide how close it gets; the approach is replanned from the new state at the next step.
+    The closed-form test :func:`~planners.online.segment_feasibility.bounds_feasible` recognises that case
+    before any QP is solved (it proves both flyable QPs infeasible), and the velocity-only one likewise."""
     segment = hermite(p0, v0, p1, v1, t0, t1)
     if respects(segment, velocity_bound, limits, acceleration_bound=acceleration_bound):
         return segment
+    T = t1 - t0
+    flyable = bounds_feasible(p0, v0, p1, v1, T, DEGREE, velocity_bound, acceleration_bound)
     attempts = []
-    if limits is not None:
-        attempts.append((limits, acceleration_bound))
-    if acceleration_bound is not None:
-        attempts.append((None, acceleration_bound))
+    if flyable:
+        if limits is not None:
+            attempts.append((limits, acceleration_bound))
+        if acceleration_bound is not None:
+            attempts.append((None, acceleration_bound))
     for lim, acc in attempts:
         qp = bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound, limits=lim, acceleration_bound=acc)
         if qp is not None:
             return qp
     if within_bounds(segment, velocity_bound):
+        return segment
+    if not (flyable or (acceleration_bound is not None and bounds_feasible(p0, v0, p1, v1, T, DEGREE,
+                                                                           velocity_bound))):
         return segment
     return bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound) or segment
 
@@ -344,7 +374,7 @@ def replan_around_impact(t_now: float, position, velocity, t_impact: float, cont
                          limits: SegmentLimits | None = None, acceleration_bound=None) -> tuple[Segment, Segment]:
     """The robot's new pre- and post-impact segments (see the module docstring)."""
     if not t_now < t_impact < t_rejoin:
-        raise ValueError(f"need t_now < t_impact < t_rejoin, got {t_now}, {t_impact}, {t_rejoin}")
+        raise ReplanInputError(f"need t_now < t_impact < t_rejoin, got {t_now}, {t_impact}, {t_rejoin}")
     pre = replan_segment(position, velocity, contact.robot_position, contact.robot_velocity_before, t_now, t_impact,
                          velocity_bound, limits, acceleration_bound)
     post = replan_segment(contact.robot_position, contact.robot_velocity_after, rejoin_position, rejoin_velocity,
