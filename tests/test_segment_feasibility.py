@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import event, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linprog
 
@@ -13,7 +13,7 @@ from planners import bezier
 from planners.errors import ReplanInputError
 from planners.online import replanner
 from planners.online.replanner import DEGREE, SegmentLimits, _qp, bounded_segment, replan_segment, within_bounds
-from planners.online.segment_feasibility import bounds_feasible, velocity_sum_range
+from planners.online.segment_feasibility import bounds_feasible, least_acceleration_bound, velocity_sum_range
 
 # A relay approach (ExpertConfig(), combined condition: e +-0.2, 10 cm start offset, 10 % thrust noise, seed 1,
 # robot R2 at t = 23.4 s on its way to a contact at t = 25 s): the robot flies away from the contact at
@@ -80,7 +80,9 @@ def test_an_infeasible_qp_that_daqp_calls_solved_gives_no_segment_and_the_replan
     assert within_bounds(replanned, RELAY_BOUNDS["velocity_bound"])  # the velocity bound can be met, and is
 
 
-def test_replan_segment_solves_no_flyable_qp_when_the_closed_form_proves_it_infeasible(monkeypatch):
+def test_replan_segment_raises_the_acceleration_bound_to_the_least_that_meets_the_contact(monkeypatch):
+    """Infeasible under the thrust limit (the closed form says so before any QP): the QPs get the least
+    acceleration bound that joins the end states instead, on the axis that needs it."""
     calls = []
     real = replanner.bounded_segment
 
@@ -89,13 +91,24 @@ def test_replan_segment_solves_no_flyable_qp_when_the_closed_form_proves_it_infe
         return real(*args, **kwargs)
 
     monkeypatch.setattr(replanner, "bounded_segment", counting)
-    replan_segment(*_args(RELAY_CASE), limits=SegmentLimits(box=RELAY_BOX), **RELAY_BOUNDS)
-    assert all(acc is None for acc in calls)  # at most the velocity-only QP
+    duration = RELAY_CASE["t1"] - RELAY_CASE["t0"]
+    least = least_acceleration_bound(RELAY_CASE["p0"], RELAY_CASE["v0"], RELAY_CASE["p1"], RELAY_CASE["v1"],
+                                     duration, DEGREE, **RELAY_BOUNDS)
+    assert least[0] > 1.9 * RELAY_BOUNDS["acceleration_bound"][0]  # x must turn around: about 0.26 m/s^2
+    assert least[1] == RELAY_BOUNDS["acceleration_bound"][1]  # y can be flown
+    seg = replan_segment(*_args(RELAY_CASE), limits=SegmentLimits(box=RELAY_BOX), **RELAY_BOUNDS)
+    assert len(calls) == 1  # one QP, with the limits and the raised bound: the two flyable ones are skipped
+    raised = np.asarray(calls[0])
+    np.testing.assert_allclose(raised, (least[0] * (1 + replanner.RAISED_MARGIN) + 1e-6, least[1]))
+    assert within_bounds(seg, RELAY_BOUNDS["velocity_bound"], raised + 1e-6)
+    peak = np.abs(seg.acceleration_control_points()).max(axis=0)
+    assert peak[0] > least[0] * (1 - 1e-6)  # no segment asks for less
+    assert max(_ends(seg, RELAY_CASE)) < 1e-8
     calls.clear()
-    # 2 s more make the turn flyable (not by the Hermite cubic): the QP with the limits is solved and kept
+    # 2 s more make the turn flyable (not by the Hermite cubic): the QP with the limits and the thrust limit
     slow = dict(RELAY_CASE, t1=RELAY_CASE["t1"] + 2.0)
     seg = replan_segment(*_args(slow), limits=SegmentLimits(box=RELAY_BOX), **RELAY_BOUNDS)
-    assert calls and calls[0] is not None
+    assert calls == [RELAY_BOUNDS["acceleration_bound"]]
     assert within_bounds(seg, RELAY_BOUNDS["velocity_bound"], np.add(RELAY_BOUNDS["acceleration_bound"], 1e-6))
     assert max(_ends(seg, slow)) < 1e-8
 
@@ -143,43 +156,64 @@ def test_bounds_feasible_rejects_bad_input_naming_the_field(bad):
         bounds_feasible((0, 0), (0, 0), (1, 0), (0, 0), **kwargs)
 
 
-_pair = st.tuples
+@st.composite
+def segment_problems(draw) -> tuple:
+    """(p0, v0, p1, v1, duration_s, degree), velocity_bound, acceleration_bound: end velocities as fractions
+    of the bound (a few beyond it), the acceleration bound a multiple of the least that joins them (a few
+    below), the run such that the mean velocity falls from 15 % below to 15 % above the range the closed form
+    gives (its ends too). About half the cases are feasible, many on the boundary; the LP is the judge."""
+    fraction, pair = st.floats(-1.02, 1.02), st.tuples
+    duration_s = draw(st.floats(0.1, 12.0))
+    degree = draw(st.sampled_from([3, 4, 10]))
+    velocity_bound = draw(st.one_of(st.none(), pair(st.floats(0.05, 0.5), st.floats(0.05, 0.5))))
+    scale = np.full(2, 0.3) if velocity_bound is None else np.asarray(velocity_bound)
+    v0 = np.asarray(draw(pair(fraction, fraction))) * scale
+    v1 = np.asarray(draw(pair(fraction, fraction))) * scale
+    turn = np.asarray(draw(pair(st.floats(0.9, 4.0), st.floats(0.9, 4.0))))
+    acceleration_bound = tuple(turn * np.abs(v1 - v0) / duration_s + 1e-4) if draw(st.booleans()) else None
+    low, high = velocity_sum_range(v0, v1, duration_s, degree, velocity_bound, acceleration_bound)
+    low, high = np.where(np.isfinite(low), low, -degree * 0.5), np.where(np.isfinite(high), high, degree * 0.5)
+    where = st.one_of(st.floats(-0.15, 1.15), st.sampled_from([0.0, 1.0]))
+    p0 = np.array([0.4, -0.2])
+    p1 = p0 + (low + np.asarray(draw(pair(where, where))) * (high - low)) * duration_s / degree
+    return (p0, v0, p1, v1, duration_s, degree), velocity_bound, acceleration_bound
+
+
+def _shifted(bound, delta: float, relative: float = 0.0):
+    return None if bound is None else tuple(max(b * (1 + relative) + delta, 0.0) for b in bound)
 
 
 @settings(max_examples=300, deadline=None)
-@given(duration_s=st.floats(0.1, 12.0), degree=st.sampled_from([3, 4, 10]),
-       velocity_bound=st.one_of(st.none(), _pair(st.floats(0.05, 0.5), st.floats(0.05, 0.5))),
-       has_acceleration_bound=st.booleans(),
-       start=_pair(st.floats(-1.02, 1.02), st.floats(-1.02, 1.02)),
-       end=_pair(st.floats(-1.02, 1.02), st.floats(-1.02, 1.02)),
-       turn=_pair(st.floats(0.9, 4.0), st.floats(0.9, 4.0)),
-       where=_pair(st.one_of(st.floats(-0.15, 1.15), st.sampled_from([0.0, 1.0])),
-                   st.one_of(st.floats(-0.15, 1.15), st.sampled_from([0.0, 1.0]))))
-def test_bounds_feasible_agrees_with_an_lp_solver(duration_s, degree, velocity_bound, has_acceleration_bound, start,
-                                                  end, turn, where):
+@given(case=segment_problems())
+def test_bounds_feasible_agrees_with_an_lp_solver(case):
     """Sound: a False is never given to a feasible problem. Exact: it agrees with HiGHS wherever HiGHS's
-    verdict is robust (the same with the bounds 1e-6 tighter and 1e-6 looser).
-
-    End velocities are drawn as fractions of the bound (a few beyond it), the acceleration bound as a multiple
-    of the least that joins them (a few below), the run so that the mean velocity falls from 15 % below to
-    15 % above the range the closed form gives (its ends too): about half the cases are feasible, many on
-    the boundary. The LP is the judge."""
-    scale = np.full(2, 0.3) if velocity_bound is None else np.asarray(velocity_bound)
-    v0, v1 = np.asarray(start) * scale, np.asarray(end) * scale
-    acceleration_bound = tuple(np.asarray(turn) * np.abs(v1 - v0) / duration_s + 1e-4) \
-        if has_acceleration_bound else None
-    low, high = velocity_sum_range(v0, v1, duration_s, degree, velocity_bound, acceleration_bound)
-    low, high = np.where(np.isfinite(low), low, -degree * 0.5), np.where(np.isfinite(high), high, degree * 0.5)
-    p0 = np.array([0.4, -0.2])
-    p1 = p0 + (low + np.asarray(where) * (high - low)) * duration_s / degree
-    problem = (p0, v0, p1, v1, duration_s, degree)
+    verdict is robust (the same with the bounds 1e-6 tighter and 1e-6 looser)."""
+    problem, velocity_bound, acceleration_bound = case
     if not bounds_feasible(*problem, velocity_bound, acceleration_bound):
+        event("infeasible")
         assert not _lp_feasible(*problem, velocity_bound, acceleration_bound)
-
-    def shifted(bound, delta):
-        return None if bound is None else tuple(max(b + delta, 0.0) for b in bound)
-
-    tight = _lp_feasible(*problem, shifted(velocity_bound, -1e-6), shifted(acceleration_bound, -1e-6))
-    loose = _lp_feasible(*problem, shifted(velocity_bound, 1e-6), shifted(acceleration_bound, 1e-6))
+    else:
+        event("feasible")
+    tight = _lp_feasible(*problem, _shifted(velocity_bound, -1e-6), _shifted(acceleration_bound, -1e-6))
+    loose = _lp_feasible(*problem, _shifted(velocity_bound, 1e-6), _shifted(acceleration_bound, 1e-6))
     if tight == loose:
         assert bounds_feasible(*problem, velocity_bound, acceleration_bound, tol=0.0) == tight
+
+
+@settings(max_examples=150, deadline=None)
+@given(case=segment_problems())
+def test_least_acceleration_bound_is_the_least_that_an_lp_solver_finds_feasible(case):
+    problem, velocity_bound, acceleration_bound = case
+    given_bound = (0.1, 0.1) if acceleration_bound is None else acceleration_bound
+    least = least_acceleration_bound(*problem, velocity_bound, given_bound, tol=0.0)
+    event("velocity bound unmet" if least is None else "raised" if (least > given_bound).any() else "as given")
+    if least is None:  # only when the velocity bound cannot be met, whatever the thrust (or by 1e-6 at most)
+        assert not _lp_feasible(*problem, _shifted(velocity_bound, -1e-6), None)
+        return
+    assert (least >= np.asarray(given_bound)).all()
+    assert _lp_feasible(*problem, velocity_bound, _shifted(least, 1e-7, 1e-5))
+    for axis in range(2):
+        if least[axis] > given_bound[axis] * (1 + 1e-4) + 1e-6:  # raised: a little less is not enough
+            lower = least.copy()
+            lower[axis] = least[axis] * (1 - 1e-4) - 1e-6
+            assert not _lp_feasible(*problem, velocity_bound, tuple(lower))

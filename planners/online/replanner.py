@@ -41,7 +41,7 @@ import numpy as np
 
 from planners import bezier
 from planners.errors import ReplanInputError
-from planners.online.segment_feasibility import FEASIBILITY_TOL, bounds_feasible
+from planners.online.segment_feasibility import FEASIBILITY_TOL, bounds_feasible, least_acceleration_bound
 from planners.plan import Segment
 
 DEGREE = 10
@@ -161,6 +161,9 @@ def respects(segment: Segment, velocity_bound, limits: SegmentLimits | None, tol
 _REG = 1e-6
 FIXED_TOL_M = 1e-9  # how far an accepted answer may move a bounded control point (the fixed ones: not at all)
 ROW_TOL = FEASIBILITY_TOL  # m/s, m/s^2 or m: how far an accepted answer may break a row's bound
+# a raised acceleration bound is this much (relative) above the least one: at the least one the QP's feasible set
+# can be a single point
+RAISED_MARGIN = 1e-3
 
 
 class _SegmentQP:
@@ -338,33 +341,37 @@ def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
 
     the closed form if it respects everything; else the QP with every bound and limit; else without the
     limits (the MPC's keep-offs still guard walls and robots) but flyable (acceleration bound); else with the
-    velocity bound alone (the paper's replanner); else the closed form.
+    velocity bound alone (the paper's replanner); else the closed form. If no flyable segment exists, the
+    acceleration bound of those QPs is the least that can be met (below).
 
-    The end states are never given up: every answer starts at (p0, v0) and ends at (p1, v1) exactly. When
-    the acceleration bound cannot be met with them (the robot is too far from the contact, or too fast, for
-    the thrust it has in the time left), the segment asks for more thrust than the robot has and the MPC's
-    thrust limits decide how close it gets; the approach is replanned from the new state at the next step.
-    The closed-form test :func:`~planners.online.segment_feasibility.bounds_feasible` recognises that case
-    before any QP is solved (it proves both flyable QPs infeasible), and the velocity-only one likewise."""
+    The end states are never given up: every answer starts at (p0, v0) and ends at (p1, v1) (a QP answer
+    that does not is no answer, see :meth:`_SegmentQP.answer_holds`). When no flyable segment joins them (the
+    robot is too far from the contact, or too fast, for the thrust it has in the time left), which the
+    closed-form test :func:`~planners.online.segment_feasibility.bounds_feasible` tells before any QP is
+    solved, the acceleration bound of the axes that need it is raised to the least that can
+    (:func:`~planners.online.segment_feasibility.least_acceleration_bound`, plus ``RAISED_MARGIN``): the
+    segment then asks for as little thrust beyond the robot's as the contact allows, and the MPC's thrust
+    limits decide how close the robot gets; the approach is replanned from the new state at the next step.
+    Only if the velocity bound cannot be met either (the robot or the contact faster than the bound) does
+    the closed form remain."""
     segment = hermite(p0, v0, p1, v1, t0, t1)
     if respects(segment, velocity_bound, limits, acceleration_bound=acceleration_bound):
         return segment
     T = t1 - t0
-    flyable = bounds_feasible(p0, v0, p1, v1, T, DEGREE, velocity_bound, acceleration_bound)
-    attempts = []
-    if flyable:
-        if limits is not None:
-            attempts.append((limits, acceleration_bound))
-        if acceleration_bound is not None:
-            attempts.append((None, acceleration_bound))
-    for lim, acc in attempts:
-        qp = bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound, limits=lim, acceleration_bound=acc)
+    acc = acceleration_bound
+    if not bounds_feasible(p0, v0, p1, v1, T, DEGREE, velocity_bound, acc):
+        least = None if acc is None else least_acceleration_bound(p0, v0, p1, v1, T, DEGREE, velocity_bound, acc)
+        if least is None:  # not even the velocity bound can be kept
+            return segment
+        acc = np.where(least > acc, least * (1.0 + RAISED_MARGIN) + FEASIBILITY_TOL, acc)
+    attempts = [(limits, acc)] if limits is not None else []
+    if acc is not None:
+        attempts.append((None, acc))
+    for lim, bound in attempts:
+        qp = bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound, limits=lim, acceleration_bound=bound)
         if qp is not None:
             return qp
     if within_bounds(segment, velocity_bound):
-        return segment
-    if not (flyable or (acceleration_bound is not None and bounds_feasible(p0, v0, p1, v1, T, DEGREE,
-                                                                           velocity_bound))):
         return segment
     return bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound) or segment
 

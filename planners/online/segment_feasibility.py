@@ -37,6 +37,17 @@ infinite, without an acceleration bound h is (then u is v0, V, ..., V, v1).
 proves every QP with these end states and bounds infeasible (limits or not), a True one proves the QP without
 limits feasible. ``tol`` loosens the test (bounds and S) by the tolerance the replanner accepts an answer with,
 so it never rules out a segment the replanner would accept, whatever the rounding.
+
+**The least acceleration bound** (:func:`least_acceleration_bound`). When the thrust cannot join the end
+states in the time left, the replanner raises the acceleration bound of the axes that need it to the least
+value that can. Each term of ``u_i`` is nondecreasing in h and each of ``l_i`` nonincreasing, so ``sum u`` is
+nondecreasing and ``sum l`` nonincreasing in h, and the h that pass (c) form a ray ``[h*, inf)`` (or none: with
+a velocity bound, ``sum u`` stops growing once every u_i is V). Both sums are piecewise linear in h, with
+kinks only where two terms of a min (max) are equal: ``h = (V - v0) / i`` and ``(V - v1) / (m - i)`` for
+u, ``(V + v0) / i`` and ``(V + v1) / (m - i)`` for l, and where the two slopes cross,
+``(v1 - v0) / (2 i - m)``, for both. Evaluated at those kinks, each sum is inverted exactly by linear
+interpolation between the two kinks that bracket S; past the last kink every term is on its final piece (V,
+or without a velocity bound the one of slope ``min(i, m - i)``), so the sums continue with a known slope.
 """
 
 from __future__ import annotations
@@ -67,12 +78,7 @@ def velocity_sum_range(v0, v1, duration_s: float, degree: int, velocity_bound=No
     return v0 + v1 + lower.sum(axis=0), v0 + v1 + upper.sum(axis=0)
 
 
-def bounds_feasible(p0, v0, p1, v1, duration_s: float, degree: int, velocity_bound=None,
-                    acceleration_bound=None, tol: float = FEASIBILITY_TOL) -> bool:
-    """True if a degree-``degree`` Bezier curve of duration ``duration_s`` s joins (p0, v0) to (p1, v1) with
-    its velocity control points within ``velocity_bound`` (m/s per axis) and its acceleration control points
-    within ``acceleration_bound`` (m/s^2 per axis), each loosened by ``tol``; exact (see the module
-    docstring). Either bound may be None (no bound)."""
+def _check(duration_s: float, degree: int, velocity_bound, acceleration_bound) -> None:
     if not degree >= 3:
         raise ReplanInputError(f"degree must be >= 3 (two fixed control points at each end), got {degree}")
     if not duration_s > 0:
@@ -80,6 +86,15 @@ def bounds_feasible(p0, v0, p1, v1, duration_s: float, degree: int, velocity_bou
     for name, bound in (("velocity_bound", velocity_bound), ("acceleration_bound", acceleration_bound)):
         if bound is not None and not (np.asarray(bound, float) >= 0).all():
             raise ReplanInputError(f"{name} must be >= 0 per axis (or None), got {bound}")
+
+
+def bounds_feasible(p0, v0, p1, v1, duration_s: float, degree: int, velocity_bound=None,
+                    acceleration_bound=None, tol: float = FEASIBILITY_TOL) -> bool:
+    """True if a degree-``degree`` Bezier curve of duration ``duration_s`` s joins (p0, v0) to (p1, v1) with
+    its velocity control points within ``velocity_bound`` (m/s per axis) and its acceleration control points
+    within ``acceleration_bound`` (m/s^2 per axis), each loosened by ``tol``; exact (see the module
+    docstring). Either bound may be None (no bound)."""
+    _check(duration_s, degree, velocity_bound, acceleration_bound)
     v0, v1 = np.asarray(v0, float), np.asarray(v1, float)
     velocity_bound = None if velocity_bound is None else np.asarray(velocity_bound, float) + tol
     if acceleration_bound is not None:
@@ -92,4 +107,56 @@ def bounds_feasible(p0, v0, p1, v1, duration_s: float, degree: int, velocity_bou
     return bool(((low - slack <= s) & (s <= high + slack)).all())
 
 
-__all__ = ["FEASIBILITY_TOL", "bounds_feasible", "velocity_sum_range"]
+def least_acceleration_bound(p0, v0, p1, v1, duration_s: float, degree: int, velocity_bound,
+                             acceleration_bound, tol: float = FEASIBILITY_TOL) -> np.ndarray | None:
+    """Per axis, the least acceleration bound (m/s^2), no lower than ``acceleration_bound``, with which a
+    degree-``degree`` curve of duration ``duration_s`` s joins (p0, v0) to (p1, v1) within ``velocity_bound``
+    (m/s per axis, or None); None if the velocity bound alone cannot be met (then no acceleration can). Exact
+    (see the module docstring); ``tol`` loosens the velocity bound as in :func:`bounds_feasible`."""
+    _check(duration_s, degree, velocity_bound, acceleration_bound)
+    v0, v1 = np.asarray(v0, float), np.asarray(v1, float)
+    bound = np.full(2, np.inf) if velocity_bound is None else np.asarray(velocity_bound, float) + tol
+    if ((np.abs(v0) > bound) | (np.abs(v1) > bound)).any():
+        return None
+    m = degree - 1
+    s = degree * (np.asarray(p1, float) - np.asarray(p0, float)) / duration_s
+    out = np.array(acceleration_bound, dtype=float)
+    for axis in range(2):
+        step = _least_step(v0[axis], v1[axis], s[axis], m, bound[axis], out[axis] * duration_s / m)
+        if not np.isfinite(step):
+            return None
+        out[axis] = max(out[axis], step * m / duration_s)
+    return out
+
+
+def _least_step(v0: float, v1: float, s: float, m: int, bound: float, step0: float) -> float:
+    """The least h >= step0 with ``sum l(h) <= s <= sum u(h)`` (one axis; inf if none)."""
+    i = np.arange(1, m, dtype=float)
+    j = m - i
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # (v0 - v1) / (2 i - m) is the same set as (v1 - v0) / (2 i - m): i and m - i swap
+        kinks = np.concatenate([(bound - v0) / i, (bound + v0) / i, (bound - v1) / j, (bound + v1) / j,
+                                (v1 - v0) / (2 * i - m)])
+    kinks = kinks[np.isfinite(kinks) & (kinks > step0)]
+    h = np.unique(np.concatenate([[step0], kinks]))
+    upper = v0 + v1 + np.minimum(np.minimum(v0 + np.outer(h, i), v1 + np.outer(h, j)), bound).sum(axis=1)
+    lower = v0 + v1 + np.maximum(np.maximum(v0 - np.outer(h, i), v1 - np.outer(h, j)), -bound).sum(axis=1)
+    # past the last kink every term is on its final piece: V (slope 0) with a velocity bound, else the
+    # smaller of the two slopes i and m - i
+    ray = 0.0 if np.isfinite(bound) else float(np.minimum(i, j).sum())
+    return max(_least_reaching(h, upper, s, ray), _least_reaching(h, -lower, -s, ray))
+
+
+def _least_reaching(h: np.ndarray, values: np.ndarray, target: float, ray_slope: float) -> float:
+    """The least x >= h[0] at which the nondecreasing piecewise-linear function through (h, values), continued
+    with slope ``ray_slope`` past h[-1], reaches ``target`` (inf if it never does)."""
+    reached = values >= target
+    if reached[0]:
+        return float(h[0])
+    if not reached.any():
+        return float(h[-1] + (target - values[-1]) / ray_slope) if ray_slope > 0 else np.inf
+    k = int(np.argmax(reached))
+    return float(h[k - 1] + (target - values[k - 1]) * (h[k] - h[k - 1]) / (values[k] - values[k - 1]))
+
+
+__all__ = ["FEASIBILITY_TOL", "bounds_feasible", "least_acceleration_bound", "velocity_sum_range"]
