@@ -52,6 +52,8 @@ or without a velocity bound the one of slope ``min(i, m - i)``), so the sums con
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from planners.errors import ReplanInputError
@@ -64,18 +66,24 @@ def velocity_sum_range(v0, v1, duration_s: float, degree: int, velocity_bound=No
     """Per axis, the least and the largest sum of the velocity control points that a degree-``degree`` curve
     from velocity ``v0`` to ``v1`` can have within the bounds (``sum l`` and ``sum u`` of the module
     docstring; meaningful when the end velocities keep the bounds)."""
-    v0, v1 = np.asarray(v0, float), np.asarray(v1, float)
     m = degree - 1
-    bound = np.full(2, np.inf) if velocity_bound is None else np.asarray(velocity_bound, float)
-    interior = np.arange(1, m, dtype=float)[:, None]  # the ends are v0 and v1 themselves
-    if acceleration_bound is None:
-        upper = np.broadcast_to(bound, (m - 1, 2))
-        lower = -upper
-    else:
-        h = np.asarray(acceleration_bound, float) * duration_s / m
-        upper = np.minimum(np.minimum(v0 + interior * h, v1 + (m - interior) * h), bound)
-        lower = np.maximum(np.maximum(v0 - interior * h, v1 - (m - interior) * h), -bound)
-    return v0 + v1 + lower.sum(axis=0), v0 + v1 + upper.sum(axis=0)
+    low, high = [], []
+    for axis in range(2):
+        a, b = float(v0[axis]), float(v1[axis])
+        bound = math.inf if velocity_bound is None else float(velocity_bound[axis])
+        step = math.inf if acceleration_bound is None else float(acceleration_bound[axis]) * duration_s / m
+        low.append(-_upper_sum(-a, -b, m, bound, step))
+        high.append(_upper_sum(a, b, m, bound, step))
+    return np.array(low), np.array(high)
+
+
+def _upper_sum(v0: float, v1: float, m: int, bound: float, step: float) -> float:
+    """sum u of one axis (sum l is ``-_upper_sum(-v0, -v1, ...)``: l of (v0, v1) is -u of (-v0, -v1)). Plain
+    floats: for 8 terms a loop is faster than numpy's dispatch."""
+    total = v0 + v1
+    for i in range(1, m):
+        total += min(v0 + i * step, v1 + (m - i) * step, bound)
+    return total
 
 
 def _check(duration_s: float, degree: int, velocity_bound, acceleration_bound) -> None:
@@ -84,7 +92,7 @@ def _check(duration_s: float, degree: int, velocity_bound, acceleration_bound) -
     if not duration_s > 0:
         raise ReplanInputError(f"duration_s must be > 0, got {duration_s}")
     for name, bound in (("velocity_bound", velocity_bound), ("acceleration_bound", acceleration_bound)):
-        if bound is not None and not (np.asarray(bound, float) >= 0).all():
+        if bound is not None and not (bound[0] >= 0 and bound[1] >= 0):
             raise ReplanInputError(f"{name} must be >= 0 per axis (or None), got {bound}")
 
 
@@ -95,16 +103,18 @@ def bounds_feasible(p0, v0, p1, v1, duration_s: float, degree: int, velocity_bou
     within ``acceleration_bound`` (m/s^2 per axis), each loosened by ``tol``; exact (see the module
     docstring). Either bound may be None (no bound)."""
     _check(duration_s, degree, velocity_bound, acceleration_bound)
-    v0, v1 = np.asarray(v0, float), np.asarray(v1, float)
-    velocity_bound = None if velocity_bound is None else np.asarray(velocity_bound, float) + tol
-    if acceleration_bound is not None:
-        acceleration_bound = np.asarray(acceleration_bound, float) + tol
-    if velocity_bound is not None and ((np.abs(v0) > velocity_bound) | (np.abs(v1) > velocity_bound)).any():
-        return False  # (a); (b) is part of (c)
-    low, high = velocity_sum_range(v0, v1, duration_s, degree, velocity_bound, acceleration_bound)
-    s = degree * (np.asarray(p1, float) - np.asarray(p0, float)) / duration_s
+    m = degree - 1
     slack = tol * degree  # tol on each of the d velocity control points
-    return bool(((low - slack <= s) & (s <= high + slack)).all())
+    for axis in range(2):
+        a, b = float(v0[axis]), float(v1[axis])
+        bound = math.inf if velocity_bound is None else float(velocity_bound[axis]) + tol
+        if not (abs(a) <= bound and abs(b) <= bound):
+            return False  # (a); (b) is part of (c)
+        step = math.inf if acceleration_bound is None else (float(acceleration_bound[axis]) + tol) * duration_s / m
+        s = degree * (float(p1[axis]) - float(p0[axis])) / duration_s
+        if not -_upper_sum(-a, -b, m, bound, step) - slack <= s <= _upper_sum(a, b, m, bound, step) + slack:
+            return False
+    return True
 
 
 def least_acceleration_bound(p0, v0, p1, v1, duration_s: float, degree: int, velocity_bound,
@@ -114,49 +124,51 @@ def least_acceleration_bound(p0, v0, p1, v1, duration_s: float, degree: int, vel
     (m/s per axis, or None); None if the velocity bound alone cannot be met (then no acceleration can). Exact
     (see the module docstring); ``tol`` loosens the velocity bound as in :func:`bounds_feasible`."""
     _check(duration_s, degree, velocity_bound, acceleration_bound)
-    v0, v1 = np.asarray(v0, float), np.asarray(v1, float)
-    bound = np.full(2, np.inf) if velocity_bound is None else np.asarray(velocity_bound, float) + tol
-    if ((np.abs(v0) > bound) | (np.abs(v1) > bound)).any():
-        return None
     m = degree - 1
-    s = degree * (np.asarray(p1, float) - np.asarray(p0, float)) / duration_s
-    out = np.array(acceleration_bound, dtype=float)
+    out = np.empty(2)
     for axis in range(2):
-        step = _least_step(v0[axis], v1[axis], s[axis], m, bound[axis], out[axis] * duration_s / m)
-        if not np.isfinite(step):
+        a, b = float(v0[axis]), float(v1[axis])
+        bound = math.inf if velocity_bound is None else float(velocity_bound[axis]) + tol
+        if not (abs(a) <= bound and abs(b) <= bound):
             return None
-        out[axis] = max(out[axis], step * m / duration_s)
+        s = degree * (float(p1[axis]) - float(p0[axis])) / duration_s
+        given = float(acceleration_bound[axis])
+        step0 = given * duration_s / m
+        # sum u must reach up to S, and sum l down to it: sum u of the mirrored axis up to -S
+        step = max(_least_step(a, b, s, m, bound, step0), _least_step(-a, -b, -s, m, bound, step0))
+        if step == math.inf:
+            return None
+        out[axis] = max(given, step * m / duration_s)
     return out
 
 
 def _least_step(v0: float, v1: float, s: float, m: int, bound: float, step0: float) -> float:
-    """The least h >= step0 with ``sum l(h) <= s <= sum u(h)`` (one axis; inf if none)."""
-    i = np.arange(1, m, dtype=float)
-    j = m - i
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # (v0 - v1) / (2 i - m) is the same set as (v1 - v0) / (2 i - m): i and m - i swap
-        kinks = np.concatenate([(bound - v0) / i, (bound + v0) / i, (bound - v1) / j, (bound + v1) / j,
-                                (v1 - v0) / (2 * i - m)])
-    kinks = kinks[np.isfinite(kinks) & (kinks > step0)]
-    h = np.unique(np.concatenate([[step0], kinks]))
-    upper = v0 + v1 + np.minimum(np.minimum(v0 + np.outer(h, i), v1 + np.outer(h, j)), bound).sum(axis=1)
-    lower = v0 + v1 + np.maximum(np.maximum(v0 - np.outer(h, i), v1 - np.outer(h, j)), -bound).sum(axis=1)
-    # past the last kink every term is on its final piece: V (slope 0) with a velocity bound, else the
-    # smaller of the two slopes i and m - i
-    ray = 0.0 if np.isfinite(bound) else float(np.minimum(i, j).sum())
-    return max(_least_reaching(h, upper, s, ray), _least_reaching(h, -lower, -s, ray))
-
-
-def _least_reaching(h: np.ndarray, values: np.ndarray, target: float, ray_slope: float) -> float:
-    """The least x >= h[0] at which the nondecreasing piecewise-linear function through (h, values), continued
-    with slope ``ray_slope`` past h[-1], reaches ``target`` (inf if it never does)."""
-    reached = values >= target
-    if reached[0]:
-        return float(h[0])
-    if not reached.any():
-        return float(h[-1] + (target - values[-1]) / ray_slope) if ray_slope > 0 else np.inf
-    k = int(np.argmax(reached))
-    return float(h[k - 1] + (target - values[k - 1]) * (h[k] - h[k - 1]) / (values[k] - values[k - 1]))
+    """The least h >= step0 with ``sum u(h) >= s`` (one axis; inf if none): a binary search over the sorted
+    kinks of the nondecreasing, piecewise-linear sum u, then linear interpolation between the two kinks that
+    bracket s (module docstring)."""
+    value0 = _upper_sum(v0, v1, m, bound, step0)
+    if value0 >= s:
+        return step0
+    kinks = set()
+    for i in range(1, m):
+        kinks.update(((bound - v0) / i, (bound - v1) / (m - i)))
+        if 2 * i != m:
+            kinks.add((v1 - v0) / (2 * i - m))
+    kinks = sorted(k for k in kinks if step0 < k < math.inf)
+    lo, hi = 0, len(kinks)
+    values: dict[int, float] = {}
+    while lo < hi:  # the first kink at which sum u reaches s
+        mid = (lo + hi) // 2
+        values[mid] = _upper_sum(v0, v1, m, bound, kinks[mid])
+        lo, hi = (lo, mid) if values[mid] >= s else (mid + 1, hi)
+    start = kinks[lo - 1] if lo > 0 else step0
+    start_value = (values[lo - 1] if lo - 1 in values else _upper_sum(v0, v1, m, bound, start)) if lo > 0 \
+        else value0
+    if lo == len(kinks):  # past the last kink every term is on its final piece: V, or the slope min(i, m - i)
+        slope = 0.0 if bound < math.inf else float(sum(min(i, m - i) for i in range(1, m)))
+        return start + (s - start_value) / slope if slope > 0 else math.inf
+    end = kinks[lo]
+    return start + (s - start_value) * (end - start) / (values[lo] - start_value)
 
 
 __all__ = ["FEASIBILITY_TOL", "bounds_feasible", "least_acceleration_bound", "velocity_sum_range"]
