@@ -26,8 +26,12 @@ conservative: the hull tightens with it):
 
 The Hermite cubic from rest to a fast contact velocity backs away first (its second control point is the
 start, its third lies behind the contact); near a wall that is what hit the wall. The QP is built ONCE per
-degree as a CasADi ``conic`` (qrqp, dense) with a fixed sparsity; each call only fills numbers (the
-matrix rows, bounds) with numpy, so nothing is rebuilt from Python expressions per control step.
+degree as a CasADi ``conic`` (DAQP, dense) with a fixed sparsity; each call only fills numbers (the
+matrix rows, bounds) with numpy, so nothing is rebuilt from Python expressions per control step. DAQP's
+"solved" is checked, not trusted: an answer that moves the fixed end states (DAQP's answer to some
+infeasible QPs) is no answer. Whether the velocity and acceleration bounds can be met at all, and the least
+acceleration bound that can, have closed forms (:mod:`planners.online.segment_feasibility`): the QPs they
+prove infeasible are not solved.
 """
 
 from __future__ import annotations
