@@ -17,9 +17,9 @@ The story, in time order:
   from the side opposite to the one the impact needs;
 - the identification's estimate of the pair after each impact, against the simulator's restitution;
 - every mission check that tried a re-plan: predicted robustness, threshold, outcome, the new plan's
-  impacts, and its **side switches**: two consecutive impacts of one robot on one object whose velocity
-  changes point in opposite directions, so that the robot must get past the object in between (the
-  planner's bodies are points: its path goes through the object);
+  impacts, and its **side switches** (:func:`planners.online.mission.side_switches`: two consecutive
+  impacts of one robot on one object whose velocity changes point in opposite directions, so that the
+  robot must get past the object in between; the planner's bodies are points, its path goes through it);
 - the task's parts (conjuncts) with their robustness on the flown trace and when their worst sample is.
 
 ``--plot`` draws the planned (offline: dotted; the last re-plan: dashed) and flown (solid) paths with the
@@ -39,6 +39,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from robustness import env_options, expert_config  # noqa: E402  (the cell's own definitions)
+
+from planners.online.mission import side_switches  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "robustness"
 
@@ -131,22 +133,6 @@ class Recorder:
 
 
 # ------------------------------------------------------------------------------------------ analysis
-def side_switches(plan, after_s: float = -np.inf) -> list[tuple[str, str, float, float]]:
-    """(robot, object, t1, t2) for consecutive impacts of one robot on one object, the second after
-    ``after_s``, whose velocity changes point in opposite directions (the robot must get past the object)."""
-    out, last = [], {}
-    for imp in sorted(plan.impacts, key=lambda i: i.time_s):
-        key = (imp.robot, imp.object)
-        dv = np.subtract(imp.object_velocity_after, imp.object_velocity_before)
-        prev = last.get(key)
-        if prev is not None and imp.time_s > after_s:
-            dv0 = np.subtract(prev.object_velocity_after, prev.object_velocity_before)
-            if np.linalg.norm(dv0) > 1e-6 and np.linalg.norm(dv) > 1e-6 and float(dv0 @ dv) < 0:
-                out.append((imp.robot, imp.object, prev.time_s, imp.time_s))
-        last[key] = imp
-    return out
-
-
 def task_parts(scenario, positions: np.ndarray, dt: float) -> list[dict]:
     """Each conjunct of the task: its text, robustness on the trace, and the time of its worst sample."""
     from impact_env.stl import Always, Eventually, InRegion, Not, conjuncts, robustness

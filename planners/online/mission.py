@@ -27,7 +27,12 @@ drifting) nothing re-decides the impacts that follow. Here, at every observed ro
    after the executed part (:func:`splice`). If the derived problem is infeasible, it is tried once more
    without the bodies' end states (robots home, objects at rest at tf): late in a mission they can be
    what stands in the way, and the task outranks them. A re-plan that fails, is infeasible, or predicts
-   no better than the current plan keeps the current plan.
+   no better than the current plan keeps the current plan; so does one with a **side switch**
+   (:func:`side_switches`, unless ``allow_side_switches``): one robot hitting one object twice in a row with
+   velocity changes in opposite directions (a push from behind, then a stop from the front). The planner's
+   bodies are points, so its robot simply flies through the object in between; a disc robot has to get
+   around an object that moves away from it, and measured on ``two_objects`` it either does not get past
+   in time or meets the object from the wrong side (the stop becomes a push out of the goal).
 
 Determinism. The compute budget is a number of branch-and-bound nodes (``node_limit`` for the robustness
 stage, ``refine_nodes`` for the second stage), so the same observations give the same plan on an idle and
@@ -63,7 +68,9 @@ class MissionConfig:
     ``min_robustness_m``: the test; ``node_limit`` / ``refine_nodes``: the planner's node budget for the
     robustness stage and the second stage; ``time_limit_s``: safety net per planner stage (s);
     ``max_replans``: per episode; ``min_remaining_s``: no re-plan closer than this to the end;
-    ``quiet_s``: no re-plan within this time of a pending planned impact (the local replanner owns it).
+    ``quiet_s``: no re-plan within this time of a pending planned impact (the local replanner owns it);
+    ``allow_side_switches``: accept a re-plan with a side switch (:func:`side_switches`; default: keep the
+    current plan).
     """
 
     check_period_s: float = 1.0
@@ -75,6 +82,7 @@ class MissionConfig:
     max_replans: int = 3
     min_remaining_s: float = 2.0
     quiet_s: float = 1.0
+    allow_side_switches: bool = False
 
     def __post_init__(self) -> None:
         for name in ("check_period_s", "time_limit_s", "min_remaining_s", "quiet_s"):
@@ -87,6 +95,9 @@ class MissionConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise PlannerError(f"MissionConfig.{name} must be an integer >= 0, got {value!r}")
+        if not isinstance(self.allow_side_switches, bool):
+            raise PlannerError(f"MissionConfig.allow_side_switches must be True or False, got "
+                               f"{self.allow_side_switches!r}")
 
 
 @dataclass
@@ -159,6 +170,24 @@ def splice(executed: Plan, remainder: Plan, t: float) -> tuple[Plan, set[int]]:
                    remainder.solver, remainder.solve_time_s, remainder.build_time_s, remainder.mip_gap,
                    {**remainder.stats, "spliced_at_s": t})
     return spliced, set(range(len(old)))
+
+
+def side_switches(plan: Plan, after_s: float = -math.inf) -> list[tuple[str, str, float, float]]:
+    """The plan's side switches: ``(robot, object, t1_s, t2_s)`` for two consecutive impacts of one robot on
+    one object, the second later than ``after_s``, whose object velocity changes point in opposite directions
+    (dot product < 0). The robot touches the object on the side opposite to the change (the contact normal
+    is the change's direction, Eq. 6-7), so between the two it must get to the object's other side."""
+    out, last = [], {}
+    for imp in sorted(plan.impacts, key=lambda i: i.time_s):
+        key = (imp.robot, imp.object)
+        change = np.subtract(imp.object_velocity_after, imp.object_velocity_before)
+        prev = last.get(key)
+        if prev is not None and imp.time_s > after_s:
+            before = np.subtract(prev.object_velocity_after, prev.object_velocity_before)
+            if min(np.linalg.norm(before), np.linalg.norm(change)) > 1e-6 and float(before @ change) < 0.0:
+                out.append((imp.robot, imp.object, prev.time_s, imp.time_s))
+        last[key] = imp
+    return out
 
 
 def _initial_state(body: Body, position: np.ndarray, velocity: np.ndarray, scenario: Scenario) -> Body:
@@ -359,6 +388,11 @@ class MissionPlanner:
             record.status = "kept: no better than the current plan"
             return None
         spliced, done = splice(plan, remainder, t)
+        switches = [] if cfg.allow_side_switches else side_switches(spliced, t)
+        if switches:
+            record.status = "kept: side switch (" + "; ".join(
+                f"{r} past {o} between {t1:.1f} and {t2:.1f} s" for r, o, t1, t2 in switches) + ")"
+            return None
         record.status = "accepted" + (" (end states relaxed)" if record.status == "relaxed end states" else "")
         record.impacts_added = len(remainder.impacts) - sum(1 for i in plan.impacts if i.time_s > t)
         self.plan_robustness = remainder.robustness
@@ -370,4 +404,4 @@ class MissionPlanner:
                 "records": [dataclasses.asdict(r) for r in self.records]}
 
 
-__all__ = ["MissionConfig", "MissionPlanner", "ReplanRecord", "resample_plan", "splice"]
+__all__ = ["MissionConfig", "MissionPlanner", "ReplanRecord", "resample_plan", "side_switches", "splice"]
