@@ -1,7 +1,8 @@
 """Re-fly one episode of a robustness-benchmark cell and tell its story impact by impact.
 
     python benchmarks/robustness_episode.py SCENARIO STACK AXIS LEVEL SEED [--plot out.png] [--json out.json]
-    python benchmarks/robustness_episode.py two_objects all e 0.3 0 --plot docs/img/two_objects_e03_seed0.png
+    python benchmarks/robustness_episode.py two_objects all e 0.3 0 --allow-side-switches \
+        --plot docs/img/two_objects_e03_seed0.png
 
 SCENARIO, STACK (``paper``, ``+id``, ``+mission``, ``all``; ``plus_id`` / ``plus_mission`` as in the cell
 file names), AXIS and LEVEL (``nominal 0``, ``combined 0``, ``e 0.3``, ``offset 0.1``, ``thrust 0.2``, ...)
@@ -24,11 +25,14 @@ The story, in time order:
 
 ``--plot`` draws the planned (offline: dotted; the last re-plan: dashed) and flown (solid) paths with the
 contacts and re-plans, and each object's distance to its task region over time with the task's windows.
+``--allow-side-switches`` flies the episode as the benchmark's cells were flown, before mission re-plans
+with a side switch were refused.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from dataclasses import dataclass, field
@@ -247,8 +251,9 @@ def story(scenario, expert, record: EpisodeRecord, result, true_restitution: flo
             rec = item
             lines.append(f"t={t:6.2f} mission check: predicted rho {rec.predicted_robustness:+.3f} < threshold "
                          f"{rec.threshold_m:.3f} -> {rec.status}"
-                         + (f" (new plan rho {rec.new_robustness:+.3f}, solve {rec.solve_s:.1f} s, "
-                            f"{rec.impacts_added:+d} impacts)" if rec.new_robustness is not None else ""))
+                         + (f" (new plan rho {rec.new_robustness:+.3f}, solve {rec.solve_s:.1f} s"
+                            + (f", {rec.impacts_added:+d} impacts" if rec.status.startswith("accepted") else "")
+                            + ")" if rec.new_robustness is not None else ""))
             new = plan_at.get(round(t, 6))
             if new is not None:
                 for imp in (i for i in new.impacts if i.time_s > t):
@@ -301,12 +306,17 @@ def plot(scenario, record: EpisodeRecord, expert, result, path: str, title: str 
     shown = set()
     rows = contacts(scenario, expert, result)
     for c in rows:
-        if c.obj is None:
-            continue
         k = min(int(round(c.t_s / dt)), len(result.positions) - 1)
+        if c.obj is None:  # a robot against a wall, an obstacle or another robot
+            if c.robot is not None:
+                label = "robot contact (wall, obstacle, robot)"
+                ax.plot(*result.positions[k, index[c.robot]], ls="", marker="x", ms=7, color="k", zorder=9,
+                        label=None if label in shown else label)
+                shown.add(label)
+            continue
         p = result.positions[k, index[c.obj]]
         if c.robot is None or c.planned is None:
-            label, style = ("unplanned contact", dict(marker="X", ms=9, color="k"))
+            label, style = ("unplanned object contact (robot, wall)", dict(marker="X", ms=9, color="k"))
         elif c.side_cos is not None and c.side_cos < 0:
             label, style = ("planned impact, hit from the wrong side", dict(marker="X", ms=11, color="red", mec="k",
                                                                           mew=0.5))
@@ -396,10 +406,16 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("seed", type=int)
     ap.add_argument("--plan", type=Path, help="plan file (default: the benchmark's cached plan of the scenario)")
     ap.add_argument("--plot", help="write the figure to this PNG")
+    ap.add_argument("--allow-side-switches", action="store_true",
+                    help="fly mission re-plans that have a side switch, as the benchmark's cells were flown "
+                         "before MissionConfig.allow_side_switches existed")
     args = ap.parse_args(argv)
     stack = args.stack.replace("plus_", "+")
+    config = expert_config(stack)
+    if args.allow_side_switches:
+        config = dataclasses.replace(config, mission=dataclasses.replace(config.mission, allow_side_switches=True))
     scenario, expert, record, result, options = fly(args.scenario, stack, args.axis, args.level, args.seed,
-                                                    args.plan)
+                                                    args.plan, config)
     print(f"{scenario.name} / {stack} / {args.axis} {args.level:g} / seed {args.seed}: env options {options}")
     true_e = options.get("restitution", scenario.restitution)
     print("\n".join(story(scenario, expert, record, result, true_e)))
