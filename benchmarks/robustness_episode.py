@@ -19,8 +19,9 @@ The story, in time order:
 - the identification's estimate of the pair after each impact, against the simulator's restitution;
 - every mission check that tried a re-plan: predicted robustness, threshold, outcome, the new plan's
   impacts, and its **side switches** (:func:`planners.online.mission.side_switches`: two consecutive
-  impacts of one robot on one object whose velocity changes point in opposite directions, so that the
-  robot must get past the object in between; the planner's bodies are points, its path goes through it);
+  impacts on one object by one robot whose velocity changes are more than 90 degrees apart, so that the
+  robot must get round the object in between; the planner's bodies are points, its path goes through it),
+  with the time left and the time getting round needs;
 - the task's parts (conjuncts) with their robustness on the flown trace and when their worst sample is.
 
 ``--plot`` draws the planned (offline: dotted; the last re-plan: dashed) and flown (solid) paths with the
@@ -44,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from robustness import env_options, expert_config  # noqa: E402  (the cell's own definitions)
 
-from planners.online.mission import side_switches  # noqa: E402
+from planners.online.mission import side_switches, unflyable_side_switches  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "robustness"
 
@@ -159,6 +160,18 @@ def task_parts(scenario, positions: np.ndarray, dt: float) -> list[dict]:
     return out
 
 
+def switches_text(scenario, plan, after_s: float) -> str:
+    """The plan's side switches after ``after_s``: who must get round what, with the time it has and needs."""
+    unflyable = {(sw.robot, sw.object, sw.t2_s) for sw in unflyable_side_switches(plan, scenario, after_s)}
+    parts = []
+    for sw in side_switches(plan, after_s):
+        need = sw.time_to_get_round_s(scenario.body(sw.robot), scenario.body(sw.object))
+        parts.append(f"{sw.robot} must get round {sw.object} between its impacts at {sw.t1_s:.2f} and {sw.t2_s:.2f} "
+                     f"(it leaves at {sw.away_mps:+.3f} m/s; {sw.t2_s - max(sw.t1_s, after_s):.1f} s left, "
+                     f"{need:.1f} s needed{', NO TIME' if (sw.robot, sw.object, sw.t2_s) in unflyable else ''})")
+    return "; ".join(parts) or "none"
+
+
 def fmt_v(v) -> str:
     return f"({v[0]:+.3f}, {v[1]:+.3f})"
 
@@ -217,7 +230,7 @@ def story(scenario, expert, record: EpisodeRecord, result, true_restitution: flo
     estimates = list(record.estimates)
     offline = record.plans[0][1]
     lines.append(f"offline plan: rho {offline.robustness:.3f} m, {len(offline.impacts)} impacts, side switches: "
-                 f"{side_switches(offline) or 'none'}")
+                 + switches_text(scenario, offline, -np.inf))
     for k, imp in enumerate(offline.impacts, 1):
         lines.append(f"  I{k} t={imp.time_s:6.2f} {imp.robot}-{imp.object} at ({imp.position[0]:.2f}, "
                      f"{imp.position[1]:.2f}): object {fmt_v(imp.object_velocity_before)} -> "
@@ -260,10 +273,7 @@ def story(scenario, expert, record: EpisodeRecord, result, true_restitution: flo
                     lines.append(f"          new impact t={imp.time_s:6.2f} {imp.robot}-{imp.object} at "
                                  f"({imp.position[0]:.2f}, {imp.position[1]:.2f}): object "
                                  f"{fmt_v(imp.object_velocity_before)} -> {fmt_v(imp.object_velocity_after)}")
-                sw = side_switches(new, t)
-                lines.append("          side switches: " + ("; ".join(
-                    f"{r} must get past {o} between its impacts at {t1:.2f} and {t2:.2f}" for r, o, t1, t2 in sw)
-                    if sw else "none"))
+                lines.append("          side switches: " + switches_text(scenario, new, t))
     lines.append(f"result: robustness {result.robustness:+.3f} m, success {result.success}; "
                  f"unplanned contacts {dict(sorted(expert.book.unplanned.items())) or 'none'}")
     for row in task_parts(scenario, result.positions, scenario.control_period_s):

@@ -1,4 +1,4 @@
-"""Mission re-plans with a side switch are not flown (planners/online/mission.py).
+"""Mission re-plans with a side switch the robot has no time for are not flown (planners/online/mission.py).
 
 The offline planner's bodies are points: a re-plan may let the robot that has just pushed an object from
 behind also stop it from the front, flying through the object in between. The regression case is the first
@@ -22,7 +22,7 @@ from impact_env.scenario import load_scenario
 from planners.errors import PlannerError
 from planners.expert import Expert, ExpertConfig
 from planners.online.bookkeeping import ImpactBook
-from planners.online.mission import MissionConfig, MissionPlanner, side_switches
+from planners.online.mission import MissionConfig, MissionPlanner, side_switches, unflyable_side_switches
 from planners.plan import Plan, PlannedImpact
 
 CASE = Path(__file__).parent / "data" / "two_objects_replan_at_10s.json"
@@ -36,12 +36,39 @@ def impacts_plan(*impacts: PlannedImpact) -> Plan:
     return Plan("hand-made", "sr", 0.0, {}, list(impacts))
 
 
-def test_a_push_then_a_stop_by_the_same_robot_is_a_side_switch():
-    plan = impacts_plan(impact(8.0, "R2", "O2", (0.0, 0.0), (-0.13, 0.0)),
-                        impact(27.0, "R2", "O2", (-0.13, 0.0), (0.0, 0.0)))
-    assert side_switches(plan) == [("R2", "O2", 8.0, 27.0)]
+@pytest.fixture(scope="module")
+def two_objects():
+    return load_scenario("two_objects")  # discs of 0.2 m, robots at most 0.3 m/s per axis
+
+
+def test_a_push_then_a_stop_by_the_same_robot_is_a_side_switch(two_objects):
+    plan = impacts_plan(impact(18.0, "R2", "O2", (-0.1, 0.0), (-0.17, 0.0)),
+                        impact(27.0, "R2", "O2", (-0.17, 0.0), (0.0, 0.0)))
+    (sw,) = side_switches(plan)
+    assert (sw.robot, sw.object, sw.t1_s, sw.t2_s) == ("R2", "O2", 18.0, 27.0)
+    assert sw.angle_rad == pytest.approx(np.pi) and sw.away_mps == pytest.approx(0.17)
+    # half a circle of radius 0.4 m at 0.3 - 0.17 m/s relative speed: 9.7 s, more than the 9 s it has
+    need = sw.time_to_get_round_s(two_objects.body("R2"), two_objects.body("O2"))
+    assert need == pytest.approx(np.pi * 0.4 / 0.13)
+    assert unflyable_side_switches(plan, two_objects) == [sw]
     assert side_switches(plan, after_s=27.0) == []  # the second impact is not after 27 s
-    assert side_switches(plan, after_s=26.9) == [("R2", "O2", 8.0, 27.0)]  # the first may be in the past
+    assert side_switches(plan, after_s=26.9) == [sw]  # the first may be in the past
+    # from a re-plan at 20 s the robot has 7 s left, not 9
+    assert unflyable_side_switches(plan, two_objects, after_s=20.0) == [sw]
+
+
+def test_a_side_switch_with_time_to_get_round_is_flyable(two_objects):
+    slow = impacts_plan(impact(8.0, "R2", "O2", (0.0, 0.0), (-0.13, 0.0)),
+                        impact(27.0, "R2", "O2", (-0.13, 0.0), (0.0, 0.0)))  # 7.4 s needed, 19 s there
+    # stopped from the front, then pushed on from behind: at rest, 4.2 s needed, 6 s there
+    stopped = impacts_plan(impact(8.0, "R1", "O1", (0.2, 0.0), (0.0, 0.0)),
+                           impact(14.0, "R1", "O1", (0.0, 0.0), (0.2, 0.0)))
+    for plan in (slow, stopped):
+        assert len(side_switches(plan)) == 1 and unflyable_side_switches(plan, two_objects) == []
+    too_fast = impacts_plan(impact(8.0, "R1", "O1", (0.0, 0.0), (0.3, 0.0)),
+                            impact(60.0, "R1", "O1", (0.3, 0.0), (0.0, 0.0)))  # as fast as the robot
+    (sw,) = unflyable_side_switches(too_fast, two_objects)
+    assert sw.time_to_get_round_s(two_objects.body("R1"), two_objects.body("O1")) == np.inf
 
 
 @pytest.mark.parametrize("impacts", [
@@ -49,14 +76,26 @@ def test_a_push_then_a_stop_by_the_same_robot_is_a_side_switch():
     [impact(8.0, "R1", "O1", (0.0, 0.0), (0.1, 0.0)), impact(20.0, "R1", "O1", (0.1, 0.0), (0.2, 0.01))],
     # the push and the stop by different robots (the offline two_objects plan)
     [impact(8.0, "R2", "O2", (0.0, 0.0), (-0.13, 0.0)), impact(28.0, "R1", "O2", (-0.13, 0.0), (0.0, 0.0))],
-    # another object in between does not make R1's two pushes of O1 consecutive opposites
-    [impact(5.0, "R1", "O1", (0.0, 0.0), (0.1, 0.0)), impact(9.0, "R1", "O2", (0.0, 0.0), (-0.1, 0.0)),
-     impact(15.0, "R1", "O1", (0.1, 0.0), (0.15, 0.0))],
-    # a perpendicular second change: the robot moves a quarter around the object, not past it
+    # another robot's impact on O1 in between: R1's two impacts are not consecutive on O1
+    [impact(5.0, "R1", "O1", (0.0, 0.0), (0.1, 0.0)), impact(9.0, "R2", "O1", (0.1, 0.0), (0.1, 0.1)),
+     impact(15.0, "R1", "O1", (0.1, 0.1), (0.0, 0.0))],
+    # a stop from the front, then a push back the way the object came: the same side
+    [impact(8.0, "R1", "O1", (0.2, 0.0), (0.0, 0.0)), impact(14.0, "R1", "O1", (0.0, 0.0), (-0.2, 0.0))],
+    # a perpendicular second change: the robot moves a quarter round the object, not to its other side
     [impact(5.0, "R1", "O1", (0.0, 0.0), (0.1, 0.0)), impact(15.0, "R1", "O1", (0.1, 0.0), (0.1, 0.1))],
 ])
 def test_no_side_switch(impacts):
     assert side_switches(impacts_plan(*impacts)) == []
+
+
+def test_the_shipped_plans_side_switches_leave_time_to_get_round():
+    """The benchmark's offline plans of relay and obstacle_avoidance have side switches that the expert
+    flies (every stack delivers both): a stop and a push back of an object at rest, a redirection after 40 s."""
+    root = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "robustness"
+    for name, count in (("relay", 1), ("obstacle_avoidance", 1), ("two_objects", 0)):
+        plan = Plan.from_dict(json.loads((root / f"{name}__plan.json").read_text()))
+        assert len(side_switches(plan)) == count
+        assert unflyable_side_switches(plan, load_scenario(name)) == []
 
 
 def test_allow_side_switches_must_be_a_bool():
@@ -98,8 +137,9 @@ def test_the_point_mass_replan_has_side_switches_and_is_accepted_when_allowed(re
     planner, new = out[True]
     assert new is not None and planner.records[0].status.startswith("accepted")
     spliced, _ = new
-    switches = side_switches(spliced, case["time_s"])
-    assert ("R2", "O2") in {(r, o) for r, o, _, _ in switches}
+    scenario = load_scenario(case["scenario"])
+    switches = unflyable_side_switches(spliced, scenario, case["time_s"])
+    assert ("R2", "O2") in {(sw.robot, sw.object) for sw in switches}
     assert side_switches(plan) == []  # the offline plan had none
 
 
@@ -108,7 +148,7 @@ def test_a_replan_with_a_side_switch_keeps_the_current_plan(replans):
     planner, new = out[False]
     assert new is None
     record = planner.records[0]
-    assert record.status.startswith("kept: side switch (") and "R2 past O2" in record.status
+    assert record.status.startswith("kept: side switch (") and "R2 round O2" in record.status
     assert record.new_robustness is not None  # a plan was found, and refused
     assert planner.plan_robustness == pytest.approx(0.5, abs=1e-3)  # the offline plan's, unchanged
 
