@@ -190,9 +190,11 @@ class SideSwitch:
     away_mps: float
 
     def time_to_get_round_s(self, robot: Body, obj: Body) -> float:
-        """A conservative estimate of the time the robot needs: the arc of ``angle_rad`` at the contact
-        distance r_R + r_O, flown at the robot's smaller axis speed bound less the object's speed away from
-        it (inf if the object is as fast as the robot; 0 if the robot has no speed bound)."""
+        """A lower bound of the time the robot needs: the arc of ``angle_rad`` at the contact distance
+        r_R + r_O, flown at the robot's smaller axis speed bound less the object's speed away from it (inf if
+        the object is as fast as the robot; 0 if the robot has no speed bound). Only a bound: the online
+        layer plans no way round (the reference goes through the object, the keep-off holds the robot
+        behind it), so a robot with this time can still fail to get round."""
         if robot.velocity_bound_mps is None:
             return 0.0
         relative = min(robot.velocity_bound_mps) - max(self.away_mps, 0.0)
