@@ -74,7 +74,8 @@ def parse_controllers(text: str, scenarios: list[str] | None = None,
         if item.startswith("rllib:") or ":rllib:" in item:
             from baselines.rllib_policy import resolve_policy_dir
 
-            label, _, target = ("rllib", "", item) if item.startswith("rllib:") else item.partition(":")
+            # "label:rllib:PATH" (the label may itself be "rllib") or the bare "rllib:PATH"
+            label, _, target = item.partition(":") if ":rllib:" in item else ("rllib", "", item)
             spec = ControllerSpec(label, target)
             for name in (scenarios or [""]) if "{scenario}" in target else [""]:
                 resolve_policy_dir(model_path(spec, name))

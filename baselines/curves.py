@@ -65,6 +65,7 @@ def training_table(curves: list[Curve]) -> str:
 
 def plot_curves(curves: list[Curve], path: str | Path, title: str = "") -> None:
     from matplotlib.figure import Figure
+    from matplotlib.ticker import FuncFormatter
 
     fig = Figure(figsize=(10, 3.6), layout="constrained")
     ax_rho, ax_ok = fig.subplots(1, 2)
@@ -76,5 +77,14 @@ def plot_curves(curves: list[Curve], path: str | Path, title: str = "") -> None:
     ax_rho.axhline(0.0, color="k", lw=0.8)
     ax_rho.set(xlabel="environment steps", ylabel="evaluation robustness (m)", title=title or "robustness")
     ax_ok.set(xlabel="environment steps", ylabel="success (%)", ylim=(-5, 105), title="success rate")
+    for ax in (ax_rho, ax_ok):  # 400000 -> 400k: full numbers overlap under a few ticks
+        ax.xaxis.set_major_formatter(FuncFormatter(_steps_label))
     ax_rho.legend(fontsize=8)
     fig.savefig(path, dpi=100)
+
+
+def _steps_label(x: float, _pos: int) -> str:
+    if abs(x) >= 1e6:
+        return f"{x / 1e6:g}M"
+    return f"{x / 1e3:g}k" if abs(x) >= 1e3 else f"{x:g}"
+

@@ -186,6 +186,16 @@ def test_behaviour_cloning_without_a_dataset_is_a_clear_error(tmp_path, capsys):
     assert main(["bc", "corridor", "--dataset", str(tmp_path / "empty")]) == 2
     assert "impact-env record corridor" in capsys.readouterr().err
 
+def test_bench_rllib_specs_take_any_label_even_rllib():
+    from baselines.bench import parse_controllers
+
+    path = RESULTS / "models" / "rllib_ppo_{scenario}"  # the published RLlib export
+    specs = parse_controllers(f"rllib:{path},rl:rllib:{path},rllib:rllib:{path}", ["throw_and_catch_exp"])
+    assert [(s.label, s.name, s.kind) for s in specs] == [("rllib", f"rllib:{path}", "rllib"),
+                                                          ("rl", f"rllib:{path}", "rllib"),
+                                                          ("rllib", f"rllib:{path}", "rllib")]
+
+
 def test_bench_model_template_must_exist_for_every_scenario(tmp_path):
     from baselines.bench import parse_controllers
     from impact_env.errors import ImpactEnvError
