@@ -17,6 +17,7 @@ rate of each env is the ceiling. The load average is printed: the machine is sha
 run. Usage:
 
     python benchmarks/ray_overhead.py [--episodes 100] [--expert-episodes 20] [--workers 2] [--steps 4096]
+                                      [--skip-sweeps | --skip-sampling]
 """
 
 from __future__ import annotations
@@ -175,20 +176,24 @@ def main() -> None:
     parser.add_argument("--expert-episodes", type=int, default=20)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--steps", type=int, default=4096, help="env steps per sampling measurement")
-    parser.add_argument("--skip-sampling", action="store_true")
+    parser.add_argument("--skip-sampling", action="store_true", help="only the sweep table")
+    parser.add_argument("--skip-sweeps", action="store_true", help="only the sampling table")
     args = parser.parse_args()
+    if args.skip_sampling and args.skip_sweeps:
+        parser.error("--skip-sampling and --skip-sweeps together leave nothing to measure")
 
     from impact_env.scenario import load_scenario
     from planners.offline.sr_planner import plan_spatially_robust
 
-    os.makedirs("out", exist_ok=True)
-    plan_path = str(plan_spatially_robust(load_scenario(SCENARIO)).save("out/ray_overhead_plan.json"))
     print(f"{os.cpu_count()} cores; load average before: {_load()}\n")
-    print("| controllers | engine | episodes | start-up s | sweep s | episodes/s | speed-up | same results |")
-    print("|---|---|---:|---:|---:|---:|---:|---|")
-    sweep_rows(["zero", "random"], args.episodes, args.workers, plan_path)
-    sweep_rows(["expert"], args.expert_episodes, args.workers, plan_path)
-    print(f"\nload average after the sweeps: {_load()}")
+    if not args.skip_sweeps:
+        os.makedirs("out", exist_ok=True)
+        plan_path = str(plan_spatially_robust(load_scenario(SCENARIO)).save("out/ray_overhead_plan.json"))
+        print("| controllers | engine | episodes | start-up s | sweep s | episodes/s | speed-up | same results |")
+        print("|---|---|---:|---:|---:|---:|---:|---|")
+        sweep_rows(["zero", "random"], args.episodes, args.workers, plan_path)
+        sweep_rows(["expert"], args.expert_episodes, args.workers, plan_path)
+        print(f"\nload average after the sweeps: {_load()}")
     if args.skip_sampling:
         return
     print(f"\nSampling with the policy in the loop, median of 3 x {args.steps} env steps:\n")

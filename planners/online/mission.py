@@ -27,7 +27,13 @@ drifting) nothing re-decides the impacts that follow. Here, at every observed ro
    after the executed part (:func:`splice`). If the derived problem is infeasible, it is tried once more
    without the bodies' end states (robots home, objects at rest at tf): late in a mission they can be
    what stands in the way, and the task outranks them. A re-plan that fails, is infeasible, or predicts
-   no better than the current plan keeps the current plan.
+   no better than the current plan keeps the current plan; so does one with a **side switch** the robot
+   has no time for (:func:`unflyable_side_switches`, unless ``allow_side_switches``): one robot hitting one
+   object twice in a row with velocity changes more than 90 degrees apart (a push from behind, then a stop
+   from the front), with less time in between than getting round the object takes. The planner's bodies are
+   points, so its robot simply flies through the object; a disc robot has to get round an object that moves
+   away from it, and measured on ``two_objects`` it either does not get past in time or meets the object
+   from the wrong side (the stop becomes a push out of the goal).
 
 Determinism. The compute budget is a number of branch-and-bound nodes (``node_limit`` for the robustness
 stage, ``refine_nodes`` for the second stage), so the same observations give the same plan on an idle and
@@ -63,7 +69,9 @@ class MissionConfig:
     ``min_robustness_m``: the test; ``node_limit`` / ``refine_nodes``: the planner's node budget for the
     robustness stage and the second stage; ``time_limit_s``: safety net per planner stage (s);
     ``max_replans``: per episode; ``min_remaining_s``: no re-plan closer than this to the end;
-    ``quiet_s``: no re-plan within this time of a pending planned impact (the local replanner owns it).
+    ``quiet_s``: no re-plan within this time of a pending planned impact (the local replanner owns it);
+    ``allow_side_switches``: accept a re-plan with a side switch the robot has no time for
+    (:func:`unflyable_side_switches`; default: keep the current plan).
     """
 
     check_period_s: float = 1.0
@@ -75,6 +83,7 @@ class MissionConfig:
     max_replans: int = 3
     min_remaining_s: float = 2.0
     quiet_s: float = 1.0
+    allow_side_switches: bool = False
 
     def __post_init__(self) -> None:
         for name in ("check_period_s", "time_limit_s", "min_remaining_s", "quiet_s"):
@@ -87,6 +96,9 @@ class MissionConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise PlannerError(f"MissionConfig.{name} must be an integer >= 0, got {value!r}")
+        if not isinstance(self.allow_side_switches, bool):
+            raise PlannerError(f"MissionConfig.allow_side_switches must be True or False, got "
+                               f"{self.allow_side_switches!r}")
 
 
 @dataclass
@@ -159,6 +171,66 @@ def splice(executed: Plan, remainder: Plan, t: float) -> tuple[Plan, set[int]]:
                    remainder.solver, remainder.solve_time_s, remainder.build_time_s, remainder.mip_gap,
                    {**remainder.stats, "spliced_at_s": t})
     return spliced, set(range(len(old)))
+
+
+@dataclass
+class SideSwitch:
+    """Two consecutive impacts on one object by one robot whose velocity changes are more than 90 degrees
+    apart: the robot touches the object on the side opposite to the change (the contact normal is the
+    change's direction, Eq. 6-7), so between the two it must get round to the object's other side.
+
+    ``angle_rad``: between the two changes; ``away_mps``: the object's planned speed away from the robot
+    after the first impact (along the first change; < 0: it comes toward the robot)."""
+
+    robot: str
+    object: str
+    t1_s: float
+    t2_s: float
+    angle_rad: float
+    away_mps: float
+
+    def time_to_get_round_s(self, robot: Body, obj: Body) -> float:
+        """A lower bound of the time the robot needs: the arc of ``angle_rad`` at the contact distance
+        r_R + r_O, flown at the robot's smaller axis speed bound less the object's speed away from it (inf if
+        the object is as fast as the robot; 0 if the robot has no speed bound). Only a bound: the online
+        layer plans no way round (the reference goes through the object, the keep-off holds the robot
+        behind it), so a robot with this time can still fail to get round."""
+        if robot.velocity_bound_mps is None:
+            return 0.0
+        relative = min(robot.velocity_bound_mps) - max(self.away_mps, 0.0)
+        if relative <= 0.0:
+            return math.inf
+        return self.angle_rad * (robot.radius_m + obj.radius_m) / relative
+
+
+def side_switches(plan: Plan, after_s: float = -math.inf) -> list[SideSwitch]:
+    """The plan's :class:`SideSwitch` es whose second impact is later than ``after_s`` (the first may be
+    earlier)."""
+    out, last = [], {}
+    for imp in sorted(plan.impacts, key=lambda i: i.time_s):
+        change = np.subtract(imp.object_velocity_after, imp.object_velocity_before)
+        prev = last.get(imp.object)
+        last[imp.object] = imp
+        if prev is None or prev.robot != imp.robot or imp.time_s <= after_s:
+            continue
+        first = np.subtract(prev.object_velocity_after, prev.object_velocity_before)
+        sizes = float(np.linalg.norm(first)), float(np.linalg.norm(change))
+        if min(sizes) <= 1e-6 or float(first @ change) >= 0.0:
+            continue
+        angle = math.acos(float(np.clip(first @ change / (sizes[0] * sizes[1]), -1.0, 1.0)))
+        away = float(np.dot(prev.object_velocity_after, first / sizes[0]))
+        out.append(SideSwitch(imp.robot, imp.object, prev.time_s, imp.time_s, angle, away))
+    return out
+
+
+def unflyable_side_switches(plan: Plan, scenario: Scenario, after_s: float = -math.inf) -> list[SideSwitch]:
+    """The side switches (second impact after ``after_s``) for which the robot has less time between
+    ``max(t1, after_s)`` and t2 than :meth:`SideSwitch.time_to_get_round_s` says it needs. The planner's
+    point robot flies through the object; the disc robot, held off it by its keep-off, does not get round
+    an object that moves away from it unless it has that time (measured on ``two_objects``)."""
+    return [sw for sw in side_switches(plan, after_s)
+            if sw.time_to_get_round_s(scenario.body(sw.robot), scenario.body(sw.object))
+            > sw.t2_s - max(sw.t1_s, after_s)]
 
 
 def _initial_state(body: Body, position: np.ndarray, velocity: np.ndarray, scenario: Scenario) -> Body:
@@ -359,6 +431,11 @@ class MissionPlanner:
             record.status = "kept: no better than the current plan"
             return None
         spliced, done = splice(plan, remainder, t)
+        switches = [] if cfg.allow_side_switches else unflyable_side_switches(spliced, self.scenario, t)
+        if switches:
+            record.status = "kept: side switch (" + "; ".join(
+                f"{sw.robot} round {sw.object} between {sw.t1_s:.1f} and {sw.t2_s:.1f} s" for sw in switches) + ")"
+            return None
         record.status = "accepted" + (" (end states relaxed)" if record.status == "relaxed end states" else "")
         record.impacts_added = len(remainder.impacts) - sum(1 for i in plan.impacts if i.time_s > t)
         self.plan_robustness = remainder.robustness
@@ -370,4 +447,5 @@ class MissionPlanner:
                 "records": [dataclasses.asdict(r) for r in self.records]}
 
 
-__all__ = ["MissionConfig", "MissionPlanner", "ReplanRecord", "resample_plan", "splice"]
+__all__ = ["MissionConfig", "MissionPlanner", "ReplanRecord", "SideSwitch", "resample_plan", "side_switches", "splice",
+           "unflyable_side_switches"]

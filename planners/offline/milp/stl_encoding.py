@@ -114,8 +114,13 @@ class STLEncoder:
         # no signed distance between points of this scene exceeds its diagonal: the bound of every r
         self.bound = math.hypot(max(xs) - min(xs), max(ys) - min(ys))
         self.big_m = 2.0 * self.bound
-        self._memo: dict[tuple[int, int], LinExpr] = {}
-        self._ub: dict[int, float] = {}  # id(robustness expression) -> an upper bound of its value
+        # Both caches are keyed by id() and hold the keyed object in their value: an id is unique only while
+        # its object lives, and the negation normal form of each conjunct is a new tree that the caller drops
+        # once it is encoded. Keyed by the ids of dead nodes, a later conjunct's node allocated at a freed
+        # address was given an earlier conjunct's encoding (two_objects: R2's pillar constraint became R1's),
+        # depending on the heap, i.e. on what the process had done before (tests/test_determinism.py).
+        self._memo: dict[tuple[int, int], tuple[Formula, LinExpr]] = {}  # (id(node), k) -> (node, robustness)
+        self._ub: dict[int, tuple[LinExpr, float]] = {}  # id(r) -> (r, an upper bound of its value)
         self._pred_ub: dict[tuple[str, str, bool], float] = {}
         self._faces: dict[tuple[str, str, int], list[tuple[int, LinExpr | None]]] = {}
         self.group = "task encoding"
@@ -125,13 +130,14 @@ class STLEncoder:
         prove the geometric optimum at once instead of after a long branch and bound."""
         ub = self.bound if ub is None or not self.bound_propagation else min(ub, self.bound)
         r = self.model.add_var(-self.bound, ub, name=name)
-        self._ub[id(r)] = ub
+        self._ub[id(r)] = (r, ub)
         return r
 
     def upper_bound(self, r: LinExpr) -> float:
         if not r.terms:
             return r.const
-        return self._ub.get(id(r), self.bound)
+        known = self._ub.get(id(r))
+        return known[1] if known is not None else self.bound
 
     def predicate_upper_bound(self, body: str, region: str, inside: bool) -> float:
         """Largest robustness the predicate can have for this body anywhere in its allowed box.
@@ -204,7 +210,7 @@ class STLEncoder:
     def _on_interval(self, f: Formula, k: int, first_point_only: bool = False) -> LinExpr:
         key = (id(f), k if not first_point_only else -1)
         if key in self._memo:
-            return self._memo[key]
+            return self._memo[key][1]
         if isinstance(f, (Eventually, Always, Until)):
             raise UnsupportedSpecError(f"the planner encodes temporal operators at the top of the task only; "
                                        f"{f} is nested inside another temporal operator")
@@ -220,7 +226,7 @@ class STLEncoder:
             r = self._outside(f.body, f.region, k, first_point_only)
         else:  # pragma: no cover - negation_normal_form leaves nothing else
             raise UnsupportedSpecError(f"cannot encode {f}")
-        self._memo[key] = r
+        self._memo[key] = (f, r)
         return r
 
     def _pts(self, body: str, k: int, first_point_only: bool) -> list[PointSet]:

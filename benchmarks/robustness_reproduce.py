@@ -1,0 +1,78 @@
+"""Re-fly every episode of a robustness-benchmark cell in this process and compare with the cell, bit for bit.
+
+    python benchmarks/robustness_reproduce.py SCENARIO STACK AXIS LEVEL [--order fresh|forward|reversed]
+        [--allow-side-switches]
+    python benchmarks/robustness_reproduce.py two_objects +mission combined 0 --allow-side-switches
+
+The cell's episodes were flown by :mod:`benchmarks/robustness.py` workers, each keeping one expert per
+scenario and stack and resetting it between the seeds it was given. ``--order`` flies them here under another
+history: ``fresh`` (default) builds a new expert for every seed; ``forward`` and ``reversed`` fly all seeds
+with one expert, reset between episodes, in the cell's order or backwards. Same seed, same episode: every
+row must say ``same``, whatever the order (the robustness is compared exactly, not rounded).
+``--allow-side-switches`` flies mission re-plans with a side switch, as the cells flown before
+``MissionConfig.allow_side_switches`` existed were (:mod:`benchmarks/robustness_episode.py`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from robustness import cell_path, env_options, expert_config  # noqa: E402  (the cell's own definitions)
+
+RESULTS = Path(__file__).resolve().parent / "results" / "robustness"
+
+
+def reproduce(scenario_name: str, stack: str, axis: str, level: float, order: str = "fresh",
+              allow_side_switches: bool = False, results: Path = RESULTS) -> list[tuple[int, float, float]]:
+    """(seed, the cell's robustness, the re-flown robustness) for every episode of the cell."""
+    from impact_env.envs.transport import TransportEnv
+    from impact_env.rollout import run_episode
+    from impact_env.scenario import load_scenario
+    from planners.expert import Expert
+    from planners.plan import Plan
+
+    cell = json.loads(cell_path(results, scenario_name, stack, axis, level).read_text())
+    scenario = load_scenario(scenario_name)
+    plan = Plan.from_dict(json.loads((results / f"{scenario.name}__plan.json").read_text()))
+    config = expert_config(stack)
+    if allow_side_switches:
+        config = dataclasses.replace(config, mission=dataclasses.replace(config.mission, allow_side_switches=True))
+    episodes = cell["episodes"][::-1] if order == "reversed" else cell["episodes"]
+    kept = Expert(scenario, plan=plan, config=config) if order != "fresh" else None
+    rows = []
+    for ep in episodes:
+        expert = kept or Expert(scenario, plan=plan, config=config)
+        env = TransportEnv(scenario, **env_options(scenario, axis, level, ep["seed"]))
+        rows.append((ep["seed"], ep["robustness"], float(run_episode(env, expert, seed=ep["seed"]).robustness)))
+    return sorted(rows)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("scenario")
+    ap.add_argument("stack", help="paper, +id, +mission or all (plus_id / plus_mission accepted)")
+    ap.add_argument("axis", help="nominal, combined, e, offset, thrust or impact")
+    ap.add_argument("level", type=float)
+    ap.add_argument("--order", choices=("fresh", "forward", "reversed"), default="fresh")
+    ap.add_argument("--allow-side-switches", action="store_true")
+    args = ap.parse_args(argv)
+    stack = args.stack.replace("plus_", "+")
+    rows = reproduce(args.scenario, stack, args.axis, args.level, args.order, args.allow_side_switches)
+    print(f"{args.scenario} / {stack} / {args.axis} {args.level:g}, order {args.order}\n")
+    print("| seed | cell robustness | re-flown | |\n|---:|---:|---:|---|")
+    for seed, cell, again in rows:
+        verdict = "same" if again == cell else f"DIFFERS by {again - cell:+.2g}"
+        print(f"| {seed} | {cell:+.6f} | {again:+.6f} | {verdict} |")
+    same = sum(again == cell for _, cell, again in rows)
+    print(f"\n{same} of {len(rows)} episodes bit-identical to the cell")
+    return 0 if same == len(rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
