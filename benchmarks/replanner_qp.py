@@ -118,6 +118,13 @@ def main() -> None:
                   f"{rob.mean():+.4f} ({rob.min():+.4f}) | {per['unplanned']:.2f} | {per['qp']:.0f} | "
                   f"{per['daqp_solved']:.0f} | {per['ends_moved']:.0f} | {per['segments_off']:.1f} | "
                   f"{max(e['largest_miss_m'] for e in eps):.3f} |")
+    if ref_dir:
+        for name in names:
+            rob = {tree: {e["seed"]: e["robustness"] for e in episodes if e["scenario"] == name and e["tree"] == tree}
+                   for tree in trees}
+            moved = {seed: rob[None][seed] - r for seed, r in rob[ref_dir].items() if abs(rob[None][seed] - r) > 1e-9}
+            print(f"\n{name}: robustness against {args.ref}, per seed: " +
+                  (", ".join(f"seed {seed} {d:+.4f}" for seed, d in sorted(moved.items())) or "all the same"))
     print(f"\nload average after: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
     if ref_dir:
         shutil.rmtree(ref_dir, ignore_errors=True)
