@@ -16,7 +16,7 @@ from planners.online.replanner import DEGREE, SegmentLimits, _qp, bounded_segmen
 from planners.online.segment_feasibility import bounds_feasible, least_acceleration_bound, velocity_sum_range
 
 # A relay approach (ExpertConfig(), combined condition: e +-0.2, 10 cm start offset, 10 % thrust noise, seed 1,
-# robot R2 at t = 23.4 s on its way to a contact at t = 25 s): the robot flies away from the contact at
+# robot R3 at t = 23.4 s on its way to a contact with O1 at t = 25 s): the robot flies away from the contact at
 # 0.13 m/s along x and must turn around and arrive at 0.18 m/s within 1.6 s, which the thrust limit
 # (0.133 m/s^2 per axis) cannot do. DAQP reported success on this QP and answered a segment that ends 5.3 cm
 # off the contact at 0.155 m/s instead of 0.203 m/s; the replanner used to accept it.
