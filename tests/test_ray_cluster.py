@@ -50,12 +50,15 @@ def test_shipped_code_runs_on_every_node(cluster, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # Ray puts the driver's working directory first on the workers' path
 
     def where_is_impact_env(_):  # a local function: sent by value (the workers cannot import tests/ from here)
+        import time
+
         import impact_env
 
+        time.sleep(0.5)  # long enough that one node cannot take every job before the other has a worker
         return impact_env.__file__
 
     with open_engine(EngineConfig("ray", address=cluster.address, ship_code=True)) as engine:
-        files = list(engine.map(where_is_impact_env, [None] * 4))
+        files = list(engine.map(where_is_impact_env, [None] * 8))
         nodes = engine.nodes()
     assert len(nodes) == 2
     for path in files:  # Ray's copy of impact_env/, not this checkout's editable install
