@@ -33,14 +33,11 @@ import multiprocessing
 import os
 import shutil
 import statistics
-import subprocess
 import sys
-import tarfile
-import tempfile
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 
 import numpy as np
+from git_tree import export_tree
 
 from impact_env.envs.transport import TransportEnv
 from impact_env.rollout import robot_object_impacts, run_episode
@@ -136,22 +133,8 @@ def _timed_episode(args: tuple) -> dict:
     return {"stack": stack, "act_ms": res.controller_ms, "replan_steps": replan_steps, "success": res.success}
 
 
-def _export(ref: str) -> str:
-    """The ref's impact_env/ and planners/ in a temporary folder (git archive), for the baseline workers."""
-    out = tempfile.mkdtemp(prefix="impact_env_baseline_")
-    root = Path(__file__).resolve().parents[1]
-    archive = subprocess.run(["git", "-C", str(root), "archive", ref, "impact_env", "planners"], check=True,
-                             capture_output=True).stdout
-    with tempfile.TemporaryFile() as f:
-        f.write(archive)
-        f.seek(0)
-        with tarfile.open(fileobj=f) as tar:
-            tar.extractall(out, filter="data")
-    return out
-
-
 def timing(scenarios: list[str], episodes: int, workers: int, ref: str) -> None:
-    baseline_dir = _export(ref)
+    baseline_dir = export_tree(ref, prefix="impact_env_baseline_")
     stacks = ("baseline", "paper", "all")
     print(f"Expert.act wall time per step (ms), two robots; baseline = {ref}; {episodes} episodes per stack and "
           f"condition, interleaved over {workers} workers; load average before: "

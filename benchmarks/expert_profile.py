@@ -67,14 +67,12 @@ import argparse
 import multiprocessing
 import os
 import shutil
-import subprocess
 import sys
-import tarfile
-import tempfile
 import time
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
+
+from git_tree import export_tree
 
 PARTS = ("MPC solver (CasADi sqpmethod + qrqp)", "MPC setup and readout (Python, numpy<->CasADi)",
          "replanner QP solver (DAQP)", "replanner QP setup (Python)", "replanner closed form and checks",
@@ -212,20 +210,6 @@ def _episode(args: tuple) -> dict:
     return {"tree": tree, "variant": variant, "steps": steps, "success": res.success}
 
 
-def _export(ref: str) -> str:
-    """The ref's impact_env/ and planners/ in a temporary folder (git archive)."""
-    out = tempfile.mkdtemp(prefix="impact_env_profile_")
-    root = Path(__file__).resolve().parents[1]
-    archive = subprocess.run(["git", "-C", str(root), "archive", ref, "impact_env", "planners"], check=True,
-                             capture_output=True).stdout
-    with tempfile.TemporaryFile() as f:
-        f.write(archive)
-        f.seek(0)
-        with tarfile.open(fileobj=f) as tar:
-            tar.extractall(out, filter="data")
-    return out
-
-
 def ablation(args, plan: dict) -> None:
     """Median and mean act time (ms, wrapped as above) of ``all``, ``paper`` and ``all`` minus each part."""
     variants = ["all", "paper"] + [f"all - {name}" for name in SWITCHES]
@@ -262,7 +246,7 @@ def main() -> None:
     if args.ablation:
         ablation(args, plan)
         return
-    ref_dir = _export(args.ref) if args.ref else None
+    ref_dir = export_tree(args.ref, prefix="impact_env_profile_") if args.ref else None
     trees = ([ref_dir] if ref_dir else []) + [None]
     jobs = [(tree, args.scenario, plan, seed, seed % 2 == 1, args.variant) for seed in range(args.episodes)
             for tree in trees]

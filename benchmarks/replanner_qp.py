@@ -25,7 +25,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from expert_profile import _export
+from git_tree import export_tree
 from robustness import env_options, plan_for
 
 COUNTS = ("qp", "daqp_solved", "ends_moved", "segments_off")
@@ -97,7 +97,7 @@ def main() -> None:
     args = parser.parse_args()
     names = args.scenarios.split(",")
     plans = {name: plan_for(name, Path(args.plans)) for name in names}
-    ref_dir = _export(args.ref) if args.ref else None
+    ref_dir = export_tree(args.ref, prefix="impact_env_qp_") if args.ref else None
     trees = ([ref_dir] if ref_dir else []) + [None]
     jobs = [(tree, name, plans[name], seed) for name in names for seed in range(args.seeds) for tree in trees]
     print(f"{args.seeds} seeds per scenario and tree, combined condition, ExpertConfig(); load average before: "
