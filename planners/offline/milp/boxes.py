@@ -167,28 +167,12 @@ class ObjectBox:
 
         for k in range(1, n + 1):
             for a in range(2):
-                bound = LinExpr()
-                for i in range(GENERATORS):
-                    g = self.pre_gp(k, i, a)
-                    if i == 2:  # non-negative
-                        bound = bound + g
-                        continue
-                    u = model.add_var(0.0, L[a], name=f"{name}.|gp|[{k}][{i}]")
-                    model.add([u >= g, u >= -g], group=group)
-                    bound = bound + u
-                model.add(self.hp[k][a] >= bound, group=group)
+                gens = [self.pre_gp(k, i, a) for i in range(GENERATORS)]
+                model.add(self.hp[k][a] >= _l1_bound(model, gens, L[a], f"{name}.|gp|[{k}]", group), group=group)
         for k in range(1, n):
             for a in range(2):
-                bound = LinExpr()
-                for i in range(GENERATORS):
-                    g = self.gv[k][i][a]
-                    if i == 2:
-                        bound = bound + g
-                        continue
-                    w = model.add_var(0.0, V[a], name=f"{name}.|gv|[{k}][{i}]")
-                    model.add([w >= g, w >= -g], group=group)
-                    bound = bound + w
-                model.add(self.hv[k][a] >= bound, group=group)
+                gens = [self.gv[k][i][a] for i in range(GENERATORS)]
+                model.add(self.hv[k][a] >= _l1_bound(model, gens, V[a], f"{name}.|gv|[{k}]", group), group=group)
 
     def _switch_big_m(self, model: Model, impacts: ImpactVars, k: int, hit: LinExpr,
                       here: list[tuple[str, tuple[list[LinExpr], list[LinExpr], float]]]) -> None:
@@ -237,6 +221,20 @@ class ObjectBox:
         for a in range(2):
             model.add(self.hp[n][a] <= position_m[a], group="final box")
             model.add(self.hv[n - 1][a] <= velocity_mps[a], group="final box")
+
+
+def _l1_bound(model: Model, gens: list[LinExpr], cap: float, name: str, group: str) -> LinExpr:
+    """sum_i |g_i| of a box's generators along one axis, one variable u_i >= |g_i| (at most ``cap``) per
+    signed generator; the last generator (the newest post-impact error) is non-negative and enters as is."""
+    bound = LinExpr()
+    for i, g in enumerate(gens):
+        if i == 2:  # non-negative
+            bound = bound + g
+            continue
+        u = model.add_var(0.0, cap, name=f"{name}[{i}]")
+        model.add([u >= g, u >= -g], group=group)
+        bound = bound + u
+    return bound
 
 
 def _equal_unless(model: Model, a: LinExpr, b: LinExpr, relax: LinExpr, big_m: float, group: str) -> None:
