@@ -3,7 +3,9 @@
 Each scenario is one job of :mod:`impact_env.sweep` (local processes, or Ray tasks with ``--engine ray``): the
 spatially robust planner with the same :class:`~planners.offline.sr_planner.PlannerConfig`, or the
 impact-robust one when the config is an :class:`~planners.offline.ir_planner.IRPlannerConfig`. The stage-2 cut is a
-node count, so a scenario's plan is the same on any worker, bit for bit (``Plan.fingerprint()``). A scenario
+node count and the solver's threads are pinned (1 per job unless the config sets ``threads``: the jobs are
+the parallelism, and HiGHS left to choose takes a count from the worker's cores, which can change a MILP's
+last bits), so a scenario's plan is the same on any worker, bit for bit (``Plan.fingerprint()``). A scenario
 whose task is infeasible, or that hits the time limit without a plan, does not stop the others: its outcome
 carries the error's message.
 """
@@ -62,6 +64,8 @@ def plan_scenarios(names: list[str], config: PlannerConfig, engine: Any) -> list
 
     kind = "ir" if isinstance(config, IRPlannerConfig) else "sr"
     options = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+    if options["threads"] is None:
+        options["threads"] = 1
     outcomes = []
     for r in engine.map(plan_job, [(name, kind, options) for name in names]):
         plan = None if r["plan"] is None else Plan.from_dict(r["plan"])

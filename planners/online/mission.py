@@ -40,6 +40,9 @@ stage, ``refine_nodes`` for the second stage), so the same observations give the
 on a busy machine. ``time_limit_s`` is only a safety net, set far above the measured replan times: if it
 ever fires, the re-plan is DISCARDED (the current plan is kept, never a partial result) and counted in the
 report's ``timeouts``, so a run whose report shows 0 timeouts flew exactly what the node budget decided.
+The solver's thread count is pinned too (``threads``, default 1): HiGHS left to choose its own takes a
+count from the machine's cores, and a different count can change a MILP's last bits, so the same episode
+could fly another re-plan on a machine with more cores (or on a Ray node).
 """
 
 from __future__ import annotations
@@ -71,7 +74,8 @@ class MissionConfig:
     ``max_replans``: per episode; ``min_remaining_s``: no re-plan closer than this to the end;
     ``quiet_s``: no re-plan within this time of a pending planned impact (the local replanner owns it);
     ``allow_side_switches``: accept a re-plan with a side switch the robot has no time for
-    (:func:`unflyable_side_switches`; default: keep the current plan).
+    (:func:`unflyable_side_switches`; default: keep the current plan); ``threads``: the solver's threads
+    for a re-plan (pinned, see the module docstring).
     """
 
     check_period_s: float = 1.0
@@ -84,6 +88,7 @@ class MissionConfig:
     min_remaining_s: float = 2.0
     quiet_s: float = 1.0
     allow_side_switches: bool = False
+    threads: int = 1
 
     def __post_init__(self) -> None:
         for name in ("check_period_s", "time_limit_s", "min_remaining_s", "quiet_s"):
@@ -96,6 +101,8 @@ class MissionConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise PlannerError(f"MissionConfig.{name} must be an integer >= 0, got {value!r}")
+        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 1:
+            raise PlannerError(f"MissionConfig.threads must be an integer >= 1, got {self.threads!r}")
         if not isinstance(self.allow_side_switches, bool):
             raise PlannerError(f"MissionConfig.allow_side_switches must be True or False, got "
                                f"{self.allow_side_switches!r}")
@@ -399,7 +406,7 @@ class MissionPlanner:
         config = dataclasses.replace(self.planner_config, intervals=intervals, robot_degree=self.degree,
                                      node_limit=cfg.node_limit, refine_nodes=cfg.refine_nodes,
                                      time_limit_s=cfg.time_limit_s, refine_time_s=cfg.time_limit_s,
-                                     warm_start=warm, diagnose_infeasibility=False, progress=None)
+                                     threads=cfg.threads, warm_start=warm, diagnose_infeasibility=False, progress=None)
         start = time.perf_counter()
         try:
             try:
