@@ -23,6 +23,7 @@ their solve time) and draws success against perturbation size.
 
     python benchmarks/robustness.py --estimate                # how long the selected grid would take
     python benchmarks/robustness.py [--scenarios a,b] [--stacks paper,all] [--axes combined,e] [--seeds 50]
+    python benchmarks/robustness.py --axes e,offset --levels e=0.4,0.5 --levels offset=0.2,0.25   # beyond
     python benchmarks/robustness.py --table-only --plot docs/img/robustness.png
 """
 
@@ -61,7 +62,8 @@ def has_impact_noise() -> bool:
     return "impact_velocity_noise_mps" in inspect.signature(TransportCore).parameters
 
 
-def conditions(axes: list[str]) -> list[tuple[str, float]]:
+def conditions(axes: list[str], levels: dict[str, tuple[float, ...]] | None = None) -> list[tuple[str, float]]:
+    """The cells' conditions: nominal, then each axis at its levels (``levels`` overrides :data:`AXES`)."""
     out = [("nominal", 0.0)]
     for axis in axes:
         if axis == "combined":
@@ -69,7 +71,26 @@ def conditions(axes: list[str]) -> list[tuple[str, float]]:
         elif axis == "impact" and not has_impact_noise():
             continue
         else:
-            out += [(axis, level) for level in AXES[axis]]
+            out += [(axis, level) for level in (levels or {}).get(axis, AXES[axis])]
+    return out
+
+
+def parse_levels(specs: list[str], axes: list[str]) -> dict[str, tuple[float, ...]]:
+    """``--levels e=0.4,0.5`` (repeatable): the levels of one swept axis instead of the default ones."""
+    out: dict[str, tuple[float, ...]] = {}
+    for spec in specs:
+        axis, _, values = spec.partition("=")
+        if axis not in AXES:
+            raise SystemExit(f"--levels {spec!r}: the axis must be one of {', '.join(AXES)}")
+        if axis not in axes:
+            raise SystemExit(f"--levels {spec!r}: add {axis} to --axes too")
+        try:
+            levels = tuple(float(v) for v in values.split(","))
+        except ValueError:
+            raise SystemExit(f"--levels {spec!r}: the levels must be numbers, e.g. {axis}=0.4,0.5") from None
+        if not levels or not all(np.isfinite(v) and v > 0 for v in levels):
+            raise SystemExit(f"--levels {spec!r}: the levels must be finite numbers > 0")
+        out[axis] = levels
     return out
 
 
@@ -143,13 +164,14 @@ def plan_for(scenario_name: str, out: Path) -> dict:
     return plan.to_dict()
 
 
-def run(scenarios, stacks, axes, seeds_shipped, seeds_new, out: Path, engine: EngineConfig) -> None:
+def run(scenarios, stacks, axes, seeds_shipped, seeds_new, out: Path, engine: EngineConfig,
+        levels: dict[str, tuple[float, ...]] | None = None) -> None:
     out.mkdir(parents=True, exist_ok=True)
     with open_engine(engine) as pool:
         for name in scenarios:
             plan = plan_for(name, out)
             seeds = seeds_shipped if name in SHIPPED else seeds_new
-            for axis, level in conditions(axes):
+            for axis, level in conditions(axes, levels):
                 for stack in stacks:
                     path = cell_path(out, name, stack, axis, level)
                     n = cell_seeds(axis, seeds)
@@ -252,7 +274,7 @@ def plot(cells: list[dict], scenarios, path: str) -> None:
     fig.savefig(path, dpi=110)
 
 
-def estimate(scenarios, stacks, axes, seeds_shipped, seeds_new) -> float:
+def estimate(scenarios, stacks, axes, seeds_shipped, seeds_new, levels=None) -> float:
     """Seconds of one worker for the selected grid, from each scenario's episode length (a rough cost of
     2.5 ms of controller and 0.5 ms of simulation per control step and robot pair, measured here)."""
     from impact_env.scenario import load_scenario
@@ -263,7 +285,7 @@ def estimate(scenarios, stacks, axes, seeds_shipped, seeds_new) -> float:
         steps = round(sc.formula.horizon_s / sc.control_period_s)
         per_episode = steps * (1.5e-3 * len(sc.robots) + 0.5e-3)
         seeds = seeds_shipped if name in SHIPPED else seeds_new
-        n = sum(cell_seeds(axis, seeds) for axis, _ in conditions(axes)) * len(stacks)
+        n = sum(cell_seeds(axis, seeds) for axis, _ in conditions(axes, levels)) * len(stacks)
         total += n * per_episode
     return total
 
@@ -276,6 +298,8 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=50, help="seeds per random cell, shipped scenarios")
     parser.add_argument("--seeds-new", type=int, default=20, help="seeds per random cell, the new scenarios")
     add_engine_arguments(parser, default_workers=min(2, os.cpu_count() or 1))
+    parser.add_argument("--levels", action="append", default=[], metavar="AXIS=L1,L2",
+                        help="levels of a swept axis instead of the default ones, e.g. e=0.4,0.5 (repeatable)")
     parser.add_argument("--out", default="benchmarks/results/robustness")
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true", help="print the table of the cached cells")
@@ -283,15 +307,16 @@ def main() -> None:
     args = parser.parse_args()
     scenarios, stacks, axes = args.scenarios.split(","), args.stacks.split(","), args.axes.split(",")
     out = Path(args.out)
+    levels = parse_levels(args.levels, axes)
     if args.estimate:
-        seconds = estimate(scenarios, stacks, axes, args.seeds, args.seeds_new)
+        seconds = estimate(scenarios, stacks, axes, args.seeds, args.seeds_new, levels)
         print(f"about {seconds / 3600:.1f} h of one worker, {seconds / 3600 / args.workers:.1f} h with "
               f"{args.workers} workers on an idle machine")
         return
     if not args.table_only:
         if "impact" in axes and not has_impact_noise():
             print("the simulator has no impact_velocity_noise_mps option yet: the impact axis is left out")
-        run(scenarios, stacks, axes, args.seeds, args.seeds_new, out, engine_config(args))
+        run(scenarios, stacks, axes, args.seeds, args.seeds_new, out, engine_config(args), levels)
     cells = load_cells(out)
     print(table(cells, scenarios))
     if args.plot:
