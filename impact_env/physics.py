@@ -14,7 +14,12 @@ Design choices (each measured or taken from docs/background.md):
 - optional post-impact velocity noise (``impact_velocity_noise_mps``): when a robot-object contact ends, the
   object's velocity gets a uniform error in [-noise, noise] on each axis, drawn from the episode's random
   generator; the logged "after" velocities include it. This is the error the impact-robust planner's delta
-  bounds, so its guarantee can be tested in the simulator directly.
+  bounds, so its guarantee can be tested in the simulator directly;
+- contacts that end in the same substep are closed (noise drawn, events listed) in a fixed order, the
+  scenario's order of the shapes, at the end of that substep, never in the order chipmunk reports them:
+  chipmunk keeps its contacts in a hash set keyed by the shapes' C addresses and calls the separate callbacks
+  in that set's order, so two robots that finish their impacts in the same substep (two_objects) would take
+  each other's draws depending on where malloc put the shapes, i.e. on what the process did before.
 
 Speed: pymunk's Python properties (and a typing mixin's ``__setattr__``) cost more than the physics itself
 at this size, so the substep loop calls the chipmunk functions that those properties wrap
@@ -86,7 +91,8 @@ class ImpactEvent:
 
 
 class _Contact:
-    __slots__ = ("time_s", "a", "b", "body_a", "body_b", "va", "vb", "jx", "jy")
+    __slots__ = ("time_s", "a", "b", "body_a", "body_b", "va", "vb", "jx", "jy", "rank", "end_s", "va_end",
+                 "vb_end")
 
 
 # Module-level callbacks (lambdas would stop a World from being pickled).
@@ -98,6 +104,8 @@ def _on_begin(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> Non
     c.body_a, c.body_b = sa.body, sb.body
     c.va, c.vb = tuple(sa.body.velocity), tuple(sb.body.velocity)
     c.jx = c.jy = 0.0
+    rank = world._shape_rank
+    c.rank = tuple(sorted((rank[sa], rank[sb])))  # the pair's place in the fixed order of closing
     world._open[(sa, sb)] = c
 
 
@@ -110,18 +118,22 @@ def _on_post_solve(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -
 
 
 def _on_separate(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:
+    # only noted here: chipmunk calls this in the order of its address-keyed hash set (see the module), so the
+    # contact is closed in World._close_separated, in the fixed order, once the substep is over
     c = world._open.pop(arbiter.shapes, None)
     if c is not None:
-        if world.impact_velocity_noise_mps > 0.0:
-            world._perturb_object(c)
-        world._closed.append(_close(c, world.time_s))
+        c.end_s = world.time_s
+        c.va_end, c.vb_end = tuple(c.body_a.velocity), tuple(c.body_b.velocity)
+        world._separated.append(c)
 
 
-def _close(c: _Contact, time_s: float) -> ImpactEvent:
+def _close(c: _Contact, time_s: float, va_end: tuple[float, float] | None = None,
+           vb_end: tuple[float, float] | None = None) -> ImpactEvent:
     return ImpactEvent(
         time_s=c.time_s, a=c.a, b=c.b, impulse_Ns=math.hypot(c.jx, c.jy),
         a_velocity_before=c.va, b_velocity_before=c.vb,
-        a_velocity_after=tuple(c.body_a.velocity), b_velocity_after=tuple(c.body_b.velocity),
+        a_velocity_after=tuple(c.body_a.velocity) if va_end is None else va_end,
+        b_velocity_after=tuple(c.body_b.velocity) if vb_end is None else vb_end,
         duration_s=time_s - c.time_s,
     )
 
@@ -159,6 +171,7 @@ class World:
         self.substeps = scenario.substeps
         self.n_substeps_done = 0
         self._open: dict[tuple[pymunk.Shape, pymunk.Shape], _Contact] = {}
+        self._separated: list[_Contact] = []  # contacts that ended in the current substep, not yet closed
         self._closed: list[ImpactEvent] = []
         self._shape_names: dict[pymunk.Shape, str] = {}
 
@@ -196,6 +209,7 @@ class World:
             self._add_shape(pymunk.Poly(static, [tuple(v) for v in obstacle.polygon.vertices]), obstacle.name,
                             elasticity)
         space.add(*[s for s in self._shape_names if s.body is static])
+        self._shape_rank = {s: k for k, s in enumerate(self._shape_names)}  # bodies in scenario order, walls, obstacles
         space.on_collision(None, None, begin=_on_begin, post_solve=_on_post_solve, separate=_on_separate, data=self)
         self._fast = None
         if _cp is not None and fast:
@@ -214,18 +228,33 @@ class World:
     def time_s(self) -> float:
         return self.n_substeps_done * self.dt_s
 
-    def _perturb_object(self, c: _Contact) -> None:
-        """The post-impact velocity error of a robot-object contact that just ended (see the class)."""
-        if c.a in self._robot_names and c.b in self._object_names:
-            body = c.body_b
-        elif c.b in self._robot_names and c.a in self._object_names:
-            body = c.body_a
-        else:
-            return
+    def _close_separated(self) -> None:
+        """Close the contacts that ended in the substep just taken, in the fixed order of their shapes: each
+        robot-object one first gets its post-impact velocity error (see the class), then is logged.
+
+        The error is added to the object's velocity now, after the substep, rather than inside chipmunk's
+        separate callback: an object with no other contact is neither pushed nor accelerated in that substep,
+        so its velocity and its next positions are the same bit for bit; only an object that leaves one
+        contact while it is in another in the same substep sees its other contact solved without the error.
+        """
+        separated = sorted(self._separated, key=lambda c: c.rank)
+        self._separated.clear()
+        for c in separated:
+            va, vb = c.va_end, c.vb_end
+            if self.impact_velocity_noise_mps > 0.0:
+                if c.a in self._robot_names and c.b in self._object_names:
+                    vb = self._perturb_object(c.body_b, vb)
+                elif c.b in self._robot_names and c.a in self._object_names:
+                    va = self._perturb_object(c.body_a, va)
+            self._closed.append(_close(c, c.end_s, va, vb))
+
+    def _perturb_object(self, body: pymunk.Body, v_end: tuple[float, float]) -> tuple[float, float]:
+        """Add the uniform error to the object's velocity; return its separation velocity with the error."""
         noise = self.impact_velocity_noise_mps
-        ex, ey = self._rng.uniform(-noise, noise, 2)
+        ex, ey = (float(e) for e in self._rng.uniform(-noise, noise, 2))
         v = body.velocity
-        body.velocity = (v.x + float(ex), v.y + float(ey))
+        body.velocity = (v.x + ex, v.y + ey)
+        return v_end[0] + ex, v_end[1] + ey
 
     def step(self, wrenches: Sequence[tuple[float, float, float]]) -> list[ImpactEvent]:
         """Advance one control period with each robot's body-frame (Fx, Fy, torque) held constant.
@@ -245,6 +274,8 @@ class World:
                 body.torque = tau
             space_step(dt)
             self.n_substeps_done += 1
+            if self._separated:
+                self._close_separated()
         closed, self._closed = self._closed, []
         return closed
 
@@ -265,14 +296,16 @@ class World:
             finally:
                 self.space._locked = False
             self.n_substeps_done += 1
+            if self._separated:
+                self._close_separated()
         closed, self._closed = self._closed, []
         return closed
 
     def flush_impacts(self) -> list[ImpactEvent]:
         """Close the contacts still open (end of episode): their 'after' velocities are the current ones."""
-        events = [_close(c, self.time_s) for c in self._open.values()]
+        contacts = sorted(self._open.values(), key=lambda c: (c.time_s, c.rank))
         self._open.clear()
-        return sorted(events, key=lambda e: e.time_s)
+        return [_close(c, self.time_s) for c in contacts]
 
     def read_state(self) -> list[tuple[float, float, float, float, float, float]]:
         """Per body (x, y, vx, vy, heading, angular velocity) in SI units, scenario body order."""

@@ -112,6 +112,7 @@ def replay(plan: Plan, scenario: Scenario) -> tuple[dict[str, np.ndarray], float
                 body.angular_velocity = 0.0
             world.space.step(dt)
             world.n_substeps_done += 1
+            world._close_separated()  # as World.step does after each substep
         events += world._closed
         world._closed = []
         for n, b in zip(names, world.bodies):
