@@ -72,7 +72,7 @@ import time
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 
-from git_tree import export_tree
+from git_tree import export_tree, segment_qp_module
 
 PARTS = ("MPC solver (CasADi sqpmethod + qrqp)", "MPC setup and readout (Python, numpy<->CasADi)",
          "replanner QP solver (DAQP)", "replanner QP setup (Python)", "replanner closed form and checks",
@@ -142,10 +142,11 @@ def _instrument(prof: _Profile, expert) -> None:
     else:
         for mpc in expert.mpcs.values():
             mpc._solvers = {k: _TimedSolver(f, prof.wrap(f, PARTS[0])) for k, f in mpc._solvers.items()}
-    if hasattr(replanner_mod, "_SegmentQP"):
-        method(replanner_mod._SegmentQP, "solve", PARTS[2])
+    qp_mod = segment_qp_module()
+    if hasattr(qp_mod, "_SegmentQP"):
+        method(qp_mod._SegmentQP, "solve", PARTS[2])
     else:
-        qp = replanner_mod._qp
+        qp = qp_mod._qp
 
         def timed_qp(degree: int, _cache: dict = {}):  # noqa: B006 - one wrapped solver per degree
             if degree not in _cache:
@@ -153,7 +154,7 @@ def _instrument(prof: _Profile, expert) -> None:
                 _cache[degree] = (_TimedSolver(solver, prof.wrap(solver, PARTS[2])), *rest)
             return _cache[degree]
 
-        replanner_mod._qp = timed_qp
+        qp_mod._qp = timed_qp
     replanner_mod.bounded_segment = prof.wrap(replanner_mod.bounded_segment, PARTS[3])
     import planners.online.reference as reference_mod
 

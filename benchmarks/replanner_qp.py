@@ -25,7 +25,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from git_tree import export_tree
+from git_tree import export_tree, segment_qp_module
 from robustness import env_options, plan_for
 
 COUNTS = ("qp", "daqp_solved", "ends_moved", "segments_off")
@@ -35,7 +35,7 @@ def _instrument(counts: dict) -> None:
     """Count inside the replanner's QP (any tree with ``_SegmentQP.solve`` and ``bounded_segment``)."""
     import planners.online.replanner as replanner
 
-    qp_class = replanner._SegmentQP
+    qp_class = segment_qp_module()._SegmentQP
     solve = qp_class.solve
 
     def counted_solve(self) -> bool:

@@ -30,6 +30,7 @@ their solve time) and draws success against perturbation size.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import inspect
 import json
 import os
@@ -46,14 +47,46 @@ STACKS = ("paper", "+id", "+mission", "all")
 AXES = {"e": (0.1, 0.2, 0.3), "offset": (0.05, 0.10, 0.15), "thrust": (0.05, 0.10, 0.20),
         "impact": (0.005, 0.01, 0.02)}
 COMBINED = {"e": 0.2, "offset": 0.10, "thrust": 0.10}
+RESULTS = Path(__file__).resolve().parent / "results" / "robustness"  # the cached cells and plans
 _WORKER: dict = {}
 
 
-def expert_config(stack: str):
+def expert_config(stack: str, allow_side_switches: bool = False):
+    """The stack's ``ExpertConfig``; ``allow_side_switches`` flies mission re-plans that have a side switch, as
+    the cells flown before ``MissionConfig.allow_side_switches`` existed were."""
     from planners.expert import ExpertConfig
 
-    return {"paper": ExpertConfig.paper(), "+id": ExpertConfig.paper(identification=True),
-            "+mission": ExpertConfig.paper(mission_replanning=True), "all": ExpertConfig()}[stack]
+    config = {"paper": ExpertConfig.paper(), "+id": ExpertConfig.paper(identification=True),
+              "+mission": ExpertConfig.paper(mission_replanning=True), "all": ExpertConfig()}[stack]
+    if allow_side_switches:
+        config = dataclasses.replace(config, mission=dataclasses.replace(config.mission, allow_side_switches=True))
+    return config
+
+
+def _stack_name(text: str) -> str:
+    """A stack as the cell files spell it too (``plus_id``), normalised to ``+id``; unknown stacks refused."""
+    stack = text.replace("plus_", "+")
+    if stack not in STACKS:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a stack: one of {', '.join(STACKS)} (or plus_id, "
+                                         "plus_mission as in the cell file names)")
+    return stack
+
+
+def add_cell_arguments(parser: argparse.ArgumentParser, seed: bool = False) -> None:
+    """The arguments that name one cell (SCENARIO STACK AXIS LEVEL, and with ``seed`` one of its episodes,
+    SEED) and ``--allow-side-switches``, for the scripts that re-fly cells (``robustness_episode.py``,
+    ``robustness_reproduce.py``). ``args.stack`` comes normalised (``plus_id`` -> ``+id``)."""
+    parser.add_argument("scenario")
+    parser.add_argument("stack", type=_stack_name, help="paper, +id, +mission or all (plus_id / plus_mission "
+                                                        "accepted)")
+    parser.add_argument("axis", choices=("nominal", "combined", *AXES), metavar="axis",
+                        help="nominal, combined, " + ", ".join(AXES))
+    parser.add_argument("level", type=float)
+    if seed:
+        parser.add_argument("seed", type=int)
+    parser.add_argument("--allow-side-switches", action="store_true",
+                        help="fly mission re-plans that have a side switch, as the benchmark's cells were flown "
+                             "before MissionConfig.allow_side_switches existed")
 
 
 def has_impact_noise() -> bool:

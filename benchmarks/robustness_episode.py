@@ -33,7 +33,6 @@ with a side switch were refused.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 from dataclasses import dataclass, field
@@ -43,11 +42,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from robustness import env_options, expert_config  # noqa: E402  (the cell's own definitions)
+from robustness import RESULTS, add_cell_arguments, env_options, expert_config  # noqa: E402  (the cell's own)
 
 from planners.online.mission import side_switches, unflyable_side_switches  # noqa: E402
-
-RESULTS = Path(__file__).resolve().parent / "results" / "robustness"
 
 
 # ------------------------------------------------------------------------------------------- recording
@@ -409,21 +406,12 @@ def fly(scenario_name: str, stack: str, axis: str, level: float, seed: int, plan
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("scenario")
-    ap.add_argument("stack", help="paper, +id, +mission or all (plus_id / plus_mission accepted)")
-    ap.add_argument("axis", help="nominal, combined, e, offset, thrust or impact")
-    ap.add_argument("level", type=float)
-    ap.add_argument("seed", type=int)
+    add_cell_arguments(ap, seed=True)
     ap.add_argument("--plan", type=Path, help="plan file (default: the benchmark's cached plan of the scenario)")
     ap.add_argument("--plot", help="write the figure to this PNG")
-    ap.add_argument("--allow-side-switches", action="store_true",
-                    help="fly mission re-plans that have a side switch, as the benchmark's cells were flown "
-                         "before MissionConfig.allow_side_switches existed")
     args = ap.parse_args(argv)
-    stack = args.stack.replace("plus_", "+")
-    config = expert_config(stack)
-    if args.allow_side_switches:
-        config = dataclasses.replace(config, mission=dataclasses.replace(config.mission, allow_side_switches=True))
+    stack = args.stack
+    config = expert_config(stack, args.allow_side_switches)
     scenario, expert, record, result, options = fly(args.scenario, stack, args.axis, args.level, args.seed,
                                                     args.plan, config)
     print(f"{scenario.name} / {stack} / {args.axis} {args.level:g} / seed {args.seed}: env options {options}")

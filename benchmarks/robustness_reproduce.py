@@ -16,16 +16,13 @@ row must say ``same``, whatever the order (the robustness is compared exactly, n
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from robustness import cell_path, env_options, expert_config  # noqa: E402  (the cell's own definitions)
-
-RESULTS = Path(__file__).resolve().parent / "results" / "robustness"
+from robustness import RESULTS, add_cell_arguments, cell_path, env_options, expert_config  # noqa: E402
 
 
 def reproduce(scenario_name: str, stack: str, axis: str, level: float, order: str = "fresh",
@@ -40,9 +37,7 @@ def reproduce(scenario_name: str, stack: str, axis: str, level: float, order: st
     cell = json.loads(cell_path(results, scenario_name, stack, axis, level).read_text())
     scenario = load_scenario(scenario_name)
     plan = Plan.from_dict(json.loads((results / f"{scenario.name}__plan.json").read_text()))
-    config = expert_config(stack)
-    if allow_side_switches:
-        config = dataclasses.replace(config, mission=dataclasses.replace(config.mission, allow_side_switches=True))
+    config = expert_config(stack, allow_side_switches)
     episodes = cell["episodes"][::-1] if order == "reversed" else cell["episodes"]
     kept = Expert(scenario, plan=plan, config=config) if order != "fresh" else None
     rows = []
@@ -55,14 +50,10 @@ def reproduce(scenario_name: str, stack: str, axis: str, level: float, order: st
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("scenario")
-    ap.add_argument("stack", help="paper, +id, +mission or all (plus_id / plus_mission accepted)")
-    ap.add_argument("axis", help="nominal, combined, e, offset, thrust or impact")
-    ap.add_argument("level", type=float)
+    add_cell_arguments(ap)
     ap.add_argument("--order", choices=("fresh", "forward", "reversed"), default="fresh")
-    ap.add_argument("--allow-side-switches", action="store_true")
     args = ap.parse_args(argv)
-    stack = args.stack.replace("plus_", "+")
+    stack = args.stack
     rows = reproduce(args.scenario, stack, args.axis, args.level, args.order, args.allow_side_switches)
     print(f"{args.scenario} / {stack} / {args.axis} {args.level:g}, order {args.order}\n")
     print("| seed | cell robustness | re-flown | |\n|---:|---:|---:|---|")

@@ -21,6 +21,7 @@ from impact_env.scenario import Scenario
 from planners import bezier, plan_schema
 from planners.errors import PlanCheckError
 from planners.funnels import ImpactCopies, ObjectFunnel, check_impact_robust
+from planners.plan_files import read_plan_json, write_plan_json
 
 __all__ = ["BodyPlan", "ImpactCopies", "ObjectFunnel", "Plan", "PlannedImpact", "Segment"]
 
@@ -217,23 +218,12 @@ class Plan:
                    fields["delta_mps"], funnels, copies)
 
     def save(self, path: str | Path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_dict(), indent=1))
-        return path
+        return write_plan_json(path, self.to_dict(), indent=1)
 
     @classmethod
     def load(cls, path: str | Path) -> Plan:
         """Read a plan file written by :meth:`save`; any problem is a :class:`PlanCheckError` naming it."""
-        try:
-            data = json.loads(Path(path).read_bytes())
-        except OSError as exc:
-            raise PlanCheckError([f"cannot read plan {path}: {exc.strerror or exc}"]) from None
-        except RecursionError:
-            raise PlanCheckError([f"plan {path} is nested too deeply to be a plan file"]) from None
-        except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError, an integer of thousands of digits
-            raise PlanCheckError([f"plan {path} is not a JSON plan file: {str(exc)[:200]}"]) from None
-        return cls.from_dict(data)
+        return cls.from_dict(read_plan_json(path, lambda message: PlanCheckError([message])))
 
     # ----------------------------------------------------------------------------------------- check
     def check(self, scenario: Scenario, tol: float = 1e-6) -> None:

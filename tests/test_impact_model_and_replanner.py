@@ -10,15 +10,8 @@ import pytest
 
 from impact_env.physics import World
 from planners.online.impact_model import disc_impact, required_contact
-from planners.online.replanner import (
-    SegmentLimits,
-    _linspace,
-    _qp,
-    bounded_segment,
-    hermite,
-    replan_around_impact,
-    replan_segment,
-)
+from planners.online.replanner import SegmentLimits, bounded_segment, hermite, replan_around_impact, replan_segment
+from planners.online.segment_qp import _linspace, _qp
 from tests.helpers import two_body
 
 

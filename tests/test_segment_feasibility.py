@@ -12,8 +12,9 @@ from scipy.optimize import linprog
 from planners import bezier
 from planners.errors import ReplanInputError
 from planners.online import replanner
-from planners.online.replanner import DEGREE, SegmentLimits, _qp, bounded_segment, replan_segment, within_bounds
+from planners.online.replanner import DEGREE, SegmentLimits, bounded_segment, replan_segment, within_bounds
 from planners.online.segment_feasibility import bounds_feasible, least_acceleration_bound, velocity_sum_range
+from planners.online.segment_qp import _qp
 
 # A relay approach (ExpertConfig(), combined condition: e +-0.2, 10 cm start offset, 10 % thrust noise, seed 1,
 # robot R3 at t = 23.4 s on its way to a contact with O1 at t = 25 s): the robot flies away from the contact at

@@ -41,11 +41,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
 from impact_env.scenario import Scenario
-from planners.errors import PlannerError, PlanTimeoutError
+from planners.errors import PlannerError
 from planners.offline.common import add_obstacle_clearance, check_common_options, encode_task
 from planners.offline.milp.boxes import ObjectBox
 from planners.offline.milp.collisions import add_robot_separation
@@ -62,9 +63,8 @@ from planners.offline.milp.trajectories import (
     value,
     velocity_bound,
 )
-from planners.offline.solvers.base import Status
 from planners.offline.sr_planner import PlannerConfig
-from planners.offline.stages import StagedModel, solve_stages
+from planners.offline.stages import StagedModel, solve_to_plan
 from planners.plan import BodyPlan, ImpactCopies, ObjectFunnel, Plan, PlannedImpact, Segment
 
 DEFAULT_FINAL_BOX = (0.5, 0.05)  # position half-width (m), velocity half-width (m/s): the authors' default
@@ -204,15 +204,8 @@ def plan_impact_robust(scenario: Scenario, config: IRPlannerConfig | None = None
     if not isinstance(config, IRPlannerConfig):
         config = IRPlannerConfig(**{k: getattr(config, k) for k in PlannerConfig.__dataclass_fields__})
     built = build_ir_model(scenario, config)
-    solution = solve_stages(staged_model(built), config, scenario.name, progress=config.progress)
-    result = solution.result
-    plan = extract_ir_plan(scenario, built, solution.x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
-    plan.stats.update(solution.stats)
-    plan.check(scenario, tol=1e-6)
-    if result.status == Status.TIME_LIMIT:
-        raise PlanTimeoutError(f"time limit of {config.time_limit_s} s reached with gap {result.mip_gap:.3g}; "
-                               f"best delta {plan.delta_mps:.5f} m/s", plan=plan, mip_gap=result.mip_gap)
-    return plan
+    return solve_to_plan(staged_model(built), config, scenario, partial(extract_ir_plan, scenario, built),
+                         lambda plan: f"best delta {plan.delta_mps:.5f} m/s")
 
 
 def _segments(curve, grid: Grid, x: np.ndarray) -> list[Segment]:

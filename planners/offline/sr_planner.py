@@ -15,11 +15,11 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
 from impact_env.scenario import Scenario
-from planners.errors import PlanTimeoutError
 from planners.offline.common import DEFAULT_DEGREE, DEFAULT_INTERVALS, add_obstacle_clearance, check_common_options
 from planners.offline.common import encode_task as _encode_task
 from planners.offline.milp.collisions import add_robot_object_separation, add_robot_separation
@@ -35,8 +35,8 @@ from planners.offline.milp.trajectories import (
     allowed_box,
     value,
 )
-from planners.offline.solvers.base import Progress, Status
-from planners.offline.stages import StagedModel, solve_stages
+from planners.offline.solvers.base import Progress
+from planners.offline.stages import StagedModel, solve_to_plan
 from planners.plan import BodyPlan, Plan, PlannedImpact, Segment
 
 __all__ = ["DEFAULT_DEGREE", "DEFAULT_INTERVALS", "BuiltModel", "PlannerConfig", "build_model", "extract_plan",
@@ -170,16 +170,9 @@ def plan_spatially_robust(scenario: Scenario, config: PlannerConfig | None = Non
     """
     config = config or PlannerConfig()
     built = build_model(scenario, config)
-    solution = solve_stages(staged_model(built), config, scenario.name,
-                            warm_start=_warm_start(built, config.warm_start), progress=config.progress)
-    result = solution.result
-    plan = extract_plan(scenario, built, solution.x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
-    plan.stats.update(solution.stats)
-    plan.check(scenario, tol=1e-6)
-    if result.status == Status.TIME_LIMIT:
-        raise PlanTimeoutError(f"time limit of {config.time_limit_s} s reached with gap {result.mip_gap:.3g}; "
-                               f"best robustness {plan.robustness:.4f} m", plan=plan, mip_gap=result.mip_gap)
-    return plan
+    return solve_to_plan(staged_model(built), config, scenario, partial(extract_plan, scenario, built),
+                         lambda plan: f"best robustness {plan.robustness:.4f} m",
+                         warm_start=_warm_start(built, config.warm_start))
 
 
 def extract_plan(scenario: Scenario, built: BuiltModel, x: np.ndarray, solver: str, solve_time_s: float,

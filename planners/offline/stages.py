@@ -13,21 +13,27 @@ velocity error) and then, keeping it, prefer plans with fewer impacts and less a
 3. polish: the binaries fixed, an LP with the stage-2 objective (or, with ``smooth``, a convex QP on squared
    accelerations), which also removes the integrality tolerance's leak through big-M rows.
 
-A planner hands its model over as a :class:`StagedModel`.
+A planner hands its model over as a :class:`StagedModel`; :func:`solve_to_plan` runs the stages and ends the
+planner the same way for both (read the plan back, check it, report a time limit).
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from planners.errors import InfeasiblePlanError, PlannerError, PlanTimeoutError
 from planners.offline.milp.model import LinExpr, Model
 from planners.offline.solvers import solve
-from planners.offline.solvers.base import SolveResult, SolverOptions, Status
+from planners.offline.solvers.base import Progress, SolveResult, SolverOptions, Status
+
+if TYPE_CHECKING:
+    from impact_env.scenario import Scenario
+    from planners.plan import Plan
 
 DIAGNOSE_NODES = 100  # branch-and-bound nodes per check of the infeasibility diagnosis
 DIAGNOSE_SAFETY_S = 20.0  # and a time limit per check that only a pathological model reaches
@@ -47,6 +53,7 @@ class StageConfig(Protocol):
     refine_time_s: float
     smooth: bool
     diagnose_infeasibility: bool
+    progress: Callable[[Progress], None] | None
 
 
 @dataclass
@@ -119,6 +126,28 @@ def solve_stages(staged: StagedModel, config: StageConfig, scenario_name: str,
     x = polish(staged, x, config)
     stats["polish_s"] = time.perf_counter() - t0
     return StagedSolution(x, result, stats)
+
+
+def solve_to_plan(staged: StagedModel, config: StageConfig, scenario: Scenario,
+                  extract: Callable[[np.ndarray, str, float, float], Plan], best: Callable[[Plan], str],
+                  warm_start: np.ndarray | None = None) -> Plan:
+    """Run the stages (:func:`solve_stages`, with ``config.progress``) and end a planner with their answer:
+    ``extract(x, solver, solve_time_s, mip_gap)`` reads the plan back, its stages' statistics join its stats,
+    and it is checked against the scenario (:meth:`Plan.check`, 1e-6).
+
+    Raises what :func:`solve_stages` raises, and PlanTimeoutError when the time limit cut stage 1 after it
+    found a plan: ``.plan`` is that plan, ``.mip_gap`` its gap, and the message ends with ``best(plan)``
+    (e.g. ``"best robustness 0.1234 m"``).
+    """
+    solution = solve_stages(staged, config, scenario.name, warm_start=warm_start, progress=config.progress)
+    result = solution.result
+    plan = extract(solution.x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
+    plan.stats.update(solution.stats)
+    plan.check(scenario, tol=1e-6)
+    if result.status == Status.TIME_LIMIT:
+        raise PlanTimeoutError(f"time limit of {config.time_limit_s} s reached with gap {result.mip_gap:.3g}; "
+                               f"{best(plan)}", plan=plan, mip_gap=result.mip_gap)
+    return plan
 
 
 def copy_model(m: Model, name: str, integer: bool = True) -> Model:

@@ -14,7 +14,6 @@ still; :mod:`~planners.tether.timing` computes that.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +23,7 @@ import numpy as np
 
 from impact_env.station import Station
 from planners.errors import PlannerError
+from planners.plan_files import read_plan_json, write_plan_json
 from planners.tether.errors import TetherPlanCheckError
 
 FORMAT = "impact_env.tether_plan/1"
@@ -140,13 +140,13 @@ class TetherPlan:
                             "travel_time_s": {str(k): self.travel_time_s(k) for k in (1, 2, 3)}}}
 
     def save(self, path: str | Path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_dict(), indent=2))
-        return path
+        return write_plan_json(path, self.to_dict(), indent=2)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TetherPlan:
+        if not isinstance(data, dict):
+            raise PlannerError(f"not a tether plan: a JSON {type(data).__name__}, expected an object with format "
+                               f"{FORMAT!r}")
         if data.get("format") != FORMAT:
             raise PlannerError(f"not a tether plan: format is {data.get('format')!r}, expected {FORMAT!r}")
         try:
@@ -162,22 +162,17 @@ class TetherPlan:
 
     @classmethod
     def load(cls, path: str | Path) -> TetherPlan:
-        path = Path(path)
-        if not path.is_file():
-            raise PlannerError(f"plan file {str(path)!r} does not exist")
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError as exc:
-            raise PlannerError(f"{path}: not valid JSON: {exc}") from None
-        return cls.from_dict(data)
+        """Read a plan file written by :meth:`save`; any problem is a :class:`PlannerError` naming it."""
+        return cls.from_dict(read_plan_json(path, PlannerError, what="tether plan"))
 
 
 def is_tether_plan_file(path: str | Path) -> bool:
     """Whether ``path`` holds a tether plan (the expert's dispatch test)."""
     try:
-        return json.loads(Path(path).read_text()).get("format") == FORMAT
-    except (OSError, ValueError, AttributeError):
+        data = read_plan_json(path, PlannerError, what="tether plan")
+    except PlannerError:
         return False
+    return isinstance(data, dict) and data.get("format") == FORMAT
 
 
 def _jsonable(value: Any) -> Any:
