@@ -5,6 +5,7 @@ in the runtime environment (``--ship-code``) rather than the installed package."
 from __future__ import annotations
 
 import csv
+import re
 from pathlib import Path
 
 import pytest
@@ -35,13 +36,16 @@ def _rows(path: Path) -> list[dict]:
     return [{k: v for k, v in r.items() if k != "controller_ms"} for r in csv.DictReader(open(path))]
 
 
-def test_a_bench_sweep_spreads_over_both_nodes_and_gives_the_local_table(cluster, tmp_path, capsys):
+def test_a_bench_sweep_on_the_cluster_gives_the_local_table(cluster, tmp_path, capsys):
+    """The bench's jobs are short: under load one node can finish all 8 before the other has started a
+    worker (Ray's SPREAD is best effort), so where they ran is reported, not asserted; that jobs do reach
+    both nodes is checked by test_shipped_code_runs_on_every_node, whose jobs last long enough."""
     common = ["bench", "throw_and_catch_exp", "--controllers", "random,zero", "--episodes", "4",
               "--thrust-noise", "0.05", "--initial-position-noise-m", "0.05"]
     assert main(common + ["--engine", "ray", "--address", cluster.address, "--out", str(tmp_path / "cluster")]) == 0
     assert not ray.is_initialized()  # the bench connected, and disconnected at its end
     out = capsys.readouterr().out
-    assert "Ray: 2 CPUs on 2 nodes (the cluster at" in out and "8 jobs on 2 nodes" in out
+    assert "Ray: 2 CPUs on 2 nodes (the cluster at" in out and re.search(r"8 jobs on [12] nodes? \(node ", out)
     assert main(common + ["--workers", "2", "--out", str(tmp_path / "local")]) == 0
     assert _rows(tmp_path / "cluster" / "episodes.csv") == _rows(tmp_path / "local" / "episodes.csv")
 
