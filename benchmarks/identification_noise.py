@@ -6,24 +6,27 @@ paper's stack at 0.02 m/s of post-impact noise: identification reads each noisy 
 restitution (one measurement moves the estimate from the file's 0.6 to 0.38, or to 0.0, because the default
 measurement noise is 1 mm/s). This script flies the same seeds with the paper's stack and with `all` at each
 measurement noise given, and prints success and robustness per row (the offline plan is the robustness
-benchmark's cached one, or planned here).
+benchmark's cached one, or planned and cached there). Episodes run on the sweep engine
+(:mod:`impact_env.sweep`: ``--workers`` local processes, or ``--engine ray``).
 
     python benchmarks/identification_noise.py [--scenario two_objects] [--level 0.02] [--seeds 10]
-                                              [--noise 0.001,0.02] [--workers 2]
+                                              [--noise 0.001,0.02] [--workers 2 | --engine ray]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
+import sys
 from pathlib import Path
 
 import numpy as np
 
-PLANS = Path(__file__).parent / "results" / "robustness"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from robustness import RESULTS, plan_for  # noqa: E402  (the robustness benchmark's cached plans)
+
+from impact_env.sweep import add_engine_arguments, engine_config, open_engine  # noqa: E402
 
 
 def _episode(job: tuple) -> tuple:
@@ -36,21 +39,11 @@ def _episode(job: tuple) -> tuple:
     from planners.plan import Plan
 
     scenario = load_scenario(scenario_name)
-    config = (ExpertConfig.paper() if stack == "paper" else
+    config = (ExpertConfig.paper() if velocity_noise is None else
               ExpertConfig(identification_config=IdentificationConfig(velocity_noise_mps=velocity_noise)))
     expert = Expert(scenario, plan=Plan.from_dict(plan_dict), config=config)
     res = run_episode(TransportEnv(scenario, impact_velocity_noise_mps=level), expert, seed=seed)
     return stack, velocity_noise, seed, bool(res.success), float(res.robustness)
-
-
-def plan_dict(name: str) -> dict:
-    path = PLANS / f"{name}__plan.json"
-    if path.exists():
-        return json.loads(path.read_text())
-    from impact_env.scenario import load_scenario
-    from planners.offline.sr_planner import plan_spatially_robust
-
-    return plan_spatially_robust(load_scenario(name)).to_dict()
 
 
 def main() -> None:
@@ -59,7 +52,7 @@ def main() -> None:
     parser.add_argument("--level", type=float, default=0.02, help="post-impact velocity noise (m/s per axis)")
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--noise", default="0.001,0.02", help="identification measurement noises (m/s)")
-    parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    add_engine_arguments(parser, default_workers=min(2, os.cpu_count() or 1))
     args = parser.parse_args()
     try:
         noises = [float(v) for v in args.noise.split(",")]
@@ -67,15 +60,15 @@ def main() -> None:
         raise SystemExit(f"--noise {args.noise!r}: comma-separated numbers in m/s, e.g. 0.001,0.02") from None
     if not all(np.isfinite(v) and v > 0 for v in noises) or args.seeds < 1 or args.level < 0:
         raise SystemExit("--noise values must be > 0, --seeds >= 1 and --level >= 0")
-    plan = plan_dict(args.scenario)
+    plan = plan_for(args.scenario, RESULTS)
     rows = [("paper", None)] + [("all", v) for v in noises]
-    jobs = [(args.scenario, plan, stack, v or 1e-3, args.level, s) for stack, v in rows for s in range(args.seeds)]
-    with ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-        results = list(pool.map(_episode, jobs))
+    jobs = [(args.scenario, plan, stack, v, args.level, s) for stack, v in rows for s in range(args.seeds)]
+    with open_engine(engine_config(args)) as engine:
+        results = list(engine.map(_episode, jobs))
     print(f"{args.scenario}, post-impact noise {args.level:g} m/s, seeds 0-{args.seeds - 1}\n")
     print("| stack | identification velocity_noise_mps | success | robustness mean (min) |\n|---|---:|---:|---:|")
     for stack, v in rows:
-        got = [r for r in results if r[0] == stack and (stack == "paper" or r[1] == v)]
+        got = [r for r in results if (r[0], r[1]) == (stack, v)]
         rho = [r[4] for r in got]
         print(f"| {stack} | {'-' if v is None else f'{v:g}'} | {sum(r[3] for r in got)}/{len(got)} | "
               f"{np.mean(rho):+.3f} ({min(rho):+.3f}) |")
