@@ -176,7 +176,8 @@ def test_contacts_that_end_in_one_substep_take_their_noise_in_the_scenario_order
 
 
 # ------------------------------------------------- one Plan object, new or reused experts, impact noise
-TWO_OBJECTS_PLAN = Path(__file__).parent / "data" / "two_objects_plan.json"  # plan_spatially_robust's, c5fd64727b18
+# the robustness benchmark's cached plan (plan_spatially_robust's, fingerprint c5fd64727b18)
+TWO_OBJECTS_PLAN = Path(__file__).resolve().parents[1] / "benchmarks/results/robustness/two_objects__plan.json"
 IMPACT_NOISE = {"impact_velocity_noise_mps": 0.02}
 
 
