@@ -193,7 +193,8 @@ def main() -> None:
     parser.add_argument("--stacks", default=",".join(STACKS))
     parser.add_argument("--seeds", type=int, default=50, help="seeds per noisy cell")
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
-    parser.add_argument("--out", default="benchmarks/results/impact_robust")
+    parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "impact_robust"),
+                        help="the cached cells (default: %(default)s)")
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true", help="print the table of the cached cells")
     args = parser.parse_args()

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 from git_tree import export_tree, segment_qp_module
-from robustness import env_options, plan_for
+from robustness import RESULTS, env_options, plan_for
 
 COUNTS = ("qp", "daqp_solved", "ends_moved", "segments_off")
 
@@ -93,7 +93,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--ref", default=None, help="also fly this git commit (before/after table)")
     parser.add_argument("--workers", type=int, default=1)
-    parser.add_argument("--plans", default="benchmarks/results/robustness")
+    parser.add_argument("--plans", default=str(RESULTS), help="the robustness benchmark's cached plans")
     args = parser.parse_args()
     names = args.scenarios.split(",")
     plans = {name: plan_for(name, Path(args.plans)) for name in names}

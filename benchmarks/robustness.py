@@ -333,7 +333,7 @@ def main() -> None:
     add_engine_arguments(parser, default_workers=min(2, os.cpu_count() or 1))
     parser.add_argument("--levels", action="append", default=[], metavar="AXIS=L1,L2",
                         help="levels of a swept axis instead of the default ones, e.g. e=0.4,0.5 (repeatable)")
-    parser.add_argument("--out", default="benchmarks/results/robustness")
+    parser.add_argument("--out", default=str(RESULTS), help="the cached cells and plans (default: %(default)s)")
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true", help="print the table of the cached cells")
     parser.add_argument("--plot", help="draw success against perturbation size to this PNG")
