@@ -19,8 +19,9 @@ drifting) nothing re-decides the impacts that follow. Here, at every observed ro
    earlier impact pending, :func:`planners.online.reachability.contact_reachable` computes the contact the
    local layer would ask for (the contact inverse with the expert's current model of the pair: the
    identified restitution when identification is on) and proves, with the closed form of
-   :func:`planners.online.segment_feasibility.bounds_feasible` at the robot's full thrust, whether any
-   replanner segment from the robot's observed state reaches it by the impact time. Proven unreachable:
+   :mod:`planners.online.segment_feasibility` at the robot's full thrust, whether any replanner segment from
+   the robot's observed state gets within ``reach_tolerance_m`` / ``reach_tolerance_mps`` of it by the
+   impact time. Proven unreachable:
    the object is predicted not to get that impact and to fly freely from then on (its later impacts
    dropped from the prediction too: they were planned for the state the lost impact would have made; the
    local layer re-aims them only from what the object really does, and a missed relay stage rarely leaves
@@ -74,7 +75,7 @@ from impact_env.stl import progress, robustness, without_constants
 from planners import bezier
 from planners.errors import PlannerError
 from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
-from planners.online.reachability import Reachability, contact_reachable
+from planners.online.reachability import POSITION_TOLERANCE_M, VELOCITY_TOLERANCE_MPS, Reachability, contact_reachable
 from planners.online.sampling import PlanSampler
 from planners.plan import BodyPlan, Plan, Segment
 
@@ -92,7 +93,9 @@ class MissionConfig:
     (:func:`unflyable_side_switches`; default: keep the current plan); ``threads``: the solver's threads
     for a re-plan (pinned, see the module docstring); ``predict_reachability``: the prediction drops a
     pending impact the robot provably cannot reach in time (step 1; off: every pending impact is
-    predicted to deliver what the plan asks).
+    predicted to deliver what the plan asks); ``reach_tolerance_m`` / ``reach_tolerance_mps``: how close
+    (per axis) to the contact's position and velocity counts as making it (the contact box of
+    :func:`planners.online.reachability.contact_reachable`; larger is more conservative).
     """
 
     check_period_s: float = 1.0
@@ -107,12 +110,18 @@ class MissionConfig:
     allow_side_switches: bool = False
     threads: int = 1
     predict_reachability: bool = True
+    reach_tolerance_m: float = POSITION_TOLERANCE_M
+    reach_tolerance_mps: float = VELOCITY_TOLERANCE_MPS
 
     def __post_init__(self) -> None:
         for name in ("check_period_s", "time_limit_s", "min_remaining_s", "quiet_s"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise PlannerError(f"MissionConfig.{name} must be a finite number > 0, got {value!r}")
+        for name in ("reach_tolerance_m", "reach_tolerance_mps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise PlannerError(f"MissionConfig.{name} must be a finite number >= 0, got {value!r}")
         if not 0.0 <= self.robustness_fraction <= 1.0:
             raise PlannerError(f"MissionConfig.robustness_fraction must be in [0, 1], got {self.robustness_fraction}")
         for name in ("node_limit", "refine_nodes", "max_replans"):
@@ -348,7 +357,8 @@ class MissionPlanner:
             restitution, masses = model(first.robot, body.name)
             out.append(contact_reachable(t, first, plan, self.scenario.body(first.robot), states[index[first.robot]],
                                          body, states[index[body.name]], restitution, masses,
-                                         self.aim_final_position))
+                                         self.aim_final_position, self.config.reach_tolerance_m,
+                                         self.config.reach_tolerance_mps))
         return out
 
     def predicted_trace(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan,
