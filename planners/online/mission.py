@@ -16,19 +16,19 @@ drifting) nothing re-decides the impacts that follow. Here, at every observed ro
    is evaluated on the executed trace so far followed by this prediction.
    **Reachability** (``predict_reachability``, default on): the local layer can re-aim an impact only if
    the robot can still get to the contact. For each object's next pending impact whose robot has no
-   earlier impact pending, :func:`planners.online.reachability.contact_reachable` computes the contact the
-   local layer would ask for (the contact inverse with the expert's current model of the pair: the
-   identified restitution when identification is on) and proves, with the closed form of
+   earlier impact pending (and no late one still approached), :func:`planners.online.reachability.
+   contact_reachable` computes the contact the local layer would ask for (the contact inverse with the
+   expert's current model of the pair, the ``model`` passed to :meth:`MissionPlanner.step`: the identified
+   restitution when identification is on) and proves, with the closed form of
    :mod:`planners.online.segment_feasibility` at the robot's full thrust, whether any replanner segment from
    the robot's observed state gets within ``reach_tolerance_m`` / ``reach_tolerance_mps`` of it by the
-   impact time. Proven unreachable:
-   the object is predicted not to get that impact and to fly freely from then on (its later impacts
-   dropped from the prediction too: they were planned for the state the lost impact would have made; the
-   local layer re-aims them only from what the object really does, and a missed relay stage rarely leaves
-   the next robot where it needs to be). This is what happens first: the local layer, out of thrust,
-   flies a segment that asks for more than the robot has and the contact comes late or not at all
-   (measured on ``relay`` at e = 0.15). The verdict is conservative (see the reachability module): when
-   every pending impact is reachable the prediction is the one above, bit for bit.
+   impact time. Proven unreachable, the object is predicted not to get that impact and to fly freely from
+   then on, its later impacts dropped too. That is what happens first: the local layer, out of thrust,
+   flies a segment that asks for more than the robot has, and the contact comes late or not at all
+   (measured on ``relay`` at e = 0.15). The later impacts were planned for the state the lost one would
+   have made; the local layer would re-aim them from what the object really does, which this prediction
+   does not try to model (it is the re-plan's job). The verdict is conservative (see the reachability
+   module); when every tested impact is reachable the prediction is the one above, bit for bit.
 2. **Test** (documented, configurable): re-plan when the predicted robustness is below
    ``robustness_fraction`` times the robustness the flown plan was made with (default 0.5) or below
    ``min_robustness_m`` (default 0: a predicted failure).
