@@ -17,11 +17,13 @@ The story, in time order:
   and the observed contact normal (the object's velocity change), below 0 when the robot hit the object
   from the side opposite to the one the impact needs;
 - the identification's estimate of the pair after each impact, against the simulator's restitution;
-- every mission check that tried a re-plan: predicted robustness, threshold, outcome, the new plan's
-  impacts, and its **side switches** (:func:`planners.online.mission.side_switches`: two consecutive
+- every mission check that tried a re-plan: predicted robustness, threshold, outcome, the pending impacts
+  the prediction judged unreachable (:mod:`planners.online.reachability`), the new plan's impacts, and its
+  **side switches** (:func:`planners.online.mission.side_switches`: two consecutive
   impacts on one object by one robot whose velocity changes are more than 90 degrees apart, so that the
   robot must get round the object in between; the planner's bodies are points, its path goes through it),
   with the time left and the time getting round needs;
+- the mission monitor's counts (checks, checks that found an unreachable impact, re-plan attempts);
 - the task's parts (conjuncts) with their robustness on the flown trace and when their worst sample is.
 
 ``--plot`` draws the planned (offline: dotted; the last re-plan: dashed) and flown (solid) paths with the
@@ -271,6 +273,13 @@ def story(scenario, expert, record: EpisodeRecord, result, true_restitution: flo
                                  f"({imp.position[0]:.2f}, {imp.position[1]:.2f}): object "
                                  f"{fmt_v(imp.object_velocity_before)} -> {fmt_v(imp.object_velocity_after)}")
                 lines.append("          side switches: " + switches_text(scenario, new, t))
+            if getattr(rec, "unreachable", None):
+                lines.append("          predicted unreachable (dropped from the prediction): "
+                             + "; ".join(rec.unreachable))
+    if expert.mission is not None:
+        m = expert.mission.report()
+        lines.append(f"mission monitor: {m['checks']} checks, {m.get('unreachable', 0)} of them found a pending impact "
+                     f"unreachable; {m['attempts']} re-plan attempts, {m['replans']} accepted")
     lines.append(f"result: robustness {result.robustness:+.3f} m, success {result.success}; "
                  f"unplanned contacts {dict(sorted(expert.book.unplanned.items())) or 'none'}")
     for row in task_parts(scenario, result.positions, scenario.control_period_s):

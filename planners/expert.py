@@ -158,7 +158,8 @@ class Expert:
             strategy = CopyContact(sc, fallback=strategy)  # the plan's copies as contingency plans
         self.selector = ReferenceSelector(plan, self.grid_dt, self.dt, strategy, cfg.replan_intervals,
                                           disc_offset=cfg.disc_offset, box=self._safe_box)
-        self.mission = (MissionPlanner(sc, plan, cfg.mission, planner_config, cfg.aim_final_position)
+        self.mission = (MissionPlanner(sc, plan, cfg.mission, planner_config, cfg.aim_final_position,
+                                       cfg.late_grace_s)
                         if cfg.mission_replanning else None)
         self.stats = ExpertStats()
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}

@@ -14,6 +14,21 @@ drifting) nothing re-decides the impacts that follow. Here, at every observed ro
    a pessimistic one (measured: the corridor's catch predicted short of the goal when the local layer puts
    the object in it) triggers replans that only lose margin. Robots follow the plan. The task's robustness
    is evaluated on the executed trace so far followed by this prediction.
+   **Reachability** (``predict_reachability``, default on): the local layer can re-aim an impact only if
+   the robot can still get to the contact. For each object's next pending impact whose robot has no
+   earlier impact pending (and no late one still approached), :func:`planners.online.reachability.
+   contact_reachable` computes the contact the local layer would ask for (the contact inverse with the
+   expert's current model of the pair, the ``model`` passed to :meth:`MissionPlanner.step`: the identified
+   restitution when identification is on) and proves, with the closed form of
+   :mod:`planners.online.segment_feasibility` at the robot's full thrust, whether any replanner segment from
+   the robot's observed state gets within ``reach_tolerance_m`` / ``reach_tolerance_mps`` of it by the
+   impact time. Proven unreachable, the object is predicted not to get that impact and to fly freely from
+   then on, its later impacts dropped too. That is what happens first: the local layer, out of thrust,
+   flies a segment that asks for more than the robot has, and the contact comes late or not at all
+   (measured on ``relay`` at e = 0.15). The later impacts were planned for the state the lost one would
+   have made; the local layer would re-aim them from what the object really does, which this prediction
+   does not try to model (it is the re-plan's job). The verdict is conservative (see the reachability
+   module); when every tested impact is reachable the prediction is the one above, bit for bit.
 2. **Test** (documented, configurable): re-plan when the predicted robustness is below
    ``robustness_fraction`` times the robustness the flown plan was made with (default 0.5) or below
    ``min_robustness_m`` (default 0: a predicted failure).
@@ -60,6 +75,7 @@ from impact_env.stl import progress, robustness, without_constants
 from planners import bezier
 from planners.errors import PlannerError
 from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
+from planners.online.reachability import POSITION_TOLERANCE_M, VELOCITY_TOLERANCE_MPS, Reachability, contact_reachable
 from planners.online.sampling import PlanSampler
 from planners.plan import BodyPlan, Plan, Segment
 
@@ -75,7 +91,11 @@ class MissionConfig:
     ``quiet_s``: no re-plan within this time of a pending planned impact (the local replanner owns it);
     ``allow_side_switches``: accept a re-plan with a side switch the robot has no time for
     (:func:`unflyable_side_switches`; default: keep the current plan); ``threads``: the solver's threads
-    for a re-plan (pinned, see the module docstring).
+    for a re-plan (pinned, see the module docstring); ``predict_reachability``: the prediction drops a
+    pending impact the robot provably cannot reach in time (step 1; off: every pending impact is
+    predicted to deliver what the plan asks); ``reach_tolerance_m`` / ``reach_tolerance_mps``: how close
+    (per axis) to the contact's position and velocity counts as making it (the contact box of
+    :func:`planners.online.reachability.contact_reachable`; larger is more conservative).
     """
 
     check_period_s: float = 1.0
@@ -89,12 +109,19 @@ class MissionConfig:
     quiet_s: float = 1.0
     allow_side_switches: bool = False
     threads: int = 1
+    predict_reachability: bool = True
+    reach_tolerance_m: float = POSITION_TOLERANCE_M
+    reach_tolerance_mps: float = VELOCITY_TOLERANCE_MPS
 
     def __post_init__(self) -> None:
         for name in ("check_period_s", "time_limit_s", "min_remaining_s", "quiet_s"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise PlannerError(f"MissionConfig.{name} must be a finite number > 0, got {value!r}")
+        for name in ("reach_tolerance_m", "reach_tolerance_mps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise PlannerError(f"MissionConfig.{name} must be a finite number >= 0, got {value!r}")
         if not 0.0 <= self.robustness_fraction <= 1.0:
             raise PlannerError(f"MissionConfig.robustness_fraction must be in [0, 1], got {self.robustness_fraction}")
         for name in ("node_limit", "refine_nodes", "max_replans"):
@@ -103,9 +130,9 @@ class MissionConfig:
                 raise PlannerError(f"MissionConfig.{name} must be an integer >= 0, got {value!r}")
         if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 1:
             raise PlannerError(f"MissionConfig.threads must be an integer >= 1, got {self.threads!r}")
-        if not isinstance(self.allow_side_switches, bool):
-            raise PlannerError(f"MissionConfig.allow_side_switches must be True or False, got "
-                               f"{self.allow_side_switches!r}")
+        for name in ("allow_side_switches", "predict_reachability"):
+            if not isinstance(getattr(self, name), bool):
+                raise PlannerError(f"MissionConfig.{name} must be True or False, got {getattr(self, name)!r}")
 
 
 @dataclass
@@ -121,6 +148,7 @@ class ReplanRecord:
     intervals: int = 0
     impacts_added: int = 0
     task: str = ""
+    unreachable: list[str] = dataclasses.field(default_factory=list)  # impacts the prediction dropped
 
 
 # ------------------------------------------------------------------------------------------- plans
@@ -274,12 +302,17 @@ class MissionPlanner:
         planner_config: options of the offline planner that re-plans keep (thrust fraction, solver, ...).
         aim_final_position: predict, as the reference selection then flies, that after its last impact an
             object heads for its planned end position (else that it leaves with the planned velocity).
+        late_grace_s: a planned impact not yet observed is still approached this long after its time (the
+            expert's ``ExpertConfig.late_grace_s``): while one is, its robot and object are not tested for
+            reachability.
     """
 
     def __init__(self, scenario: Scenario, plan: Plan, config: MissionConfig | None = None,
-                 planner_config: PlannerConfig | None = None, aim_final_position: bool = False) -> None:
+                 planner_config: PlannerConfig | None = None, aim_final_position: bool = False,
+                 late_grace_s: float = 0.5) -> None:
         self.scenario = scenario
         self.aim_final_position = aim_final_position
+        self.late_grace_s = float(late_grace_s)
         self.config = config or MissionConfig()
         self.planner_config = planner_config or PlannerConfig()
         self.dt = scenario.control_period_s
@@ -298,14 +331,46 @@ class MissionPlanner:
         self.records: list[ReplanRecord] = []
         self.checks = 0
         self.timeouts = 0
+        self.unreachable = 0  # checks that found a pending impact unreachable
+        self.verdicts: list[Reachability] = []  # the last prediction's reachability verdicts
         self._last_check = -math.inf
         self._sampler: PlanSampler | None = None
         self._sampler_plan: Plan | None = None
 
     # ------------------------------------------------------------------------------------ monitor
+    def reachability(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan, done: set[int],
+                     model) -> list[Reachability]:
+        """The verdict on each object's next pending impact (time > t) that can be tested (step 1): its
+        robot has no earlier impact pending and neither has a late one still approached (within
+        ``late_grace_s`` of its time). ``model(robot, object)``: the pair's (restitution, (m_robot, m_object)),
+        as the expert's contact inverse uses it."""
+        pending = [(k, i) for k, i in enumerate(plan.impacts) if k not in done and i.time_s > t - self.late_grace_s]
+        out = []
+        for body in self.scenario.objects:
+            mine = [i for _, i in pending if i.object == body.name]
+            future = [i for i in mine if i.time_s > t]
+            if not future or len(future) < len(mine):  # nothing ahead, or a late impact still approached
+                continue
+            first = min(future, key=lambda i: i.time_s)
+            if any(i.robot == first.robot and i is not first and i.time_s <= first.time_s for _, i in pending):
+                continue  # the robot has another impact first: its velocity changes there
+            restitution, masses = model(first.robot, body.name)
+            out.append(contact_reachable(t, first, plan, self.scenario.body(first.robot), states[index[first.robot]],
+                                         body, states[index[body.name]], restitution, masses,
+                                         self.aim_final_position, self.config.reach_tolerance_m,
+                                         self.config.reach_tolerance_mps))
+        return out
+
     def predicted_trace(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan,
-                        done: set[int]) -> dict[str, np.ndarray]:
-        """Predicted positions (samples at t, t + dt, ..., the task's horizon) of every body: see step 1."""
+                        done: set[int], model=None) -> dict[str, np.ndarray]:
+        """Predicted positions (samples at t, t + dt, ..., the task's horizon) of every body: see step 1.
+
+        ``model(robot, object)`` -> (restitution, (m_robot, m_object)): the pair's model for the reachability
+        test (with ``predict_reachability``; None: no test). The verdicts are kept in ``self.verdicts``."""
+        self.verdicts = []
+        if model is not None and self.config.predict_reachability:
+            self.verdicts = self.reachability(t, states, index, plan, done, model)
+        lost = {id(v.impact) for v in self.verdicts if not v.reachable}
         if self._sampler_plan is not plan:
             self._sampler, self._sampler_plan = PlanSampler(plan), plan
         sampler = self._sampler
@@ -319,7 +384,7 @@ class MissionPlanner:
             pos = s[:2] + np.outer(times - t, s[3:5])
             pending = sorted((i for k, i in enumerate(plan.impacts)
                               if i.object == body.name and k not in done and i.time_s > t), key=lambda i: i.time_s)
-            if pending:
+            if pending and id(pending[0]) not in lost:  # a lost impact: free flight from now on
                 first = pending[0]
                 hit = s[:2] + s[3:5] * (first.time_s - t)
                 after = times >= first.time_s
@@ -340,9 +405,9 @@ class MissionPlanner:
         return out
 
     def predicted_robustness(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan,
-                             done: set[int]) -> float:
+                             done: set[int], model=None) -> float:
         """The task's robustness on the executed trace followed by the prediction."""
-        pred = self.predicted_trace(t, states, index, plan, done)
+        pred = self.predicted_trace(t, states, index, plan, done, model)
         past = np.array(self.trace)  # (k + 1, n_bodies, 2), the last sample is now
         trace = {name: np.vstack([past[:-1, i], pred[name]]) for i, name in enumerate(self.names)}
         return float(robustness(self.formula, trace, self.regions, self.dt))
@@ -361,7 +426,9 @@ class MissionPlanner:
         if any(abs(i.time_s - t) < cfg.quiet_s for i in pending):
             return None
         self.checks += 1
-        predicted = self.predicted_robustness(t, states, index, plan, book.done)
+        predicted = self.predicted_robustness(t, states, index, plan, book.done, model)
+        if any(not v.reachable for v in self.verdicts):
+            self.unreachable += 1
         threshold = max(cfg.min_robustness_m, cfg.robustness_fraction * self.plan_robustness)
         if predicted >= threshold:
             return None
@@ -393,7 +460,8 @@ class MissionPlanner:
                 threshold: float) -> tuple[Plan, set[int]] | None:
         from planners.errors import InfeasiblePlanError, PlanTimeoutError
 
-        record = ReplanRecord(t, predicted, threshold, "kept")
+        record = ReplanRecord(t, predicted, threshold, "kept",
+                              unreachable=[v.describe() for v in self.verdicts if not v.reachable])
         self.records.append(record)
         built = self.derived_scenario(t, states, index)
         if built is None:
@@ -450,7 +518,7 @@ class MissionPlanner:
 
     def report(self) -> dict[str, Any]:
         return {"checks": self.checks, "replans": sum(r.status.startswith("accepted") for r in self.records),
-                "attempts": len(self.records), "timeouts": self.timeouts,
+                "attempts": len(self.records), "timeouts": self.timeouts, "unreachable": self.unreachable,
                 "records": [dataclasses.asdict(r) for r in self.records]}
 
 

@@ -1,0 +1,181 @@
+"""Can a robot still make the contact of its next planned impact? (the mission monitor's reachability check)
+
+The mission monitor (:mod:`planners.online.mission`) predicts each object's flight assuming that its next
+planned impact delivers what the local layer asks for (the replanner re-aims it, Eq. 29). That holds only
+while the robot can get to the contact in time. This module decides, from the observed states, when it
+provably cannot.
+
+**The contact** is the one the local layer would ask for (:class:`planners.online.reference.PlanContact`): the
+object's state at the impact time by free flight from its observed state, the velocity it must leave with
+(:func:`planners.online.reference.desired_object_velocity`) and the circular impact model's closed-form
+inverse (:func:`planners.online.impact_model.required_contact`, Eq. 6-7) with the expert's current model of
+the pair (the identified restitution and masses when identification is on). It gives the robot's centre at
+contact and its velocity just before.
+
+**The test.** The robot must fly from its observed state (position, velocity) at ``t`` to that contact state
+at the impact time ``t_i``, through a segment of the replanner's class (a degree-``DEGREE`` Bezier curve with
+fixed end states). Whether one exists within an acceleration bound is the closed form of
+:mod:`planners.online.segment_feasibility` (:func:`~planners.online.segment_feasibility.bounds_feasible`).
+A False verdict must be a proof (a wrongly pessimistic prediction triggers re-plans that lose margin), so:
+
+- the acceleration bound is the robot's FULL thrust over its mass, not the replanner's ``thrust_fraction``
+  share of it (the MPC's input bounds allow all of it), per world axis at the robot's observed heading
+  (``(Fx |cos theta| + Fy |sin theta|) / m`` along x, likewise along y: the box of body-frame thrusts,
+  rotated; at heading 0 the replanner's per-axis bound). A contact the replanner reaches only by raising its
+  acceleration bound up to the robot's thrust is not flagged;
+- no velocity bound: when the contact needs the robot faster than ``velocity_bound_mps`` (or the robot is
+  faster now), the replanner gives the bound up (:func:`planners.online.replanner.replan_segment` falls
+  back to its unbounded closed form) and the MPC, which has no velocity constraint, flies it. The speed the
+  contact needs is compared with the bound and reported (``contact_speed_above_bound``), not judged;
+- the contact state is a box, not a point: the robot only has to get within ``position_tolerance_m`` of the
+  contact position and ``velocity_tolerance_mps`` of the contact velocity, per axis. The exact state is too
+  strict: near the impact any small mismatch needs an acceleration that grows like 1 / T^2, yet the contact
+  still happens, a few hundredths of a second early or late and a little slow (measured on ``relay`` at
+  e = 0.15: from 2.8 s before an impact the exact contact state was out of reach, the contact came 0.02 s
+  early and the object left 0.008 m/s off);
+- the bounds are loosened by the replanner's own tolerance (``FEASIBILITY_TOL``), as in ``bounds_feasible``.
+
+**The box test** (:func:`box_reachable`). Per axis, ``bounds_feasible`` asks ``sum l(v1) <= S(p1) <= sum
+u(v1)`` with ``S = d (p1 - p0) / T`` (module docstring of ``segment_feasibility``), where v1 must satisfy
+``|v1 - v0| <= A T`` (its condition (b)). ``sum u`` and ``sum l`` are continuous and nondecreasing in v1 (each
+term is), ``sum l <= sum u`` where (b) holds, and S increases with p1. Let ``[v_lo, v_hi]`` be the velocity
+interval of the box cut to (b). *Claim:* the box holds a reachable state if and only if ``v_lo <= v_hi``,
+``sum u(v_hi) >= S(p1 - eps_p)`` and ``sum l(v_lo) <= S(p1 + eps_p)``. Necessary: a reachable (p, v) in the
+box has ``S(p1 - eps_p) <= S(p) <= sum u(v) <= sum u(v_hi)``, likewise below. Sufficient: let v* be the least
+v in ``[v_lo, v_hi]`` with ``sum u(v) >= S(p1 - eps_p)`` (it exists by continuity); if v* = v_lo, ``sum
+l(v*) <= S(p1 + eps_p)`` is given; else ``sum u(v*) = S(p1 - eps_p)`` and ``sum l(v*) <= sum u(v*)``. Either
+way ``[sum l(v*), sum u(v*)]`` meets ``[S(p1 - eps_p), S(p1 + eps_p)]``: a p in it is reachable with v*. The
+axes are independent, so the box is reachable when every axis is. With zero tolerances it is
+``bounds_feasible`` without a velocity bound (tested).
+
+What a False verdict proves, and what it does not: no segment of the replanner's class gets the robot within
+the tolerances of the contact state with the robot's thrust, so the local layer has to ask for more than the
+robot has, the MPC saturates, and the contact comes late, slow or not at all (measured on ``relay`` at
+e = 0.15: late by 0.4-0.8 s or missed). A robot that is not restricted to Bezier curves could do a little
+better (from rest to rest the degree-10 class reaches 8/9 of the bang-bang displacement, 2 A T^2 / 9 against
+A T^2 / 4), a robot that turns could get up to sqrt(2) more thrust along a diagonal (the MPC holds the
+heading), and an unplanned contact could change its velocity on the way: the verdict is about the local
+layer's segments, not a bound on every trajectory.
+
+Only an impact that is the robot's next one is tested (:meth:`planners.online.mission.MissionPlanner.
+reachability`): if the robot has an earlier pending impact its velocity changes there, and its current state
+says nothing about the later contact.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from impact_env.scenario import Body
+from planners.errors import ReplanInputError
+from planners.online.impact_model import ContactPlan, required_contact
+from planners.online.reference import desired_object_velocity
+from planners.online.segment_feasibility import FEASIBILITY_TOL, velocity_sum_range
+from planners.online.segment_qp import DEGREE
+from planners.plan import Plan, PlannedImpact
+
+POSITION_TOLERANCE_M = 0.05  # default contact box: an eighth of the contact distance of two 0.2 m discs
+VELOCITY_TOLERANCE_MPS = 0.05  # default contact box: the object's outcome within (1 + e) m_R / (m_R + m_O) of it
+
+
+@dataclass(frozen=True)
+class Reachability:
+    """The verdict on one pending impact at time ``t_s``.
+
+    ``reachable``: False only when proven unreachable (see the module docstring); ``contact``: the contact
+    the local layer would ask for (None if the object needs no velocity change there, or the impact is
+    due now); ``contact_speed_above_bound``: that contact needs the robot faster than its velocity bound on
+    some axis (reported, not part of the verdict: the local layer then flies it without the bound).
+    """
+
+    t_s: float
+    impact: PlannedImpact
+    reachable: bool
+    contact: ContactPlan | None = None
+    contact_speed_above_bound: bool = False
+
+    def describe(self) -> str:
+        """``"R3-O1 at 25.00 s"`` (with ``", contact above the speed bound"`` when it is)."""
+        imp = self.impact
+        return (f"{imp.robot}-{imp.object} at {imp.time_s:.2f} s"
+                + (", contact above the speed bound" if self.contact_speed_above_bound else ""))
+
+
+def robot_acceleration_bound(robot: Body, heading_rad: float = 0.0) -> tuple[float, float]:
+    """Per world axis, the largest acceleration (m/s^2) the robot's full thrust gives at this heading: the box
+    of body-frame thrusts ``|Fx| <= thrust_limit_N[0]``, ``|Fy| <= thrust_limit_N[1]`` rotated by the heading,
+    over the mass (at heading 0 the thrust limits over the mass, the replanner's per-axis bound)."""
+    if robot.thrust_limit_N is None:
+        raise ReplanInputError(f"body {robot.name!r} has no thrust limits: it is not a robot")
+    fx, fy = (float(f) for f in robot.thrust_limit_N)
+    c, s = abs(math.cos(heading_rad)), abs(math.sin(heading_rad))
+    return (fx * c + fy * s) / robot.mass_kg, (fx * s + fy * c) / robot.mass_kg
+
+
+def box_reachable(p0, v0, p1, v1, duration_s: float, degree: int, acceleration_bound,
+                  position_tolerance_m: float = 0.0, velocity_tolerance_mps: float = 0.0,
+                  tol: float = FEASIBILITY_TOL) -> bool:
+    """True if a degree-``degree`` Bezier curve of ``duration_s`` s from (p0, v0) with its acceleration control
+    points within ``acceleration_bound`` (m/s^2 per axis, loosened by ``tol``) ends within
+    ``position_tolerance_m`` of p1 and ``velocity_tolerance_mps`` of v1 on each axis; exact (module docstring).
+    No velocity bound. With zero tolerances: ``bounds_feasible(p0, v0, p1, v1, duration_s, degree, None,
+    acceleration_bound, tol)``."""
+    if not duration_s > 0:
+        raise ReplanInputError(f"duration_s must be > 0, got {duration_s}")
+    if not degree >= 3:
+        raise ReplanInputError(f"degree must be >= 3 (two fixed control points at each end), got {degree}")
+    for name, value in (("position_tolerance_m", position_tolerance_m),
+                        ("velocity_tolerance_mps", velocity_tolerance_mps)):
+        if not (math.isfinite(value) and value >= 0):
+            raise ReplanInputError(f"{name} must be a finite number >= 0, got {value!r}")
+    acc = np.asarray(acceleration_bound, float) + tol
+    if not (acc.shape == (2,) and (acc >= 0).all()):
+        raise ReplanInputError(f"acceleration_bound must be >= 0 per axis, got {acceleration_bound}")
+    p0, v0, p1, v1 = (np.asarray(x, float) for x in (p0, v0, p1, v1))
+    v_lo = np.maximum(v1 - velocity_tolerance_mps, v0 - acc * duration_s)  # condition (b)
+    v_hi = np.minimum(v1 + velocity_tolerance_mps, v0 + acc * duration_s)
+    if (v_lo > v_hi).any():
+        return False
+    slack = tol * degree  # as in bounds_feasible: tol on each of the d velocity control points
+    s_low = degree * (p1 - position_tolerance_m - p0) / duration_s
+    s_high = degree * (p1 + position_tolerance_m - p0) / duration_s
+    least, _ = velocity_sum_range(v0, v_lo, duration_s, degree, None, acc)
+    _, largest = velocity_sum_range(v0, v_hi, duration_s, degree, None, acc)
+    return bool((largest + slack >= s_low).all() and (least - slack <= s_high).all())
+
+
+def contact_reachable(t: float, impact: PlannedImpact, plan: Plan, robot: Body, robot_state, obj: Body,
+                      object_state, restitution: float, masses: tuple[float, float],
+                      aim_final_position: bool = False, position_tolerance_m: float = POSITION_TOLERANCE_M,
+                      velocity_tolerance_mps: float = VELOCITY_TOLERANCE_MPS) -> Reachability:
+    """Whether ``robot`` can still make the contact of ``impact`` on ``obj`` (see the module docstring).
+
+    ``robot_state`` / ``object_state``: observed at time ``t`` (s), ``[x, y, theta, vx, vy, omega]`` (m, rad,
+    m/s, rad/s), the object flying freely until the impact; ``restitution`` and ``masses`` (robot, object;
+    kg): the pair's model (identified or the scenario file's); ``aim_final_position``: as the contact strategy
+    (:class:`planners.online.reference.PlanContact`); the tolerances: the contact box (m, m/s per axis)."""
+    duration = impact.time_s - t
+    if duration <= 0.0:
+        return Reachability(t, impact, True)
+    robot_state, object_state = np.asarray(robot_state, float), np.asarray(object_state, float)
+    v_o = object_state[3:5]
+    x_o = object_state[:2] + v_o * duration
+    v_des = desired_object_velocity(plan, impact, x_o, aim_final_position)
+    m_r, m_o = masses
+    contact = required_contact(x_o, v_o, v_des, m_r, robot.radius_m, m_o, obj.radius_m, restitution)
+    if contact is None:
+        return Reachability(t, impact, True)
+    v1 = contact.robot_velocity_before
+    too_fast = robot.velocity_bound_mps is not None and bool(
+        np.any(np.abs(v1) > np.asarray(robot.velocity_bound_mps, float) + FEASIBILITY_TOL))
+    reachable = box_reachable(robot_state[:2], robot_state[3:5], contact.robot_position, v1, duration, DEGREE,
+                              robot_acceleration_bound(robot, float(robot_state[2])), position_tolerance_m,
+                              velocity_tolerance_mps)
+    return Reachability(t, impact, reachable, contact, too_fast)
+
+
+__all__ = ["POSITION_TOLERANCE_M", "VELOCITY_TOLERANCE_MPS", "Reachability", "box_reachable", "contact_reachable",
+           "robot_acceleration_bound"]
