@@ -19,7 +19,7 @@ The story, in time order:
 - the identification's estimate of the pair after each impact, against the simulator's restitution;
 - every mission check that tried a re-plan: predicted robustness, threshold, outcome, the pending impacts
   the prediction judged unreachable (:mod:`planners.online.reachability`), the new plan's impacts, and its
-  **side switches** (:func:`planners.online.mission.side_switches`: two consecutive
+  **side switches** (:func:`planners.online.side_switch.side_switches`: two consecutive
   impacts on one object by one robot whose velocity changes are more than 90 degrees apart, so that the
   robot must get round the object in between; the planner's bodies are points, its path goes through it),
   with the time left and the time getting round needs;
@@ -46,7 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from robustness import RESULTS, add_cell_arguments, env_options, expert_config  # noqa: E402  (the cell's own)
 
-from planners.online.mission import side_switches, unflyable_side_switches  # noqa: E402
+from planners.online.side_switch import side_switches, unflyable_side_switches  # noqa: E402
 
 
 # ------------------------------------------------------------------------------------------- recording

@@ -22,7 +22,8 @@ from impact_env.scenario import load_scenario
 from planners.errors import PlannerError
 from planners.expert import Expert, ExpertConfig
 from planners.online.bookkeeping import ImpactBook
-from planners.online.mission import MissionConfig, MissionPlanner, side_switches, unflyable_side_switches
+from planners.online.mission import MissionConfig, MissionPlanner
+from planners.online.side_switch import side_switches, unflyable_side_switches
 from planners.plan import Plan, PlannedImpact
 
 CASE = Path(__file__).parent / "data" / "two_objects_replan_at_10s.json"
