@@ -18,6 +18,40 @@ measurement's variance is that of a velocity error ``velocity_noise_mps`` divide
 speed, so a glancing touch counts little. Pairs are estimated separately (on hardware two objects may be
 of different materials); a pair not yet observed uses the estimate pooled over all pairs, and before any
 impact the scenario file's value with the prior's uncertainty.
+
+Significance test (``IdentificationConfig.significance = k``; off by default). An estimate replaces the
+scenario file's value e_file in the contact inverse only when the data say the restitution really differs:
+
+    |m - e_file| > k * s_m,
+
+with m the data's weighted mean and s_m its standard error, both computed without the prior (the test asks
+what the measurements alone say). Each measurement i is read twice. The object's reading e_i (above) carries
+the object's velocity error; the robot's reading r_i applies Eq. 5 to the robot's velocity change alone (its
+direction gives the normal, momentum with the file's mass ratio the object's change,
+r = -1 + (1 + m_O/m_R) |dv_R| / ((m_O/m_R) (v_R- - v_O-) . n_R)), and carries the robot's thrust during the
+contact. The two errors are independent, so d_i = r_i - e_i is one sample of the difference of the errors,
+E[d_i^2] = var(e_i) + var(r_i) >= var(e_i): a one-impact look at the error actually present, which the
+assumed noise cannot give. Measurement i's variance in the test is the larger of the assumed and the seen,
+
+    v_i = max(sigma_i^2, d_i^2),      sigma_i = velocity_noise_mps (1 + e_i) / (normal approach speed),
+
+and with w_i = 1 / v_i over the pair's n measurements (or all of them, for the pooled estimate)
+
+    m = sum w_i e_i / sum w_i,        s_m^2 = max(1, chi2 / (n - 1)) / sum w_i,  chi2 = sum w_i (e_i - m)^2,
+
+the standard error inflated by the Birge ratio chi2 / (n - 1) when the measurements scatter more than their
+variances allow (n >= 2; a scatter smaller than expected never shrinks it). Why this is conservative in the
+right direction: when the file is right and only the object's reported velocity is noisy, e_i - e_file and
+d_i are nearly the same number (the robot's reading is near the truth), so |m - e_file| / s_m stays near 1
+or below and any k >= 2 keeps the file's value, even after one impact and whatever noise the user assumed.
+When the restitution is really off and the impact noise-free, d_i is only the robot's thrust error (a few
+thousandths), so a mismatch of 0.1 is tens of standard errors and the estimate is used after one impact.
+A wrong file mass ratio also makes the two readings disagree, which keeps the file's value (the restitution
+measurement cannot be trusted then). With the test on, each measurement's momentum balance uses the mass
+ratio the contact inverse uses (:meth:`ImpactIdentifier.masses_for`), not the running ratio estimate, which
+one noisy impact would otherwise move and carry into the pair's next measurements. A pair that has been
+observed is decided on its own measurements, one that has not on all of them (the pooled estimate); when
+the test passes the contact inverse uses the same estimate as with the test off.
 """
 
 from __future__ import annotations
@@ -26,6 +60,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from planners.errors import PlannerError
 
 
 @dataclass
@@ -60,6 +96,45 @@ class ImpactMeasurement:
     mass_ratio: float  # m_object / m_robot
     mass_ratio_variance: float
     normal_speed_mps: float
+    restitution_robot_side: float | None = None  # the robot's reading of the same impact (module docstring)
+
+    @property
+    def test_variance(self) -> float:
+        """v_i of the significance test: the larger of the assumed variance and the squared difference of the
+        object's and the robot's readings (the assumed one alone when the robot gives no reading)."""
+        if self.restitution_robot_side is None:
+            return self.restitution_variance
+        return max(self.restitution_variance, (self.restitution_robot_side - self.restitution) ** 2)
+
+
+@dataclass(frozen=True)
+class Significance:
+    """The significance test's verdict on a set of measurements against the file's restitution.
+
+    ``mean`` (m) and ``std_of_mean`` (s_m) as in the module docstring, ``z = |m - e_file| / s_m``, ``count``
+    measurements; ``in_use``: z > k, the estimate replaces the file's value.
+    """
+
+    mean: float
+    std_of_mean: float
+    z: float
+    count: int
+    in_use: bool
+
+
+def significance_test(values: list[float], variances: list[float], reference: float, k: float) -> Significance:
+    """Does the weighted mean of ``values`` (with ``variances``) differ from ``reference`` by more than ``k``
+    standard errors? The standard error is inflated by the Birge ratio when the values scatter more than
+    their variances allow (module docstring). No values: not in use."""
+    if not values:
+        return Significance(reference, math.inf, 0.0, 0, False)
+    e = np.asarray(values, float)
+    w = 1.0 / np.asarray(variances, float)
+    mean = float(w @ e / w.sum())
+    birge = float(w @ (e - mean) ** 2) / (len(e) - 1) if len(e) > 1 else 1.0
+    std = math.sqrt(max(1.0, birge) / float(w.sum()))
+    z = abs(mean - reference) / std
+    return Significance(mean, std, z, len(e), bool(z > k))
 
 
 @dataclass
@@ -70,7 +145,15 @@ class IdentificationConfig:
     ``velocity_noise_mps``: error of a reported velocity along the normal (the contact is detected at a
     substep, so the line of centres is known exactly but the velocities carry about one substep of thrust);
     ``min_normal_speed_mps``: slower approaches are not used (their ratio is noise); ``use_mass_ratio``: let
-    the contact inverse use the estimated mass ratio once its std is below ``mass_ratio_max_std``.
+    the contact inverse use the estimated mass ratio once its std is below ``mass_ratio_max_std``;
+    ``significance``: k of the significance test (module docstring): a pair's (or the pooled) estimate
+    replaces the file's restitution only when it differs from it by more than k standard errors; None (the
+    default) uses every estimate as soon as it exists.
+
+    ``significance`` is off by default for now: turning it on changes every published benchmark cell that
+    flies identification, and those must be flown again before the default can change (3 is the value
+    measured to keep the file's restitution under post-impact noise and still take a 0.1 mismatch after one
+    noise-free impact; see ``benchmarks/identification_noise.py``).
     """
 
     restitution_prior_std: float = 0.25
@@ -79,6 +162,23 @@ class IdentificationConfig:
     min_normal_speed_mps: float = 0.01
     use_mass_ratio: bool = False
     mass_ratio_max_std: float = 0.02
+    significance: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("restitution_prior_std", "mass_ratio_prior_std", "velocity_noise_mps", "min_normal_speed_mps",
+                     "mass_ratio_max_std"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value)
+                                               and value >= 0):
+                raise PlannerError(f"IdentificationConfig.{name} must be a finite number >= 0, got {value!r}")
+        if not isinstance(self.use_mass_ratio, bool):
+            raise PlannerError(f"IdentificationConfig.use_mass_ratio must be True or False, got "
+                               f"{self.use_mass_ratio!r}")
+        k = self.significance
+        if k is not None and (isinstance(k, bool) or not (isinstance(k, (int, float)) and math.isfinite(k)
+                                                          and k > 0)):
+            raise PlannerError(f"IdentificationConfig.significance must be None (off) or a finite number of "
+                               f"standard errors > 0 (e.g. 3), got {k!r}")
 
 
 @dataclass
@@ -106,6 +206,8 @@ class ImpactIdentifier:
         self.pairs: dict[tuple[str, str], Estimate] = {}
         self.ratios: dict[tuple[str, str], Estimate] = {}
         self.measurements: list[ImpactMeasurement] = []
+        self.decisions: dict[tuple[str, str], Significance] = {}  # with the significance test on
+        self.pooled_decision = Significance(self.restitution, math.inf, 0.0, 0, False)
 
     def _prior_ratio(self, robot: str, obj: str) -> float:
         return self.masses[obj] / self.masses[robot]
@@ -120,7 +222,19 @@ class ImpactIdentifier:
         """The pair's restitution estimate; the pooled one if the pair has not been observed yet."""
         return self.pairs.get((robot, obj)) or self.pooled
 
+    def in_use(self, robot: str, obj: str) -> bool:
+        """Does the contact inverse use the pair's (or the pooled) estimate? Always once there is one with
+        the significance test off; with it on, when the test says the data differ from the file's value."""
+        est = self.estimate(robot, obj)
+        if self.config.significance is None:
+            return est.count > 0
+        return (self.decisions.get((robot, obj)) or self.pooled_decision).in_use
+
     def restitution_for(self, robot: str, obj: str) -> float:
+        """The restitution the contact inverse uses for the pair: its estimate, or with the significance test
+        on and not passed, the scenario file's."""
+        if self.config.significance is not None and not self.in_use(robot, obj):
+            return float(np.clip(self.restitution, 0.0, 1.0))
         return float(np.clip(self.estimate(robot, obj).mean, 0.0, 1.0))
 
     def masses_for(self, robot: str, obj: str) -> tuple[float, float]:
@@ -154,7 +268,18 @@ class ImpactIdentifier:
             self.pooled.update(m.restitution, m.restitution_variance)
             self.measurements.append(m)
             used.append(m)
+            if c.significance is not None:
+                self._decide(key)
         return used
+
+    def _decide(self, key: tuple[str, str]) -> None:
+        """Re-run the significance test for the pair ``key`` and for the pooled estimate."""
+        def test(ms: list[ImpactMeasurement]) -> Significance:
+            return significance_test([m.restitution for m in ms], [m.test_variance for m in ms],
+                                     self.restitution, self.config.significance)
+
+        self.decisions[key] = test([m for m in self.measurements if (m.robot, m.object) == key])
+        self.pooled_decision = test(self.measurements)
 
     def _measure(self, ev: dict, robot: str, obj: str) -> ImpactMeasurement | None:
         side = {ev["a"]: "a", ev["b"]: "b"}
@@ -170,20 +295,44 @@ class ImpactIdentifier:
         approach = float((vr0 - vo0) @ n)
         if approach < self.config.min_normal_speed_mps:
             return None
-        ratio_prior = self.mass_ratio(robot, obj).mean
+        if self.config.significance is None:
+            ratio_prior = self.mass_ratio(robot, obj).mean
+        else:  # the contact inverse's ratio (module docstring)
+            m_r, m_o = self.masses_for(robot, obj)
+            ratio_prior = m_o / m_r
         vr1_momentum = vr0 - ratio_prior * dvo  # Eq. 5's momentum balance, free of the robot's thrust
         e = float((vo1 - vr1_momentum) @ n) / approach
         sigma = self.config.velocity_noise_mps
         e_var = (sigma * (1.0 + e) / approach) ** 2 + 1e-8
         ratio = -float((vr1 - vr0) @ n) / size
         ratio_var = (sigma * (1.0 + ratio) / size) ** 2 + 1e-8
-        return ImpactMeasurement(float(ev["time"]), robot, obj, e, e_var, ratio, ratio_var, approach)
+        return ImpactMeasurement(float(ev["time"]), robot, obj, e, e_var, ratio, ratio_var, approach,
+                                 _robot_side_restitution(vr0, vr1, vo0, ratio_prior))
 
     def report(self) -> dict:
-        """JSON-ready estimates: pooled and per pair (mean, std, count)."""
-        def row(est: Estimate) -> dict:
-            return {"mean": est.mean, "std": est.std, "count": est.count}
+        """JSON-ready estimates: pooled and per pair (mean, std, count); with the significance test on, also
+        its verdict (``in_use``, ``z``, the data's mean and its standard error ``test_std``)."""
+        def row(est: Estimate, decision: Significance | None) -> dict:
+            out = {"mean": est.mean, "std": est.std, "count": est.count}
+            if self.config.significance is not None and decision is not None:
+                out.update(in_use=decision.in_use, z=decision.z, test_mean=decision.mean,
+                           test_std=decision.std_of_mean)
+            return out
 
-        return {"restitution": {"pooled": row(self.pooled),
-                                **{f"{r}-{o}": row(est) for (r, o), est in self.pairs.items()}},
-                "mass_ratio": {f"{r}-{o}": row(est) for (r, o), est in self.ratios.items()}}
+        return {"restitution": {"pooled": row(self.pooled, self.pooled_decision),
+                                **{f"{r}-{o}": row(est, self.decisions.get((r, o)))
+                                   for (r, o), est in self.pairs.items()}},
+                "mass_ratio": {f"{r}-{o}": row(est, None) for (r, o), est in self.ratios.items()}}
+
+
+def _robot_side_restitution(vr0: np.ndarray, vr1: np.ndarray, vo0: np.ndarray, ratio: float) -> float | None:
+    """Eq. 5 read from the robot alone: the normal from its velocity change, the object's change from momentum
+    with ``ratio`` = m_O / m_R (module docstring). None when the robot's change gives no normal."""
+    dvr = vr1 - vr0
+    size = float(np.linalg.norm(dvr))
+    if size < 1e-9 or ratio <= 0:
+        return None
+    approach = float((vr0 - vo0) @ (-dvr / size))
+    if approach <= 1e-9:
+        return None
+    return -1.0 + (1.0 + ratio) * size / (ratio * approach)
