@@ -3,6 +3,7 @@
     python benchmarks/robustness_episode.py SCENARIO STACK AXIS LEVEL SEED [--plot out.png] [--json out.json]
     python benchmarks/robustness_episode.py two_objects all e 0.3 0 --allow-side-switches \
         --plot docs/img/two_objects_e03_seed0.png
+    python benchmarks/robustness_episode.py two_objects all impact 0.02 4 --significance 3
 
 SCENARIO, STACK (``paper``, ``+id``, ``+mission``, ``all``; ``plus_id`` / ``plus_mission`` as in the cell
 file names), AXIS and LEVEL (``nominal 0``, ``combined 0``, ``e 0.3``, ``offset 0.1``, ``thrust 0.2``, ...)
@@ -16,7 +17,9 @@ The story, in time order:
   normal, the restitution it assumed) against what happened, and the **side**: ``cos`` between the asked
   and the observed contact normal (the object's velocity change), below 0 when the robot hit the object
   from the side opposite to the one the impact needs;
-- the identification's estimate of the pair after each impact, against the simulator's restitution;
+- the identification's estimate of the pair after each impact, against the simulator's restitution (with
+  ``--significance K``, identification's significance test on at k = K, and its verdict: the estimate in use,
+  or the file's value kept);
 - every mission check that tried a re-plan: predicted robustness, threshold, outcome, the pending impacts
   the prediction judged unreachable (:mod:`planners.online.reachability`), the new plan's impacts, and its
   **side switches** (:func:`planners.online.side_switch.side_switches`: two consecutive
@@ -35,6 +38,7 @@ with a side switch were refused.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from dataclasses import dataclass, field
@@ -106,7 +110,8 @@ class EpisodeRecord:
     """Everything the story needs, collected while the episode is flown."""
 
     plans: list[tuple[float, object]] = field(default_factory=list)  # (time set, Plan)
-    estimates: list[tuple[float, str, str, float, float]] = field(default_factory=list)  # t, robot, obj, mean, std
+    # t, robot, obj, mean, std, and with the significance test on its verdict (in use, z), else None
+    estimates: list[tuple[float, str, str, float, float, tuple[bool, float] | None]] = field(default_factory=list)
 
 
 class Recorder:
@@ -131,7 +136,9 @@ class Recorder:
         measurements = ex.identifier.measurements if ex.config.identification else []
         for m in measurements[self._seen:]:
             est = ex.identifier.estimate(m.robot, m.object)
-            self.record.estimates.append((m.time_s, m.robot, m.object, est.mean, est.std))
+            decision = ex.identifier.decisions.get((m.robot, m.object))
+            verdict = None if decision is None else (decision.in_use, decision.z)
+            self.record.estimates.append((m.time_s, m.robot, m.object, est.mean, est.std, verdict))
         self._seen = len(measurements)
         return action
 
@@ -257,8 +264,10 @@ def story(scenario, expert, record: EpisodeRecord, result, true_restitution: flo
                          f"(t={ask.first_t_s:.1f} s) the robot was {where} the object")
             lines.append(head)
             while estimates and estimates[0][0] <= t + 1e-9:
-                _, r, o, mean, std = estimates.pop(0)
-                lines.append(f"          identified e({r}-{o}) = {mean:.3f} +- {std:.3f}")
+                _, r, o, mean, std, verdict = estimates.pop(0)
+                lines.append(f"          identified e({r}-{o}) = {mean:.3f} +- {std:.3f}" + (
+                    "" if verdict is None else f" ({'in use' if verdict[0] else 'file value kept'}, "
+                                               f"z = {verdict[1]:.1f})"))
         else:
             rec = item
             lines.append(f"t={t:6.2f} mission check: predicted rho {rec.predicted_robustness:+.3f} < threshold "
@@ -418,12 +427,19 @@ def main(argv: list[str] | None = None) -> None:
     add_cell_arguments(ap, seed=True)
     ap.add_argument("--plan", type=Path, help="plan file (default: the benchmark's cached plan of the scenario)")
     ap.add_argument("--plot", help="write the figure to this PNG")
+    ap.add_argument("--significance", type=float, metavar="K",
+                    help="turn identification's significance test on at k = K standard errors "
+                         "(IdentificationConfig.significance)")
     args = ap.parse_args(argv)
     stack = args.stack
     config = expert_config(stack, args.allow_side_switches)
+    if args.significance is not None:
+        config = dataclasses.replace(config, identification_config=dataclasses.replace(
+            config.identification_config, significance=args.significance))
     scenario, expert, record, result, options = fly(args.scenario, stack, args.axis, args.level, args.seed,
                                                     args.plan, config)
-    print(f"{scenario.name} / {stack} / {args.axis} {args.level:g} / seed {args.seed}: env options {options}")
+    sig = "" if args.significance is None else f" / significance {args.significance:g}"
+    print(f"{scenario.name} / {stack}{sig} / {args.axis} {args.level:g} / seed {args.seed}: env options {options}")
     true_e = options.get("restitution", scenario.restitution)
     print("\n".join(story(scenario, expert, record, result, true_e)))
     if args.plot:
