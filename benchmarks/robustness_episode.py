@@ -110,8 +110,9 @@ class EpisodeRecord:
     """Everything the story needs, collected while the episode is flown."""
 
     plans: list[tuple[float, object]] = field(default_factory=list)  # (time set, Plan)
-    # t, robot, obj, mean, std, and with the significance test on its verdict (in use, z), else None
-    estimates: list[tuple[float, str, str, float, float, tuple[bool, float] | None]] = field(default_factory=list)
+    # t, robot, obj, mean, std, and with the significance test on: (in use, z, the object's and the robot's
+    # reading of the impact), else None
+    estimates: list[tuple[float, str, str, float, float, tuple | None]] = field(default_factory=list)
 
 
 class Recorder:
@@ -137,7 +138,8 @@ class Recorder:
         for m in measurements[self._seen:]:
             est = ex.identifier.estimate(m.robot, m.object)
             decision = ex.identifier.decisions.get((m.robot, m.object))
-            verdict = None if decision is None else (decision.in_use, decision.z)
+            verdict = None if decision is None else (decision.in_use, decision.z, m.restitution,
+                                                     m.restitution_robot_side)
             self.record.estimates.append((m.time_s, m.robot, m.object, est.mean, est.std, verdict))
         self._seen = len(measurements)
         return action
@@ -176,6 +178,10 @@ def switches_text(scenario, plan, after_s: float) -> str:
                      f"(it leaves at {sw.away_mps:+.3f} m/s; {sw.t2_s - max(sw.t1_s, after_s):.1f} s left, "
                      f"{need:.1f} s needed{', NO TIME' if (sw.robot, sw.object, sw.t2_s) in unflyable else ''})")
     return "; ".join(parts) or "none"
+
+
+def _reading(value: float | None) -> str:
+    return "nothing" if value is None else f"{value:.3f}"
 
 
 def fmt_v(v) -> str:
@@ -267,7 +273,8 @@ def story(scenario, expert, record: EpisodeRecord, result, true_restitution: flo
                 _, r, o, mean, std, verdict = estimates.pop(0)
                 lines.append(f"          identified e({r}-{o}) = {mean:.3f} +- {std:.3f}" + (
                     "" if verdict is None else f" ({'in use' if verdict[0] else 'file value kept'}, "
-                                               f"z = {verdict[1]:.1f})"))
+                                               f"z = {verdict[1]:.1f}; this impact read {verdict[2]:.3f} from "
+                                               f"the object, {_reading(verdict[3])} from the robot)"))
         else:
             rec = item
             lines.append(f"t={t:6.2f} mission check: predicted rho {rec.predicted_robustness:+.3f} < threshold "
