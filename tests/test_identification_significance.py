@@ -200,6 +200,21 @@ def test_significance_test_weighted_mean_and_birge_inflated_standard_error():
     weighted = significance_test([0.0, 1.0], [1.0, 0.25], 0.0, 1.0)
     assert weighted.mean == pytest.approx(0.8)  # weights 1 and 4
     assert not significance_test([], [], 0.6, 3.0).in_use
+    unchecked = significance_test([0.1, 0.61], [math.inf, 1e-4], 0.6, 3.0)  # only the checked value counts
+    assert unchecked.count == 1 and unchecked.mean == pytest.approx(0.61) and not unchecked.in_use
+    assert not significance_test([0.1], [math.inf], 0.6, 3.0).in_use
+
+
+def test_a_contact_the_robot_cannot_read_does_not_count():
+    """The robot's velocity did not change (something else held it): its reading is missing, and however
+    certain the object's reading looks, the file's value is kept."""
+    event = impact_event(0.2, 0.2, 0.4)
+    event["a_velocity_after"] = event["a_velocity_before"]
+    ident = identifier()
+    (m,) = ident.observe([event])
+    assert m.restitution_robot_side is None and m.test_variance == math.inf
+    assert not ident.in_use("R1", "O1") and ident.restitution_for("R1", "O1") == FILE_E
+    assert identifier(None).observe([event])[0].restitution == pytest.approx(0.2)  # off: used as before
 
 
 def test_the_noisy_readings_variance_is_the_seen_difference():

@@ -27,7 +27,7 @@ scenario file's value e_file in the contact inverse only when the data say the r
 with m the data's weighted mean and s_m its standard error, both computed without the prior (the test asks
 what the measurements alone say). Each measurement i is read twice. The object's reading e_i (above) carries
 the object's velocity error; the robot's reading r_i applies Eq. 5 to the robot's velocity change alone (its
-direction gives the normal, momentum with the file's mass ratio the object's change,
+direction gives the normal, momentum with the contact inverse's mass ratio the object's change,
 r = -1 + (1 + m_O/m_R) |dv_R| / ((m_O/m_R) (v_R- - v_O-) . n_R)), and carries the robot's thrust during the
 contact. The two errors are independent, so d_i = r_i - e_i is one sample of the difference of the errors,
 E[d_i^2] = var(e_i) + var(r_i) >= var(e_i): a one-impact look at the error actually present, which the
@@ -41,17 +41,22 @@ and with w_i = 1 / v_i over the pair's n measurements (or all of them, for the p
 
 the standard error inflated by the Birge ratio chi2 / (n - 1) when the measurements scatter more than their
 variances allow (n >= 2; a scatter smaller than expected never shrinks it). Why this is conservative in the
-right direction: when the file is right and only the object's reported velocity is noisy, e_i - e_file and
-d_i are nearly the same number (the robot's reading is near the truth), so |m - e_file| / s_m stays near 1
-or below and any k >= 2 keeps the file's value, even after one impact and whatever noise the user assumed.
-When the restitution is really off and the impact noise-free, d_i is only the robot's thrust error (a few
-thousandths), so a mismatch of 0.1 is tens of standard errors and the estimate is used after one impact.
-A wrong file mass ratio also makes the two readings disagree, which keeps the file's value (the restitution
-measurement cannot be trusted then). With the test on, each measurement's momentum balance uses the mass
-ratio the contact inverse uses (:meth:`ImpactIdentifier.masses_for`), not the running ratio estimate, which
-one noisy impact would otherwise move and carry into the pair's next measurements. A pair that has been
-observed is decided on its own measurements, one that has not on all of them (the pooled estimate); when
-the test passes the contact inverse uses the same estimate as with the test off.
+right direction: when the file is right and only the object's reported velocity is noisy, e_i - e_file and d_i
+are nearly the same number (the robot's reading is near the truth), so |m - e_file| / s_m stays near 1 or
+below and any k >= 2 keeps the file's value, even after one impact and whatever noise the user assumed. When
+the restitution is really off and the impact noise-free, d_i is only the robot's thrust error (a few
+thousandths), so a mismatch of 0.1 is tens of standard errors and the estimate is used after one impact; then
+sigma_i bounds the power: with the default 1 mm/s, k = 3 takes a 0.1 mismatch from one contact approached
+faster than about 5 cm/s (3 * 1.5 * 0.001 / 0.045 = 0.1). k = 3 rather than 2 leaves room for the case the
+test is weak in: a robot thrusting hard through a slow contact, where its reading is off by as much as the
+object's and the two can agree on a wrong value by chance (then the file's value is also kept when a small
+mismatch is real: the conservative side). A wrong file mass ratio also makes the two readings disagree, which
+keeps the file's value (the restitution measurement cannot be trusted then). With the test on, each
+measurement's momentum balance uses the mass ratio the contact inverse uses
+(:meth:`ImpactIdentifier.masses_for`), not the running ratio estimate, which one noisy impact would otherwise
+move and carry into the pair's next measurements. A pair that has been observed is decided on its own
+measurements, one that has not on all of them (the pooled estimate); when the test passes the contact inverse
+uses the pair's (or the pooled) Gaussian estimate above, as with the test off.
 """
 
 from __future__ import annotations
@@ -101,9 +106,10 @@ class ImpactMeasurement:
     @property
     def test_variance(self) -> float:
         """v_i of the significance test: the larger of the assumed variance and the squared difference of the
-        object's and the robot's readings (the assumed one alone when the robot gives no reading)."""
+        object's and the robot's readings; infinite (the measurement does not count) when the robot's change
+        gives no reading, as when something else touched the robot during the contact."""
         if self.restitution_robot_side is None:
-            return self.restitution_variance
+            return math.inf
         return max(self.restitution_variance, (self.restitution_robot_side - self.restitution) ** 2)
 
 
@@ -125,11 +131,13 @@ class Significance:
 def significance_test(values: list[float], variances: list[float], reference: float, k: float) -> Significance:
     """Does the weighted mean of ``values`` (with ``variances``) differ from ``reference`` by more than ``k``
     standard errors? The standard error is inflated by the Birge ratio when the values scatter more than
-    their variances allow (module docstring). No values: not in use."""
-    if not values:
+    their variances allow (module docstring). Values of infinite variance do not count; none left: not in
+    use."""
+    keep = [(v, var) for v, var in zip(values, variances, strict=True) if math.isfinite(var)]
+    if not keep:
         return Significance(reference, math.inf, 0.0, 0, False)
-    e = np.asarray(values, float)
-    w = 1.0 / np.asarray(variances, float)
+    e = np.array([v for v, _ in keep], float)
+    w = 1.0 / np.array([var for _, var in keep], float)
     mean = float(w @ e / w.sum())
     birge = float(w @ (e - mean) ** 2) / (len(e) - 1) if len(e) > 1 else 1.0
     std = math.sqrt(max(1.0, birge) / float(w.sum()))
