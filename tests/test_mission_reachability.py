@@ -20,8 +20,10 @@ import pytest
 from impact_env.scenario import load_scenario
 from planners.errors import PlannerError, ReplanInputError
 from planners.online.bookkeeping import ImpactBook
+from planners.online.impact_model import required_contact
 from planners.online.mission import MissionConfig, MissionPlanner
 from planners.online.reachability import box_reachable, contact_reachable, robot_acceleration_bound
+from planners.online.reference import desired_object_velocity
 from planners.online.sampling import PlanSampler
 from planners.online.segment_feasibility import bounds_feasible
 from planners.online.segment_qp import DEGREE
@@ -255,3 +257,32 @@ def test_relay_at_restitution_015_is_delivered_with_the_check():
     assert first.time_s < 25.0 and first.unreachable == ["R3-O1 at 25.00 s"]
     assert first.status.startswith("accepted")
     assert after.success and after.robustness > 0.2
+
+
+def test_a_contact_within_the_late_grace_counts_as_reachable(relay):
+    """R3 flies straight, at zero acceleration, onto the contact of its push at 25 s made 0.3 s late (the
+    object where its free flight has taken it then): exactly on time it is out of reach (0.5 s before, with
+    no tolerance), within the expert's 0.5 s of grace it is not; a negative grace is refused."""
+    scenario, plan, index = relay
+    states = plan_states(plan, index, T_CHECK)
+    i3, o1 = plan.impacts[2], states[index["O1"]]
+    late = 0.3
+    x_o = o1[:2] + o1[3:5] * (i3.time_s + late - T_CHECK)
+    v_des = desired_object_velocity(plan, i3, x_o, True)
+    r3_body, o1_body = scenario.body("R3"), scenario.body("O1")
+    contact = required_contact(x_o, o1[3:5], v_des, 16.8, r3_body.radius_m, 16.8, o1_body.radius_m,
+                               scenario.restitution)
+    t = i3.time_s - 0.5
+    r3 = states[index["R3"]].copy()
+    r3[:2] = contact.robot_position - contact.robot_velocity_before * (i3.time_s + late - t)
+    r3[3:5], r3[2] = contact.robot_velocity_before, 0.0
+    o1_now = o1.copy()
+    o1_now[:2] = o1[:2] + o1[3:5] * (t - T_CHECK)
+    args = (t, i3, plan, r3_body, r3, o1_body, o1_now, scenario.restitution, (16.8, 16.8), True, 0.0, 0.0)
+    on_time = contact_reachable(*args)
+    assert not on_time.reachable
+    graced = contact_reachable(*args, late_s=0.5)
+    assert graced.reachable
+    assert graced.contact is not None  # the contact of the first delay that is within reach
+    with pytest.raises(ReplanInputError, match="late_s must be a finite number >= 0"):
+        contact_reachable(*args, late_s=-0.1)
