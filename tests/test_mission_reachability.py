@@ -248,15 +248,17 @@ def fly_relay_cell(predict_reachability: bool):
 
 def test_relay_at_restitution_015_is_delivered_with_the_check():
     """Without the check the monitor first tries a re-plan at 51.9 s, when nothing feasible is left, and the
-    episode ends at -0.54 m; with it, it sees at 20.1 s that R3 cannot make its push at 25 s and re-plans."""
+    episode ends at -0.54 m; with it, it sees at 26.1 s that R3 cannot make its push at 30 s (its push at 25 s
+    comes late, within the grace) and re-plans from 27.1 s."""
     before, mission = fly_relay_cell(predict_reachability=False)
     assert not before.success and before.robustness < -0.5
     assert mission.records[0].time_s == pytest.approx(51.9) and mission.report()["unreachable"] == 0
     after, mission = fly_relay_cell(predict_reachability=True)
     first = mission.records[0]
-    assert first.time_s < 25.0 and first.unreachable == ["R3-O1 at 25.00 s"]
-    assert first.status.startswith("accepted")
-    assert after.success and after.robustness > 0.2
+    assert first.time_s < 30.0 and first.unreachable[0].startswith("R3-O1 at 30.00 s")
+    accepted = [r for r in mission.records if r.status.startswith("accepted")]
+    assert accepted and accepted[0].time_s < 30.0
+    assert after.success and after.robustness > 0.1
 
 
 def test_a_contact_within_the_late_grace_counts_as_reachable(relay):

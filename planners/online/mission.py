@@ -23,8 +23,9 @@ drifting) nothing re-decides the impacts that follow. Here, at every observed ro
    :mod:`planners.online.segment_feasibility` at the robot's full thrust, whether any replanner segment from
    the robot's observed state gets within ``reach_tolerance_m`` / ``reach_tolerance_mps`` of it by the
    impact time, or up to ``late_grace_s`` after it (the expert still approaches a late impact that long, and
-   a late contact still delivers most of it: measured on ``relay``, 0.51 s late and 0.029 m/s off). Proven unreachable, the object is predicted not to get that impact and to fly freely from
-   then on, its later impacts dropped too. That is what happens first: the local layer, out of thrust,
+   a late contact still delivers most of it: measured on ``relay``, 0.51 s late and 0.029 m/s off).
+   Proven unreachable, the object is predicted not to get that impact and to fly freely from then on, its
+   later impacts dropped too. That is what happens first: the local layer, out of thrust,
    flies a segment that asks for more than the robot has, and the contact comes late or not at all
    (measured on ``relay`` at e = 0.15). The later impacts were planned for the state the lost one would
    have made; the local layer would re-aim them from what the object really does, which this prediction

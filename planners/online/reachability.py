@@ -79,7 +79,9 @@ from planners.plan import Plan, PlannedImpact
 
 POSITION_TOLERANCE_M = 0.05  # default contact box: an eighth of the contact distance of two 0.2 m discs
 LATE_SAMPLES = 6  # delays tested from 0 to late_s (0.1 s apart at the expert's 0.5 s of grace)
-VELOCITY_TOLERANCE_MPS = 0.05  # default contact box: the object's outcome within (1 + e) m_R / (m_R + m_O) of it
+VELOCITY_TOLERANCE_MPS = 0.1  # default contact box: the object's outcome within (1 + e) m_R / (m_R + m_O) of it
+# (measured: 0.05 m/s called ping_pong_stop's return unreachable when the model's e was 0.2 below the
+# simulator's, and the contact came 0.07 s late and delivered; 0.1 and 0.2 both keep relay at e = 0.15 found)
 
 
 @dataclass(frozen=True)
