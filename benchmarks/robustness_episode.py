@@ -289,12 +289,12 @@ def story(scenario, expert, record: EpisodeRecord, result, true_restitution: flo
                                  f"({imp.position[0]:.2f}, {imp.position[1]:.2f}): object "
                                  f"{fmt_v(imp.object_velocity_before)} -> {fmt_v(imp.object_velocity_after)}")
                 lines.append("          side switches: " + switches_text(scenario, new, t))
-            if getattr(rec, "unreachable", None):
+            if rec.unreachable:
                 lines.append("          predicted unreachable (dropped from the prediction): "
                              + "; ".join(rec.unreachable))
     if expert.mission is not None:
         m = expert.mission.report()
-        lines.append(f"mission monitor: {m['checks']} checks, {m.get('unreachable', 0)} of them found a pending impact "
+        lines.append(f"mission monitor: {m['checks']} checks, {m['unreachable']} of them found a pending impact "
                      f"unreachable; {m['attempts']} re-plan attempts, {m['replans']} accepted")
     lines.append(f"result: robustness {result.robustness:+.3f} m, success {result.success}; "
                  f"unplanned contacts {dict(sorted(expert.book.unplanned.items())) or 'none'}")

@@ -66,7 +66,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planners.errors import PlannerError
+from planners.errors import PlannerError, check_number
 
 
 @dataclass
@@ -175,10 +175,7 @@ class IdentificationConfig:
     def __post_init__(self) -> None:
         for name in ("restitution_prior_std", "mass_ratio_prior_std", "velocity_noise_mps", "min_normal_speed_mps",
                      "mass_ratio_max_std"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value)
-                                               and value >= 0):
-                raise PlannerError(f"IdentificationConfig.{name} must be a finite number >= 0, got {value!r}")
+            check_number(f"IdentificationConfig.{name}", getattr(self, name))
         if not isinstance(self.use_mass_ratio, bool):
             raise PlannerError(f"IdentificationConfig.use_mass_ratio must be True or False, got "
                                f"{self.use_mass_ratio!r}")
@@ -233,9 +230,8 @@ class ImpactIdentifier:
     def in_use(self, robot: str, obj: str) -> bool:
         """Does the contact inverse use the pair's (or the pooled) estimate? Always once there is one with
         the significance test off; with it on, when the test says the data differ from the file's value."""
-        est = self.estimate(robot, obj)
         if self.config.significance is None:
-            return est.count > 0
+            return self.estimate(robot, obj).count > 0
         return (self.decisions.get((robot, obj)) or self.pooled_decision).in_use
 
     def restitution_for(self, robot: str, obj: str) -> float:

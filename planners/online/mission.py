@@ -75,7 +75,7 @@ import numpy as np
 from impact_env.scenario import Body, Scenario
 from impact_env.stl import progress, robustness, without_constants
 from planners import bezier
-from planners.errors import PlannerError
+from planners.errors import PlannerError, check_number
 from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
 from planners.online.reachability import POSITION_TOLERANCE_M, VELOCITY_TOLERANCE_MPS, Reachability, contact_reachable
 from planners.online.sampling import PlanSampler
@@ -122,9 +122,7 @@ class MissionConfig:
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise PlannerError(f"MissionConfig.{name} must be a finite number > 0, got {value!r}")
         for name in ("reach_tolerance_m", "reach_tolerance_mps"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise PlannerError(f"MissionConfig.{name} must be a finite number >= 0, got {value!r}")
+            check_number(f"MissionConfig.{name}", getattr(self, name))
         if not 0.0 <= self.robustness_fraction <= 1.0:
             raise PlannerError(f"MissionConfig.robustness_fraction must be in [0, 1], got {self.robustness_fraction}")
         for name in ("node_limit", "refine_nodes", "max_replans"):

@@ -66,6 +66,7 @@ import casadi as ca
 import numpy as np
 
 from impact_env.scenario import Body
+from planners.errors import check_number
 from planners.online.freeflyer import _rk4_sx, rk4_step, state_from_sim
 from planners.online.mpc_specs import (
     _NSI,
@@ -79,7 +80,6 @@ from planners.online.mpc_specs import (
     MPCConfig,
     MPCInputError,
     MPCResult,
-    _check_weight,
     _vector,
 )
 
@@ -292,7 +292,7 @@ class FreeflyerMPC:
         if unknown:
             raise MPCInputError(f"unknown weight(s) {unknown}; weights are {', '.join(_WEIGHTS)}")
         for name, value in weights.items():
-            _check_weight(name, value)
+            check_number(name, value, error=MPCInputError)
         self.config = replace(self.config, **weights)
         self._write_weights()
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planners.errors import MPCInputError
+from planners.errors import MPCInputError, check_number
 
 SOLVERS = ("sqp", "fatrop", "ipopt")
 NX, NU = 6, 3  # state [px, py, theta, vx, vy, omega], input [Fx, Fy, tau]
@@ -49,7 +49,7 @@ class MPCConfig:
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 2:
             raise MPCInputError(f"horizon must be an integer >= 2, got {self.horizon!r}")
         for name in ("dt_s", "impact_penalty", "avoid_penalty") + _WEIGHTS:
-            _check_weight(name, getattr(self, name), positive=name in ("dt_s", "impact_penalty", "avoid_penalty"))
+            check_number(name, getattr(self, name), name in ("dt_s", "impact_penalty", "avoid_penalty"), MPCInputError)
         if not (isinstance(self.thrust_fraction, (int, float)) and 0.0 < self.thrust_fraction <= 1.0):
             raise MPCInputError(f"thrust_fraction must be in (0, 1], got {self.thrust_fraction!r}")
         if self.solver not in SOLVERS:
@@ -61,12 +61,6 @@ class MPCConfig:
             raise MPCInputError(f"sqp_max_iter must be an integer >= 1, got {self.sqp_max_iter!r}")
         if isinstance(self.keep_off_rows, bool) or not isinstance(self.keep_off_rows, int) or self.keep_off_rows < 1:
             raise MPCInputError(f"keep_off_rows must be an integer >= 1, got {self.keep_off_rows!r}")
-
-
-def _check_weight(name: str, value: object, positive: bool = False) -> None:
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if not ok or value < 0 or (positive and value == 0):
-        raise MPCInputError(f"{name} must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
 
 
 def _vector(value: object, shape: tuple[int, ...], name: str) -> np.ndarray:

@@ -71,8 +71,8 @@ import numpy as np
 
 from impact_env.scenario import Body
 from planners.errors import ReplanInputError
-from planners.online.impact_model import ContactPlan, required_contact
-from planners.online.reference import desired_object_velocity
+from planners.online.impact_model import ContactPlan
+from planners.online.reference import ContactQuery, PlanContact
 from planners.online.segment_feasibility import FEASIBILITY_TOL, velocity_sum_range
 from planners.online.segment_qp import DEGREE
 from planners.plan import Plan, PlannedImpact
@@ -173,15 +173,14 @@ def contact_reachable(t: float, impact: PlannedImpact, plan: Plan, robot: Body, 
         raise ReplanInputError(f"late_s must be a finite number >= 0, got {late_s!r}")
     robot_state, object_state = np.asarray(robot_state, float), np.asarray(object_state, float)
     v_o = object_state[3:5]
-    m_r, m_o = masses
+    strategy = PlanContact(aim_final_position)
     acceleration = robot_acceleration_bound(robot, float(robot_state[2]))
     delays = [0.0] if late_s == 0.0 else np.linspace(0.0, late_s, LATE_SAMPLES)
     first = None
     for delay in delays:  # the first delay at which the contact is within reach decides
         duration = impact.time_s + float(delay) - t
         x_o = object_state[:2] + v_o * duration
-        v_des = desired_object_velocity(plan, impact, x_o, aim_final_position)
-        contact = required_contact(x_o, v_o, v_des, m_r, robot.radius_m, m_o, obj.radius_m, restitution)
+        contact = strategy.contact(ContactQuery(t, robot, obj, impact, plan, x_o, v_o, restitution, masses))
         if contact is None:
             return Reachability(t, impact, True)
         v1 = contact.robot_velocity_before
