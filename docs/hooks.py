@@ -1,11 +1,13 @@
-"""MkDocs hooks of the documentation site: environment pages from the docstrings, README and CHANGELOG sections.
+"""MkDocs hooks of the documentation site: environment pages from the docstrings, the CLI's help, the CHANGELOG.
 
 - ``on_files`` adds one page per environment (``environments/<slug>.md``), written from the environment
   class's docstring (:mod:`impact_env.envs.docstrings`) and from the environment itself (spaces, episode length,
   agents), so a page cannot drift from the code: id, GIF, a summary table, the docstring's sections and the
   arguments table (types and defaults from the constructor's signature).
-- ``on_page_markdown`` replaces ``<!-- readme: Heading -->`` by that section of the README and
-  ``<!-- changelog -->`` by the CHANGELOG, so the benchmark tables and the release notes have one source.
+- ``on_page_markdown`` replaces ``<!-- cli-help -->`` by every subcommand's ``--help``, ``<!-- changelog -->``
+  by the CHANGELOG, and ``<!-- readme: ## Heading -->`` by that section of the README. The pages hold their
+  own text (the README says what the package is and links to them), so no page uses the README marker now;
+  it stays for a page that wants to quote the README, and a heading the README does not have fails the build.
   Links into the repository outside ``docs/`` become plain code (the site publishes ``docs/`` only).
 """
 
@@ -180,8 +182,9 @@ environment's own docstring and constructor, so its arguments table is the code'
 """
 
 
-def cli_page() -> str:
-    """Every subcommand's ``--help``, as the installed ``impact-env`` prints it (COLUMNS fixed for the page)."""
+def cli_help() -> str:
+    """Every subcommand's ``--help``, as the installed ``impact-env`` prints it (COLUMNS fixed for the page): the
+    generated part of ``cli.md``."""
     import argparse
     import os
 
@@ -190,9 +193,7 @@ def cli_page() -> str:
     os.environ["COLUMNS"] = "110"
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    parts = ["# Command line", "", "`impact-env` as `impact-env --help` and `impact-env COMMAND --help` print it "
-             "(generated from the parser when the site is built).", "", "```text", parser.format_help().rstrip(),
-             "```", ""]
+    parts = ["## impact-env --help", "", "```text", parser.format_help().rstrip(), "```", ""]
     for name, command in sub.choices.items():
         parts += [f"## {name}", "", "```text", command.format_help().rstrip(), "```", ""]
     return "\n".join(parts)
@@ -201,7 +202,7 @@ def cli_page() -> str:
 def on_files(files, config):
     from mkdocs.structure.files import File
 
-    generated = {"environments/index.md": index_page(), "cli.md": cli_page()}
+    generated = {"environments/index.md": index_page()}
     for page in pages():
         generated[f"environments/{page.slug}.md"] = render_page(page)
     for path, text in generated.items():
@@ -224,7 +225,10 @@ def readme_section(heading: str) -> str:
         if line.startswith("#") and len(line) - len(line.lstrip("#")) <= level and line.lstrip("#").startswith(" "):
             break
         out.append(line)
-    return "\n".join(out).strip()
+    section = "\n".join(out).strip()
+    if not section:
+        raise ValueError(f"README.md's section {heading!r} is empty")
+    return section
 
 
 def repository_links(text: str) -> str:
@@ -242,10 +246,17 @@ def repository_links(text: str) -> str:
 
 
 def on_page_markdown(markdown, page, config, files):
+    from mkdocs.exceptions import PluginError
+
     def readme(m: re.Match) -> str:
-        return repository_links(readme_section(m.group(1).strip()))
+        try:
+            return repository_links(readme_section(m.group(1).strip()))
+        except ValueError as error:  # a page must not silently lose the section it includes
+            raise PluginError(f"docs/{page.file.src_path}: {error}") from None
 
     markdown = re.sub(r"<!-- readme: (.+?) -->", readme, markdown)
+    if "<!-- cli-help -->" in markdown:
+        markdown = markdown.replace("<!-- cli-help -->", cli_help())
     if "<!-- changelog -->" in markdown:
         changelog = (ROOT / "CHANGELOG.md").read_text().split("\n", 1)[1]
         markdown = markdown.replace("<!-- changelog -->", repository_links(changelog))
