@@ -1,5 +1,6 @@
 """The documentation's sources, checked without building the site (``make docs`` builds it): the generated
-environment pages, the README sections the pages include, and the script that makes the GIFs and figures."""
+environment and command-line pages, the hook's markers (a README section a page would include must exist),
+the navigation, and the script that makes the GIFs and figures. The pages' code blocks: test_docs_code.py."""
 
 from __future__ import annotations
 
@@ -44,15 +45,43 @@ def test_environment_page_is_written_from_the_environment(page):
 
 
 def test_cli_page_has_every_subcommand():
-    text = hooks.cli_page()
+    text = hooks.cli_help()
     for name in ("scenarios", "show", "run", "train", "bench", "record", "bc", "curves", "plan"):
         assert f"## {name}\n" in text and f"usage: impact-env {name}" in text
+    page = (ROOT / "docs" / "cli.md").read_text()
+    assert page.count("<!-- cli-help -->") == 1
+    assert "usage: impact-env run" in hooks.on_page_markdown(page, _Page("cli.md"), None, None)
+
+
+class _Page:
+    """What the hook reads of an mkdocs page."""
+
+    def __init__(self, src_path: str) -> None:
+        self.file = type("File", (), {"src_path": src_path})()
 
 
 def test_every_readme_section_the_site_includes_exists():
     for md in (ROOT / "docs").glob("*.md"):
         for heading in re.findall(r"<!-- readme: (.+?) -->", md.read_text()):
             assert hooks.readme_section(heading.strip()), (md.name, heading)
+
+
+def test_a_missing_readme_section_fails_the_build():
+    from mkdocs.exceptions import PluginError
+
+    assert hooks.readme_section("## Install").startswith("With Python")
+    with pytest.raises(PluginError, match=r"docs/benchmarks.md: README.md has no heading '## Benchmark'"):
+        hooks.on_page_markdown("# B\n\n<!-- readme: ## Benchmark -->\n", _Page("benchmarks.md"), None, None)
+
+
+def test_every_page_is_in_the_navigation():
+    """mkdocs --strict says so too, but only when the site is built; the nav is read here without PyYAML tags."""
+    nav = (ROOT / "mkdocs.yml").read_text().split("\nnav:\n", 1)[1]
+    listed = set(re.findall(r"([\w/]+\.(?:md|ipynb))", nav))
+    pages = {p.relative_to(ROOT / "docs").as_posix() for p in (ROOT / "docs").glob("*.md")} | {"tutorial.ipynb"}
+    assert pages <= listed, sorted(pages - listed)
+    generated = {f"environments/{p.slug}.md" for p in hooks.pages()} | {"environments/index.md"}
+    assert listed - pages == generated, sorted(listed - pages ^ generated)
 
 
 def test_links_outside_the_docs_become_code():
