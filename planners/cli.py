@@ -88,8 +88,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _cmd_plan(args: argparse.Namespace) -> int:
     from impact_env.scenario import load_scenario
     from impact_env.station import is_station_file
-    from planners.offline.ir_planner import IRPlannerConfig, build_ir_model, plan_impact_robust
-    from planners.offline.sr_planner import PlannerConfig, build_model, plan_spatially_robust
+    from planners.offline.impact_robust import IRPlannerConfig, build_ir_model, plan_impact_robust
+    from planners.offline.spatially_robust import PlannerConfig, build_model, plan_spatially_robust
 
     if "," in args.scenario:
         return _plan_list(args)
@@ -142,7 +142,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     if args.out:
         print(f"wrote {plan.save(args.out)}")
     if args.plot:
-        from planners.plotting import plot_plan
+        from planners.plan.plotting import plot_plan
 
         png = Path(args.plot) if Path(args.plot).suffix else Path(args.plot).with_suffix(".png")
         plot_plan(scenario, plan, png)
@@ -156,8 +156,8 @@ def _plan_list(args: argparse.Namespace) -> int:
     from impact_env.station import is_station_file
     from impact_env.sweep import engine_config, open_engine
     from planners.offline.batch import plan_scenarios
-    from planners.offline.ir_planner import IRPlannerConfig
-    from planners.offline.sr_planner import PlannerConfig
+    from planners.offline.impact_robust import IRPlannerConfig
+    from planners.offline.spatially_robust import PlannerConfig
 
     names = [n.strip() for n in args.scenario.split(",") if n.strip()]
     stations = [n for n in names if is_station_file(n)]
@@ -190,7 +190,7 @@ def _plan_list(args: argparse.Namespace) -> int:
             print(f"wrote {o.plan.save(Path(args.out) / f'{o.scenario}.json')}")
         if args.plot:
             from impact_env.scenario import load_scenario
-            from planners.plotting import plot_plan
+            from planners.plan.plotting import plot_plan
 
             Path(args.plot).mkdir(parents=True, exist_ok=True)
             plot_plan(load_scenario(o.scenario), o.plan, Path(args.plot) / f"{o.scenario}.png")

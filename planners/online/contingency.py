@@ -1,6 +1,6 @@
 """Flying an impact-robust plan: its robot copies as contingency plans for every object state in the box.
 
-An impact-robust plan (``planners.offline.ir_planner``) carries, for each impact, four copies of the
+An impact-robust plan (``planners.offline.impact_robust``) carries, for each impact, four copies of the
 impacting robot's curve that meet the vertices of the object's state box, and a feedback law: an object hit
 at normalised box coordinates xi (per axis, xi_p for position and xi_v for velocity, in [-1, 1]) leaves with
 
@@ -31,10 +31,10 @@ import numpy as np
 
 from impact_env.scenario import Body, Scenario
 from planners import bezier
-from planners.funnels import ImpactCopies, box_coordinates, copy_targets
 from planners.online.impact_model import ContactPlan, required_contact
 from planners.online.reference import ContactQuery, ContactStrategy, PlanContact
-from planners.plan import Plan, PlannedImpact
+from planners.plan import ImpactCopies, Plan, PlannedImpact
+from planners.plan.funnels import box_coordinates, copy_targets
 
 
 def copies_of(plan: Plan, impact: PlannedImpact) -> ImpactCopies | None:

@@ -38,7 +38,7 @@ drifting) nothing re-decides the impacts that follow. Here, at every observed ro
    velocities as initial conditions, the remaining time as ``tf_s``, the task progressed to now
    (:func:`impact_env.stl.progress`) and shifted to start at 0 with its decided parts dropped
    (:func:`impact_env.stl.without_constants`), and a grid of proportionally fewer intervals. The offline
-   planner (:func:`planners.offline.sr_planner.plan_spatially_robust`, untouched) solves it, warm-started
+   planner (:func:`planners.offline.spatially_robust.plan_spatially_robust`, untouched) solves it, warm-started
    from the current plan resampled onto the new grid (:func:`resample_plan`). The new plan may add impacts,
    e.g. a trimming impact that stops a drifting object. It is shifted back to absolute time and spliced
    after the executed part (:func:`splice`). If the derived problem is infeasible, it is tried once more
@@ -76,7 +76,7 @@ from impact_env.scenario import Body, Scenario
 from impact_env.stl import progress, robustness, without_constants
 from planners import bezier
 from planners.errors import PlannerError, check_number
-from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
+from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
 from planners.online.reachability import POSITION_TOLERANCE_M, VELOCITY_TOLERANCE_MPS, Reachability, contact_reachable
 from planners.online.sampling import PlanSampler
 from planners.online.side_switch import SideSwitch, side_switches, unflyable_side_switches

@@ -32,14 +32,9 @@ blends are convex combinations; regions and obstacles keep it because all copies
 from __future__ import annotations
 
 from impact_env.scenario import Body
+from planners.impact_law import mass_fractions, point_mass_law
 from planners.offline.milp.boxes import ObjectBox
-from planners.offline.milp.impacts import (
-    ImpactVars,
-    add_robot_smoothness,
-    equal_unless,
-    law_big_m,
-    mass_fractions,
-)
+from planners.offline.milp.impacts import ImpactVars, add_robot_smoothness, equal_unless, law_big_m
 from planners.offline.milp.model import LinExpr, Model
 from planners.offline.milp.stl_encoding import PointProduct
 from planners.offline.milp.trajectories import Grid, Point, RobotTrajectory, velocity_bound
@@ -116,7 +111,7 @@ def add_copy_impacts(model: Model, robots: list[RobotCopies], boxes: list[Object
             o = box.centre
             vo = velocity_bound(o.spec)
             fractions = mass_fractions(r.spec.mass_kg, o.spec.mass_kg, restitution)
-            m1, m2, m3, m4 = fractions
+            _, _, m3, m4 = fractions
             m_rob, m_obj = law_big_m(fractions, vr, vo)
             for k in range(1, n):
                 miss = 1 - impacts.z[(name, o.spec.name, k)]
@@ -125,11 +120,11 @@ def add_copy_impacts(model: Model, robots: list[RobotCopies], boxes: list[Object
                     vertex = tuple(box.vertex_position(k, s_p, a) for a in range(2))
                     vo_in = tuple(box.vertex_velocity_before(k, s_v, a) for a in range(2))
                     equal_unless(model, c.position_at_knot(k), vertex, miss, extent, "impact contact")
-                    vr_law = tuple(vr_in[a] * m1 + vo_in[a] * m2 for a in range(2))
+                    vr_law, _ = point_mass_law(fractions, vr_in, vo_in)
                     equal_unless(model, c.velocity_start(k), vr_law, miss, m_rob, "impact law")
                 # the box centre obeys Eq. (5) with the nominal robot (the mean of the copies)
                 nominal_in = r.nominal.velocity_end(k - 1)
-                vo_law = tuple(nominal_in[a] * m3 + o.velocity(k - 1)[a] * m4 for a in range(2))
+                _, vo_law = point_mass_law(fractions, nominal_in, o.velocity(k - 1))
                 equal_unless(model, o.velocity(k), vo_law, miss, m_obj, "impact law")
                 cross = tuple(sum((v[a] * float(s_p * s_v) for v, (s_p, s_v) in zip(v_in, SIGNS)), LinExpr())
                               for a in range(2))

@@ -8,7 +8,7 @@ lists them all. A new field is one new row; a new kind of value is one new reade
 ``(value, where, problems) -> value``, appending to ``problems`` and returning :data:`INVALID` on failure).
 
 An impact-robust plan adds ``delta_mps``, ``funnels`` (per object, :data:`FUNNEL_FIELDS`) and ``copies``
-(per impact, :data:`COPIES_FIELDS`); :mod:`planners.funnels` says what they mean.
+(per impact, :data:`COPIES_FIELDS`); :mod:`planners.plan.funnels` says what they mean.
 
 Limits: times in [0, :data:`MAX_TIME_S`] s, coordinates and velocities within +-:data:`MAX_COORDINATE_M`,
 Bezier degree 1.. :data:`MAX_DEGREE` (the planner writes 1 for objects and 2..8 for robots), ``stats`` nested at
@@ -326,7 +326,7 @@ PLAN_FIELDS: dict[str, Field] = {
     "stats": Field(json_data, {}),
     "impacts": Field(table_list(IMPACT_FIELDS, non_empty=False)),
     "bodies": Field(table_map(BODY_FIELDS)),
-    # impact-robust plans only (planners.funnels)
+    # impact-robust plans only (planners.plan.funnels)
     "delta_mps": Field(optional_non_negative, None),
     "funnels": Field(table_map(FUNNEL_FIELDS), {}),
     "copies": Field(table_list(COPIES_FIELDS, non_empty=False), []),

@@ -63,7 +63,7 @@ from planners.offline.milp.trajectories import (
     value,
     velocity_bound,
 )
-from planners.offline.sr_planner import PlannerConfig
+from planners.offline.spatially_robust import PlannerConfig
 from planners.offline.stages import StagedModel, solve_to_plan
 from planners.plan import BodyPlan, ImpactCopies, ObjectFunnel, Plan, PlannedImpact, Segment
 
@@ -258,7 +258,7 @@ def extract_ir_plan(scenario: Scenario, built: IRModel, x: np.ndarray, solver: s
                 stats=stats, delta_mps=float(built.delta.value(x)), funnels=funnels, copies=copies)
     # the MILP bounds half-widths from below only: record the exact propagated spread, except for the box
     # the copies were built for at each impact (position at the impact knot, velocity on the interval before)
-    from planners.funnels import feedback, propagate
+    from planners.plan.funnels import feedback, propagate
 
     fb = feedback(plan, scenario)
     for name, funnel in funnels.items():

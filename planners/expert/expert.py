@@ -40,7 +40,7 @@ import numpy as np
 from impact_env.envs.core import ACTION_PER_ROBOT, OBS_PER_BODY
 from impact_env.scenario import Body, Scenario, load_scenario
 from planners.errors import PlannerError
-from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
+from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
 from planners.online.bookkeeping import ImpactBook
 from planners.online.identification import IdentificationConfig, ImpactIdentifier
 from planners.online.keep_off import boundary_keep_off, object_keep_off, robot_keep_off, segment_limits
@@ -375,7 +375,7 @@ class Expert:
 
     def plot_episode(self, result, path) -> None:
         """Fig. 6 of the paper for an episode run by ``impact_env.rollout.run_episode``."""
-        from planners.plotting import plot_execution
+        from planners.plan.plotting import plot_execution
 
         plot_execution(self.scenario, self.plan, result.times_s, result.positions, result.impacts,
                        result.robustness, path)
