@@ -5,27 +5,12 @@ and what goes beyond the paper so that it still delivers when the world is not t
     obs, info = env.reset(seed=0); expert.reset()
     action = expert.act(obs, info)                          # the Gymnasium env's normalised action
 
-This module composes the online layer (``planners/online/``); each part has its own module:
-
-- impact bookkeeping (:mod:`~planners.online.bookkeeping`): which planned impacts the env has reported,
-  and every contact nobody planned, per pair;
-- identification (:mod:`~planners.online.identification`): each reported robot-object impact updates the
-  pair's restitution estimate, which the contact inverse uses for the next impacts;
-- mission replanning (:mod:`~planners.online.mission`): the predicted outcome of the plan's remainder is
-  monitored, and when it leaves the plan's tolerance the offline planner is re-run from the current state
-  over the remaining horizon, with the task progressed to now;
-- reference selection (:mod:`~planners.online.reference`): the replanner (Eq. 29) around each planned
-  impact, the plan elsewhere; its :class:`~planners.online.reference.ContactStrategy` is the plug-in point
-  for other plans (e.g. an impact-robust plan's robot copies);
-- safe segments (:mod:`~planners.online.keep_off`): replanned segments inside the world box, off the
-  obstacles and the other robots; MPC keep-offs for the nearest object, the other robots and the nearest
-  wall or obstacle face;
-- the MPC (:mod:`~planners.online.mpc`, Eq. 30-31) tracks the reference.
-
-Each part beyond the paper can be switched off in :class:`ExpertConfig`; ``ExpertConfig.paper()`` is the
-paper's stack (local replanning only). The expert uses only what the environment exposes: the observation
-(positions, velocities, headings, time left), the env's documented ``info["impacts"]``, and the episode's
-fixed facts from the scenario file (masses, radii, limits, the nominal restitution).
+It composes the online layer (``planners/online/``): impact bookkeeping, identification, mission
+replanning, reference selection (the replanner, Eq. 29, around each planned impact), safe segments and
+keep-offs, and the MPC (Eq. 30-31). Each part beyond the paper is an option of :class:`ExpertConfig`;
+``ExpertConfig.paper()`` is the paper's stack. The expert uses only what the environment exposes: the
+observation, the env's documented ``info["impacts"]`` and the scenario file's fixed facts (masses, radii,
+limits, the nominal restitution). What each part does: ``docs/expert_design.md``.
 """
 
 from __future__ import annotations

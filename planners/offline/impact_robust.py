@@ -5,36 +5,12 @@
 
 Maximises delta, the post-impact velocity error (per axis, at every robot-object impact) that the plan
 tolerates: for every such error the task still holds and every object ends inside its final box
-(``[final_box]`` in the scenario; default :data:`DEFAULT_FINAL_BOX`). What is shared with the spatially
-robust planner is shared, not copied: the time grid (``common.py``), the robots' Bezier curves, velocity
-bounds and thrust limits (``milp/trajectories.py``), the point-mass impact law in real velocities with the
-scenario's restitution (``milp/impacts.py``), the STL and obstacle encoding (``milp/stl_encoding.py``),
-robot separation (``milp/collisions.py``), the solver backends and the lexicographic stages cut by nodes
-(``stages.py``). What is new:
-
-- the object's state is a set: a zonotope per axis, whose box grows by free flight and is reset by every
-  impact (``milp/boxes.py``, Eq. 17-19); its box, not a point, must satisfy the task's predicates (every
-  corner inside a goal, the whole box beyond an obstacle face) and end inside the final box;
-- each robot is four copies that reach the box's vertices (Lemma 1, in the exact per-axis form of
-  ``milp/copies.py``); copies keep the thrust and velocity limits, the task and the obstacle clearance;
-- the post-impact velocity may depend on where in its box the object was hit (affine feedback through the
-  copies), so an impact can steer the position spread back in: a later trimming impact narrows the funnel.
-
-Why the encoding is exact: the guarantee is a universally quantified statement over the object's states,
-and every step of its encoding is either linear (free flight on the fixed grid, the impact law, the box of
-a zonotope, the product sets of predicates) or a disjunction decided by an existing binary (which impact is
-last, which face) with a big-M equal to the range of what it relaxes. No product of variables appears:
-delta, the half-widths and the feedback gains enter linearly. The only conservatism is the interval hull
-(Eq. 3) taken at each impact, as in the paper. The guarantee is checked by sampling in
-``tests/test_ir_planner.py``.
-
-Not as the paper's code does it (docs/background.md#impact-robust): the scenario's restitution in the law (not e = 1),
-a position spread that no impact removes (an impact resets only the velocity spread; the position spread
-shrinks only through feedback and time), thrust limits, big-Ms from bounds, and no forced durations.
-
-Stages: (1) maximise delta alone (>= ``min_delta_mps``; tie-breaks in this objective halved HiGHS's node
-throughput), (2) keeping it, fewest impacts, cut at ``refine_nodes`` nodes, (3) with the binaries fixed,
-the LP that minimises the L1 acceleration of all copies (or the QP with ``smooth``).
+(``[final_box]`` in the scenario; default :data:`DEFAULT_FINAL_BOX`). It shares the spatially robust
+planner's grid, curves, impact law, STL encoding, solvers and stages. New are the object's state as a
+zonotope per axis (``milp/boxes.py``, Eq. 17-19) and each robot as four copies that reach the box's vertices
+(``milp/copies.py``, Lemma 1), with affine feedback through the copies. The encoding is exact up to the
+interval hull taken at each impact, as in the paper. Why, and how it differs from the paper's code:
+``docs/planner_design.md#impact-robust-planner``.
 """
 
 from __future__ import annotations

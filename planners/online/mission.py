@@ -2,64 +2,17 @@
 mission from the current state when it leaves the plan's tolerance.
 
 The paper's stack is open loop at the mission level: the local replanner (Eq. 29) re-aims each planned
-impact, but once an impact goes wrong (a restitution that is not the model's, a stop that leaves the object
-drifting) nothing re-decides the impacts that follow. Here, at every observed robot-object impact and every
-``check_period_s``:
+impact, but once an impact goes wrong nothing re-decides the impacts that follow. Here, at every observed
+robot-object impact and every ``check_period_s``, (1) the rest of the episode is predicted from the observed
+states as the local layer will fly it, without the impacts the robot provably cannot reach
+(:mod:`planners.online.reachability`); (2) when the task's predicted robustness fails the test of
+:class:`MissionConfig`, (3) the offline planner re-plans the rest from the current state (a derived scenario
+with the task progressed to now) and the new plan is spliced after the executed part, unless it is no better
+or has a side switch the robot has no time for (:mod:`planners.online.side_switch`).
 
-1. **Prediction.** The rest of the episode is predicted from the observed states: each object flies freely
-   to its next planned impact, leaves it toward the position the plan needs at the impact after (which is
-   what the local replanner aims for), and follows the plan after that; after its last impact it leaves
-   with the planned velocity, corrected toward the planned end position when the expert aims there; an
-   object with no impact left flies freely to the end. The prediction models what the local layer will do:
-   a pessimistic one (measured: the corridor's catch predicted short of the goal when the local layer puts
-   the object in it) triggers replans that only lose margin. Robots follow the plan. The task's robustness
-   is evaluated on the executed trace so far followed by this prediction.
-   **Reachability** (``predict_reachability``, default on): the local layer can re-aim an impact only if
-   the robot can still get to the contact. For each object's next pending impact whose robot has no
-   earlier impact pending (and no late one still approached), :func:`planners.online.reachability.
-   contact_reachable` computes the contact the local layer would ask for (the contact inverse with the
-   expert's current model of the pair, the ``model`` passed to :meth:`MissionPlanner.step`: the identified
-   restitution when identification is on) and proves, with the closed form of
-   :mod:`planners.online.segment_feasibility` at the robot's full thrust, whether any replanner segment from
-   the robot's observed state gets within ``reach_tolerance_m`` / ``reach_tolerance_mps`` of it by the
-   impact time, or up to ``late_grace_s`` after it (the expert still approaches a late impact that long, and
-   a late contact still delivers most of it: measured on ``relay``, 0.51 s late and 0.029 m/s off).
-   Proven unreachable, the object is predicted not to get that impact and to fly freely from then on, its
-   later impacts dropped too. That is what happens first: the local layer, out of thrust,
-   flies a segment that asks for more than the robot has, and the contact comes late or not at all
-   (measured on ``relay`` at e = 0.15). The later impacts were planned for the state the lost one would
-   have made; the local layer would re-aim them from what the object really does, which this prediction
-   does not try to model (it is the re-plan's job). The verdict is conservative (see the reachability
-   module); when every tested impact is reachable the prediction is the one above, bit for bit.
-2. **Test** (documented, configurable): re-plan when the predicted robustness is below
-   ``robustness_fraction`` times the robustness the flown plan was made with (default 0.5) or below
-   ``min_robustness_m`` (default 0: a predicted failure).
-3. **Re-plan.** A derived scenario is built (``dataclasses.replace``): the bodies' observed positions and
-   velocities as initial conditions, the remaining time as ``tf_s``, the task progressed to now
-   (:func:`impact_env.stl.progress`) and shifted to start at 0 with its decided parts dropped
-   (:func:`impact_env.stl.without_constants`), and a grid of proportionally fewer intervals. The offline
-   planner (:func:`planners.offline.spatially_robust.plan_spatially_robust`, untouched) solves it, warm-started
-   from the current plan resampled onto the new grid (:func:`resample_plan`). The new plan may add impacts,
-   e.g. a trimming impact that stops a drifting object. It is shifted back to absolute time and spliced
-   after the executed part (:func:`splice`). If the derived problem is infeasible, it is tried once more
-   without the bodies' end states (robots home, objects at rest at tf): late in a mission they can be
-   what stands in the way, and the task outranks them. A re-plan that fails, is infeasible, or predicts
-   no better than the current plan keeps the current plan; so does one with a **side switch** the robot
-   has no time for (:func:`unflyable_side_switches`, unless ``allow_side_switches``): one robot hitting one
-   object twice in a row with velocity changes more than 90 degrees apart (a push from behind, then a stop
-   from the front), with less time in between than getting round the object takes. The planner's bodies are
-   points, so its robot simply flies through the object; a disc robot has to get round an object that moves
-   away from it, and measured on ``two_objects`` it either does not get past in time or meets the object
-   from the wrong side (the stop becomes a push out of the goal).
-
-Determinism. The compute budget is a number of branch-and-bound nodes (``node_limit`` for the robustness
-stage, ``refine_nodes`` for the second stage), so the same observations give the same plan on an idle and
-on a busy machine. ``time_limit_s`` is only a safety net, set far above the measured replan times: if it
-ever fires, the re-plan is DISCARDED (the current plan is kept, never a partial result) and counted in the
-report's ``timeouts``, so a run whose report shows 0 timeouts flew exactly what the node budget decided.
-The solver's thread count is pinned too (``threads``, default 1): HiGHS left to choose its own takes a
-count from the machine's cores, and a different count can change a MILP's last bits, so the same episode
-could fly another re-plan on a machine with more cores (or on a Ray node).
+The compute budget is a node count and the solver's threads are pinned (``MissionConfig.solver_options``), so
+the same observations give the same re-plan on any machine; a re-plan cut by the time limit is discarded.
+The design and its measurements: ``docs/expert_design.md#mission-replanning``.
 """
 
 from __future__ import annotations

@@ -1,24 +1,13 @@
 """The exact planner: backward reachability over the anchors' visibility polygons, fewest pulls first.
 
-What the thesis did not use (its Sec. 4.3 flow, Eq. 5): with one active anchor the cargo moves in a straight
-line toward it at ``w``; more robots on other anchors add speed and bend the path, but never reach a point that
-single pulls cannot (a multi-anchor flow stays inside the region the cargo could cross by single pulls). So
-whether the goal can be reached, and with how few pulls, is decided over single-anchor pulls:
-
-- ``R_0`` is the goal box intersected with the free space (the cargo centre in the box, the disc inside);
-- ``R_{n+1} = R_n  U  (union over anchors a of Pre_a(R_n))``, where ``Pre_a(S)`` are the free-space points
-  from which a pull toward ``a`` (in line of sight, outside its stop radius) carries the cargo into ``S``
-  without leaving the free space. In each radial cell ``C`` of ``a`` (see :mod:`~planners.tether.geometry`)
-  that is exactly ``C`` intersected with the shadow of ``S ∩ C`` cast from ``a``;
-- the start in ``R_n`` and not in ``R_{n-1}``: ``n`` pulls is the fewest; a plan is read forward by choosing,
-  from the current point, a pull that lands in ``R_{n-1}`` (deep inside it, for robustness), and so on;
-- ``R_{n+1} = R_n`` (no area added) and the start not in it: no sequence of pulls, however long, reaches the
-  goal. That is the proof of infeasibility (:class:`TetherInfeasibleError` carries it).
-
-Exact up to the polygons shapely computes with (double precision) and the free space's mitred corners (see
-:mod:`~planners.tether.geometry`), which make every plan safe and may lose plans that need to graze a notch
-closer than the mitre. The levels do not depend on the start: a :class:`ReachabilityPlanner` keeps them, so
-replanning from another point (the expert does it when the cargo deviates) costs only the forward read.
+With one active anchor the cargo moves in a straight line toward it at ``w``; more robots on other anchors add
+speed but never reach a point that single pulls cannot, so reachability is decided over single pulls:
+``R_0`` is the goal box in the free space and ``R_{n+1} = R_n U (union over anchors a of Pre_a(R_n))``,
+computed exactly per radial cell (:mod:`~planners.tether.geometry`). The start in ``R_n`` and not in
+``R_{n-1}``: ``n`` pulls is the fewest, and a plan is read forward level by level. ``R_{n+1} = R_n`` without
+the start is the proof that no plan exists (:class:`TetherInfeasibleError` carries it). The levels do not
+depend on the start, so a :class:`ReachabilityPlanner` replans from another point with a forward read only.
+Why single pulls suffice, and how exact it is: ``docs/planner_design.md#exact-tether-planner``.
 """
 
 from __future__ import annotations

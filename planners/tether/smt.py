@@ -1,27 +1,13 @@
 """The thesis's planner (Sec. 4.4) with an SMT solver that installs from the package index: z3.
 
-The thesis hands its hybrid automaton to dReach / dReal, which cannot be installed today. With one active anchor
-the flow of Eq. 5 is a straight line toward the anchor at speed ``w``, so a mode's trajectory needs no ODE: a pull
-from ``p`` ends at a point ``q`` of the segment from ``p`` toward the anchor ``a``, ``cross(q - p, a - p) = 0``,
-``0 <= (q - p) . (a - p) <= |a - p|^2``, outside the stop radius ``|q - a| >= s``: polynomial constraints, which
-z3 decides exactly over the reals (nlsat). Only single-anchor modes are encoded: extra robots add speed, not
-reach (see :mod:`~planners.tether.reachability`); the multi-anchor modes are in the ``.drh`` export.
-
-- :func:`plan_smt` is the thesis's divide and conquer: paths of the region graph from the start's region to a
-  goal region, shortest first (networkx); along a path one sub-problem per region, "take the cargo from the
-  current point into the overlap with the next region" (the goal box in the last), solved with 0, 1, 2, ...
-  pulls up to a bound; its end point starts the next sub-problem; a sub-problem without a solution rejects the
-  path and the next path is tried. Like the thesis's, it is incomplete: an early sub-problem may pick an end
-  point from which the rest fails, and the bound limits the pulls per region.
-- :func:`bounded_search` is the whole automaton as one bounded model check: ``n`` pulls, each a straight pull
-  toward one anchor that may cross several regions (split where it crosses), for ``n = 0, 1, 2, ...``. Its
-  smallest satisfiable ``n`` is the fewest pulls, to compare with the exact planner; ``unsat`` up to the bound
-  is a bounded answer, not a proof for longer plans.
-
-Both enforce line of sight from the start of each pull to its anchor (a disjunction over the triangles of the
-anchor's visibility polygon in the region; the thesis assumed that an anchor of the region is visible from all
-of it, which is not true near notches). ``rule`` picks the anchors a region's modes may use (see
-:mod:`~planners.tether.automaton`): the thesis's ``"region"`` or ``"line_of_sight"``.
+The thesis hands its hybrid automaton to dReach / dReal, which cannot be installed today. With one active
+anchor the flow of Eq. 5 is a straight line toward the anchor, so a pull from ``p`` toward ``a`` ends at a
+point of that segment outside the stop radius: polynomial constraints, which z3 decides exactly over the
+reals. :func:`plan_smt` is the thesis's divide and conquer over paths of the region graph (incomplete, like
+the thesis's); :func:`bounded_search` is the whole automaton as one bounded model check, whose smallest
+satisfiable number of pulls compares with the exact planner. Both enforce line of sight from the start of
+each pull to its anchor; ``rule`` picks the anchors a region's modes may use (:mod:`~planners.tether.automaton`).
+The encodings in detail: ``docs/planner_design.md#smt-planner``.
 """
 
 from __future__ import annotations
