@@ -88,8 +88,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _cmd_plan(args: argparse.Namespace) -> int:
     from impact_env.scenario import load_scenario
     from impact_env.station import is_station_file
-    from planners.offline.impact_robust import IRPlannerConfig, build_ir_model, plan_impact_robust
-    from planners.offline.spatially_robust import PlannerConfig, build_model, plan_spatially_robust
+    from planners.offline.config import IRPlannerConfig, PlannerConfig, SolverOptions
+    from planners.offline.impact_robust import build_ir_model, plan_impact_robust
+    from planners.offline.spatially_robust import build_model, plan_spatially_robust
 
     if "," in args.scenario:
         return _plan_list(args)
@@ -101,10 +102,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     _check_options(args)
     scenario = load_scenario(args.scenario)
     say = (lambda text: None) if args.quiet else (lambda text: print(text, flush=True))
-    common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth,
-                  solver=args.solver, time_limit_s=args.time_limit, mip_gap=args.mip_gap,
-                  threads=args.threads, seed=args.seed, refine_nodes=args.refine_nodes,
-                  progress=None if args.quiet else progress_printer())
+    budget = SolverOptions(time_limit_s=args.time_limit, mip_gap=args.mip_gap, threads=args.threads, seed=args.seed,
+                           progress=None if args.quiet else progress_printer())
+    common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth, solver=args.solver,
+                  solver_options=budget, refine_nodes=args.refine_nodes)
     if args.planner == "ir":
         config = IRPlannerConfig(copy_intervals=args.copy_intervals, **common)
         build, plan_fn = build_ir_model, plan_impact_robust
@@ -156,8 +157,7 @@ def _plan_list(args: argparse.Namespace) -> int:
     from impact_env.station import is_station_file
     from impact_env.sweep import engine_config, open_engine
     from planners.offline.batch import plan_scenarios
-    from planners.offline.impact_robust import IRPlannerConfig
-    from planners.offline.spatially_robust import PlannerConfig
+    from planners.offline.config import IRPlannerConfig, PlannerConfig, SolverOptions
 
     names = [n.strip() for n in args.scenario.split(",") if n.strip()]
     stations = [n for n in names if is_station_file(n)]
@@ -165,9 +165,9 @@ def _plan_list(args: argparse.Namespace) -> int:
         raise PlannerError(f"plan tether stations one at a time ({', '.join(stations)}); lists are for impact "
                            "scenarios")
     _check_options(args)
-    common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth,
-                  solver=args.solver, time_limit_s=args.time_limit, mip_gap=args.mip_gap,
-                  threads=args.threads, seed=args.seed, refine_nodes=args.refine_nodes)
+    budget = SolverOptions(time_limit_s=args.time_limit, mip_gap=args.mip_gap, threads=args.threads, seed=args.seed)
+    common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth, solver=args.solver,
+                  solver_options=budget, refine_nodes=args.refine_nodes)
     config = (IRPlannerConfig(copy_intervals=args.copy_intervals, **common) if args.planner == "ir"
               else PlannerConfig(**common))
     with open_engine(engine_config(args), n_jobs=len(names)) as engine:

@@ -15,13 +15,21 @@ limits, the nominal restitution). What each part does: ``docs/expert_design.md``
 
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, InitVar, dataclass, field
 from typing import Any
 
 import numpy as np
 
+from impact_env.config_checks import (
+    NOT_GIVEN,
+    check_flag,
+    check_instance,
+    check_integer,
+    check_number,
+    fail,
+    warn_deprecated,
+)
 from impact_env.envs.core import ACTION_PER_ROBOT, OBS_PER_BODY
 from impact_env.scenario import Body, Scenario, load_scenario
 from planners.errors import PlannerError
@@ -35,53 +43,81 @@ from planners.online.reference import ContactStrategy, PlanContact, ReferenceSel
 from planners.plan import Plan
 
 
-@dataclass
+@dataclass(frozen=True)
 class ExpertConfig:
-    """Which parts of the expert run, and their margins.
+    """Which parts of the expert run, and their margins. An optional part is its config, or None when off.
 
-    ``identification``: estimate restitution online and use it in the contact inverse (else the scenario
-    file's value). ``mission_replanning``: monitor the plan's predicted outcome and re-plan the rest of the
-    mission when it leaves the tolerance (:class:`~planners.online.mission.MissionConfig`). ``safe_segments``:
-    replanned segments respect the world box, obstacles and other robots, and the MPC keeps off the other
-    robots and the nearest wall or obstacle face (else only the nearest object, as in the paper).
-    ``aim_final_position``: after an object's last planned impact, send it to its planned end position
-    rather than only at its planned velocity (:class:`~planners.online.reference.PlanContact`).
-    ``disc_offset``: before each approach, fly the plan shifted to where a disc (not the planner's point)
-    meets the object (:meth:`~planners.online.reference.ReferenceSelector._offset_toward`).
-    Margins (m) are added to the radii. ``replan_intervals``: the local replanner starts this many grid
-    intervals before an impact. ``contact_window_s``: from this long before a pending impact the keep-off on
-    its object is lifted. ``late_grace_s``: a planned impact not yet observed is still approached this long
-    after its time.
+    The old keywords ``identification=True/False``, ``identification_config=`` and ``mission_replanning=`` are
+    still accepted for one release, with a ``DeprecationWarning``: ``ExpertConfig(identification=False,
+    mission_replanning=False)`` is ``ExpertConfig(identification=None, mission=None)``.
     """
 
-    identification: bool = True
-    mission_replanning: bool = True
+    identification: IdentificationConfig | None = field(default_factory=IdentificationConfig)
+    """Estimate restitution online and use it in the contact inverse (:mod:`planners.online.identification`);
+    None: the scenario file's value."""
+    mission: MissionConfig | None = field(default_factory=MissionConfig)
+    """Monitor the plan's predicted outcome and re-plan the rest of the mission when it leaves the tolerance
+    (:mod:`planners.online.mission`); None: no mission replanning."""
     safe_segments: bool = True
+    """Replanned segments respect the world box, obstacles and other robots, and the MPC keeps off the other
+    robots and the nearest wall or obstacle face; False: only the nearest object, as in the paper."""
     aim_final_position: bool = True
+    """After an object's last planned impact, send it to its planned end position rather than only at its
+    planned velocity (:class:`~planners.online.reference.PlanContact`)."""
     disc_offset: bool = True
+    """Before each approach, fly the plan shifted to where a disc (not the planner's point) meets the object
+    (:meth:`~planners.online.reference.ReferenceSelector._offset_toward`)."""
     object_margin_m: float = 0.03
+    """Added to the radii in the MPC's keep-off from objects (m)."""
     robot_margin_m: float = 0.05
+    """Added to the radii in the keep-off between robots (m)."""
     wall_margin_m: float = 0.03
+    """Added to the radius in the keep-off from walls and obstacle faces (m)."""
     replan_intervals: int = 2
+    """The local replanner starts this many grid intervals before an impact."""
     contact_window_s: float = 0.5
+    """From this long before a pending impact the keep-off on its object is lifted (s)."""
     late_grace_s: float = 0.5
-    identification_config: IdentificationConfig = field(default_factory=IdentificationConfig)
-    mission: MissionConfig = field(default_factory=MissionConfig)
+    """A planned impact not yet observed is still approached this long after its time (s)."""
+    _: KW_ONLY
+    identification_config: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``identification``."""
+    mission_replanning: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``mission`` (None: off)."""
 
     @classmethod
     def paper(cls, **overrides: Any) -> ExpertConfig:
-        """The paper's stack: local replanning at planned impacts only."""
-        return cls(**{"identification": False, "mission_replanning": False, "safe_segments": False,
-                      "aim_final_position": False, "disc_offset": False, **overrides})
+        """The paper's stack: local replanning at planned impacts only; ``overrides`` switch parts on."""
+        return cls(**{"identification": None, "mission": None, "safe_segments": False, "aim_final_position": False,
+                      "disc_offset": False, **overrides})
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, identification_config: Any, mission_replanning: Any) -> None:
+        if isinstance(self.identification, bool):
+            warn_deprecated(f"ExpertConfig(identification={self.identification}) is deprecated and will be removed "
+                            "in 0.4.0: pass an IdentificationConfig, or None for off")
+            object.__setattr__(self, "identification", IdentificationConfig() if self.identification else None)
+        if identification_config is not NOT_GIVEN:
+            warn_deprecated("ExpertConfig(identification_config=...) is deprecated and will be removed in 0.4.0: "
+                            "pass ExpertConfig(identification=...)")
+            if self.identification is not None:
+                object.__setattr__(self, "identification", identification_config)
+        if mission_replanning is not NOT_GIVEN:
+            warn_deprecated(f"ExpertConfig(mission_replanning={mission_replanning!r}) is deprecated and will be "
+                            "removed in 0.4.0: pass ExpertConfig(mission=MissionConfig(...)), or None for off")
+            if not isinstance(mission_replanning, bool):
+                fail("ExpertConfig.mission_replanning", mission_replanning, "True or False", PlannerError)
+            if not mission_replanning:
+                object.__setattr__(self, "mission", None)
+            elif self.mission is None:
+                object.__setattr__(self, "mission", MissionConfig())
+        check_instance(self, "identification", PlannerError, IdentificationConfig, what="an IdentificationConfig",
+                       none="off")
+        check_instance(self, "mission", PlannerError, MissionConfig, what="a MissionConfig", none="off")
+        for name in ("safe_segments", "aim_final_position", "disc_offset"):
+            check_flag(self, name, PlannerError)
         for name in ("object_margin_m", "robot_margin_m", "wall_margin_m", "contact_window_s", "late_grace_s"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise PlannerError(f"ExpertConfig.{name} must be a finite number >= 0, got {value!r}")
-        if isinstance(self.replan_intervals, bool) or not isinstance(self.replan_intervals, int) \
-                or self.replan_intervals < 1:
-            raise PlannerError(f"ExpertConfig.replan_intervals must be an integer >= 1, got {self.replan_intervals!r}")
+            check_number(self, name, PlannerError, low=0)
+        check_integer(self, "replan_intervals", PlannerError, low=1)
 
 
 @dataclass
@@ -135,7 +171,7 @@ class Expert:
         self.book = ImpactBook(plan.impacts, tolerance_s=0.5 * self.grid_dt)
         self.identifier = ImpactIdentifier(sc.restitution, {b.name: b.mass_kg for b in sc.bodies},
                                            frozenset(self._robot_names), frozenset(self._object_names),
-                                           cfg.identification_config)
+                                           cfg.identification or IdentificationConfig())
         strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
         if plan.planner == "ir" and isinstance(strategy, PlanContact):
             from planners.online.contingency import CopyContact
@@ -145,7 +181,7 @@ class Expert:
                                           disc_offset=cfg.disc_offset, box=self._safe_box)
         self.mission = (MissionPlanner(sc, plan, cfg.mission, planner_config, cfg.aim_final_position,
                                        cfg.late_grace_s)
-                        if cfg.mission_replanning else None)
+                        if cfg.mission is not None else None)
         self.stats = ExpertStats()
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}
         self._cache: tuple[int, np.ndarray] | None = None
@@ -187,7 +223,7 @@ class Expert:
         states = np.column_stack([rows[:, 0:2], np.arctan2(rows[:, 5], rows[:, 4]), rows[:, 2:4], rows[:, 6]])
         events = (info or {}).get("impacts", [])
         completed = self.book.observe(events, self._robot_names, self._object_names)
-        if self.config.identification:
+        if self.config.identification is not None:
             self.identifier.observe(events)
         if self.mission is not None:
             new = self.mission.step(t, states, self._index, self.plan, self.book, bool(completed), self._model)
@@ -233,7 +269,7 @@ class Expert:
 
     def _model(self, robot: str, obj: str) -> tuple[float, tuple[float, float]]:
         """(restitution, (m_robot, m_object)) of the pair: identified, or the scenario file's."""
-        if self.config.identification:
+        if self.config.identification is not None:
             return self.identifier.restitution_for(robot, obj), self.identifier.masses_for(robot, obj)
         sc = self.scenario
         return sc.restitution, (sc.body(robot).mass_kg, sc.body(obj).mass_kg)
@@ -337,8 +373,8 @@ class Expert:
             "mpc_ms": {"median": float(np.median(ms)), "p99": float(np.percentile(ms, 99))},
             "act_ms": {"median": float(np.median(act)), "p99": float(np.percentile(act, 99))},
             "unplanned_contacts": dict(sorted(self.book.unplanned.items())),
-            "config": {"identification": self.config.identification,
-                       "mission_replanning": self.config.mission_replanning,
+            "config": {"identification": self.config.identification is not None,
+                       "mission_replanning": self.config.mission is not None,
                        "safe_segments": self.config.safe_segments,
                        "aim_final_position": self.config.aim_final_position,
                        "disc_offset": self.config.disc_offset},
@@ -348,7 +384,7 @@ class Expert:
             out["planned_delta_mps"] = self.offline_plan.delta_mps
             out["tolerated_final_velocity_mps"] = {name: list(f.final_box_mps)
                                                    for name, f in self.offline_plan.funnels.items()}
-        if self.config.identification:
+        if self.config.identification is not None:
             out["identification"] = self.identifier.report()
         if self.mission is not None:
             out["mission"] = self.mission.report()

@@ -15,6 +15,8 @@ import dataclasses
 
 from planners.errors import PlannerError
 from planners.expert.expert import ExpertConfig
+from planners.online.identification import IdentificationConfig
+from planners.online.mission import MissionConfig
 
 STACKS = ("paper", "+id", "+mission", "all")
 
@@ -25,8 +27,8 @@ def stack_config(name: str, allow_side_switches: bool = False) -> ExpertConfig:
     ``MissionConfig.allow_side_switches`` existed were."""
     if name not in STACKS:
         raise PlannerError(f"unknown expert stack {name!r}: one of {', '.join(STACKS)}")
-    config = {"paper": ExpertConfig.paper(), "+id": ExpertConfig.paper(identification=True),
-              "+mission": ExpertConfig.paper(mission_replanning=True), "all": ExpertConfig()}[name]
-    if allow_side_switches:
+    config = {"paper": ExpertConfig.paper(), "+id": ExpertConfig.paper(identification=IdentificationConfig()),
+              "+mission": ExpertConfig.paper(mission=MissionConfig()), "all": ExpertConfig()}[name]
+    if allow_side_switches and config.mission is not None:
         config = dataclasses.replace(config, mission=dataclasses.replace(config.mission, allow_side_switches=True))
     return config

@@ -15,6 +15,7 @@ interval hull taken at each impact, as in the paper. Why, and how it differs fro
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from functools import partial
@@ -24,6 +25,7 @@ import numpy as np
 from impact_env.scenario import Scenario
 from planners.errors import PlannerError
 from planners.offline.common import add_obstacle_clearance, check_common_options, encode_task
+from planners.offline.config import DEFAULT_COPY_INTERVALS, DEFAULT_FINAL_BOX, IRPlannerConfig, PlannerConfig
 from planners.offline.milp.boxes import ObjectBox
 from planners.offline.milp.collisions import add_robot_separation
 from planners.offline.milp.copies import SIGNS, RobotCopies, add_copy_impacts
@@ -39,34 +41,8 @@ from planners.offline.milp.trajectories import (
     value,
     velocity_bound,
 )
-from planners.offline.spatially_robust import PlannerConfig
 from planners.offline.stages import StagedModel, solve_to_plan
 from planners.plan import BodyPlan, ImpactCopies, ObjectFunnel, Plan, PlannedImpact, Segment
-
-DEFAULT_FINAL_BOX = (0.5, 0.05)  # position half-width (m), velocity half-width (m/s): the authors' default
-DEFAULT_COPY_INTERVALS = 2
-
-
-@dataclass
-class IRPlannerConfig(PlannerConfig):
-    """Options of the impact-robust planner: those of :class:`PlannerConfig` (grid, thrust share, stages,
-    solver) and
-
-    min_delta_mps: the smallest delta worth a plan (a task that cannot tolerate it is infeasible: the
-        final box is then smaller than the grid can trim to). default_final_box: (position_m,
-        velocity_mps) half-widths for objects without a ``[final_box]`` entry. copy_intervals: grid
-        intervals before and after an impact on which the robot's copies may differ (room to reach the box
-        vertices within the thrust limits; default: the scenario's ``[planner] copy_intervals``, else 2).
-        disjunctive_resets: the box resets in Balas' convex-hull form (False: big-M switching, the baseline
-        of ``benchmarks/planner.py``).
-    """
-
-    acceleration_weight: float = 0.0
-    impact_weight: float = 0.0
-    min_delta_mps: float = 1e-3
-    default_final_box: tuple[float, float] = DEFAULT_FINAL_BOX
-    copy_intervals: int | None = None
-    disjunctive_resets: bool = True
 
 
 @dataclass
@@ -102,11 +78,6 @@ def build_ir_model(scenario: Scenario, config: IRPlannerConfig) -> IRModel:
     """Build the MILP of the impact-robust planner (no solving)."""
     start = time.perf_counter()
     grid, degree = check_common_options(scenario, config)
-    if config.robot_object_separation:
-        raise PlannerError("robot_object_separation is not available with the impact-robust planner: the "
-                           "controller keeps robots off objects away from planned impacts")
-    if not config.min_delta_mps > 0:
-        raise PlannerError(f"min_delta_mps must be > 0, got {config.min_delta_mps}")
     n = grid.intervals
     model = Model(name=f"ir:{scenario.name}")
     allowed = {b.name: allowed_box(scenario, b) for b in scenario.bodies}
@@ -178,7 +149,7 @@ def plan_impact_robust(scenario: Scenario, config: IRPlannerConfig | None = None
     """
     config = config or IRPlannerConfig()
     if not isinstance(config, IRPlannerConfig):
-        config = IRPlannerConfig(**{k: getattr(config, k) for k in PlannerConfig.__dataclass_fields__})
+        config = IRPlannerConfig(**{f.name: getattr(config, f.name) for f in dataclasses.fields(PlannerConfig)})
     built = build_ir_model(scenario, config)
     return solve_to_plan(staged_model(built), config, scenario, partial(extract_ir_plan, scenario, built),
                          lambda plan: f"best delta {plan.delta_mps:.5f} m/s")

@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planners.errors import PlannerError, check_number
+from impact_env.config_checks import check_flag, check_number
+from planners.errors import PlannerError
 
 
 @dataclass
@@ -100,18 +101,9 @@ def significance_test(values: list[float], variances: list[float], reference: fl
     return Significance(mean, std, z, len(e), bool(z > k))
 
 
-@dataclass
+@dataclass(frozen=True)
 class IdentificationConfig:
     """Prior uncertainties and measurement noise of :class:`ImpactIdentifier`.
-
-    ``restitution_prior_std`` and ``mass_ratio_prior_std``: how far the scenario file may be off;
-    ``velocity_noise_mps``: error of a reported velocity along the normal (the contact is detected at a
-    substep, so the line of centres is known exactly but the velocities carry about one substep of thrust);
-    ``min_normal_speed_mps``: slower approaches are not used (their ratio is noise); ``use_mass_ratio``: let
-    the contact inverse use the estimated mass ratio once its std is below ``mass_ratio_max_std``;
-    ``significance``: k of the significance test (module docstring): a pair's (or the pooled) estimate
-    replaces the file's restitution only when it differs from it by more than k standard errors; None (the
-    default) uses every estimate as soon as it exists.
 
     ``significance`` is off by default for now: turning it on changes every published benchmark cell that
     flies identification, and those must be flown again before the default can change (3 is the value
@@ -120,25 +112,29 @@ class IdentificationConfig:
     """
 
     restitution_prior_std: float = 0.25
+    """How far the scenario file's restitution may be off (standard deviation, dimensionless)."""
     mass_ratio_prior_std: float = 0.5
+    """How far the file's mass ratio m_object / m_robot may be off (standard deviation, relative)."""
     velocity_noise_mps: float = 1e-3
+    """Error of a reported velocity along the normal (m/s): the contact is detected at a substep, so the
+    line of centres is exact but the velocities carry about one substep of thrust."""
     min_normal_speed_mps: float = 0.01
+    """Slower approaches (m/s, along the normal) are not used: their ratio is noise."""
     use_mass_ratio: bool = False
+    """Let the contact inverse use the estimated mass ratio once its std is below ``mass_ratio_max_std``."""
     mass_ratio_max_std: float = 0.02
+    """The std (relative) below which an estimated mass ratio is used (with ``use_mass_ratio``)."""
     significance: float | None = None
+    """k of the significance test (standard errors, see the module docstring): a pair's (or the pooled)
+    estimate replaces the file's restitution only when it differs from it by more than k standard errors;
+    None uses every estimate as soon as it exists."""
 
     def __post_init__(self) -> None:
         for name in ("restitution_prior_std", "mass_ratio_prior_std", "velocity_noise_mps", "min_normal_speed_mps",
                      "mass_ratio_max_std"):
-            check_number(f"IdentificationConfig.{name}", getattr(self, name))
-        if not isinstance(self.use_mass_ratio, bool):
-            raise PlannerError(f"IdentificationConfig.use_mass_ratio must be True or False, got "
-                               f"{self.use_mass_ratio!r}")
-        k = self.significance
-        if k is not None and (isinstance(k, bool) or not (isinstance(k, (int, float)) and math.isfinite(k)
-                                                          and k > 0)):
-            raise PlannerError(f"IdentificationConfig.significance must be None (off) or a finite number of "
-                               f"standard errors > 0 (e.g. 3), got {k!r}")
+            check_number(self, name, PlannerError, low=0)
+        check_flag(self, "use_mass_ratio", PlannerError)
+        check_number(self, "significance", PlannerError, low=0, low_open=True, none="off")
 
 
 @dataclass

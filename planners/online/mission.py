@@ -20,15 +20,25 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, InitVar, dataclass, field
 from typing import Any
 
 import numpy as np
 
+from impact_env.config_checks import (
+    NOT_GIVEN,
+    check_flag,
+    check_instance,
+    check_integer,
+    check_number,
+    check_value,
+    moved_into,
+)
 from impact_env.scenario import Body, Scenario
 from impact_env.stl import progress, robustness, without_constants
 from planners import bezier
-from planners.errors import PlannerError, check_number
+from planners.errors import PlannerError
+from planners.offline.solvers.base import SolverOptions
 from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
 from planners.online.reachability import POSITION_TOLERANCE_M, VELOCITY_TOLERANCE_MPS, Reachability, contact_reachable
 from planners.online.sampling import PlanSampler
@@ -36,57 +46,75 @@ from planners.online.side_switch import SideSwitch, side_switches, unflyable_sid
 from planners.plan import BodyPlan, Plan, Segment
 
 
-@dataclass
+def _replan_budget() -> SolverOptions:
+    return SolverOptions(node_limit=200, time_limit_s=60.0, threads=1)
+
+
+@dataclass(frozen=True)
 class MissionConfig:
     """When and how the mission is re-planned (see the module docstring).
 
-    ``check_period_s``: prediction period between impacts (s); ``robustness_fraction`` and
-    ``min_robustness_m``: the test; ``node_limit`` / ``refine_nodes``: the planner's node budget for the
-    robustness stage and the second stage; ``time_limit_s``: safety net per planner stage (s);
-    ``max_replans``: per episode; ``min_remaining_s``: no re-plan closer than this to the end;
-    ``quiet_s``: no re-plan within this time of a pending planned impact (the local replanner owns it);
-    ``allow_side_switches``: accept a re-plan with a side switch the robot has no time for
-    (:func:`unflyable_side_switches`; default: keep the current plan); ``threads``: the solver's threads
-    for a re-plan (pinned, see the module docstring); ``predict_reachability``: the prediction drops a
-    pending impact the robot provably cannot reach in time (step 1; off: every pending impact is
-    predicted to deliver what the plan asks); ``reach_tolerance_m`` / ``reach_tolerance_mps``: how close
-    (per axis) to the contact's position and velocity counts as making it (the contact box of
-    :func:`planners.online.reachability.contact_reachable`; larger is more conservative).
+    The old keywords ``node_limit``, ``time_limit_s`` and ``threads`` are still accepted for one release, with
+    a ``DeprecationWarning``, and set in :attr:`solver_options`.
     """
 
     check_period_s: float = 1.0
+    """Prediction period between impacts (s)."""
     robustness_fraction: float = 0.5
+    """Re-plan when the predicted robustness is below this share (in [0, 1]) of the flown plan's ..."""
     min_robustness_m: float = 0.0
-    node_limit: int = 200
+    """... or below this (m; 0: when a failure is predicted)."""
+    solver_options: SolverOptions = field(default_factory=_replan_budget)
+    """A re-plan's solver budget: ``node_limit`` branch-and-bound nodes of the robustness stage (200), the
+    budget; ``time_limit_s`` per planner stage (60 s), a safety net (a re-plan it cuts is discarded); ``threads``
+    pinned (1: HiGHS's own choice depends on the machine's cores). The planner config's own are not used."""
     refine_nodes: int = 0
-    time_limit_s: float = 60.0
+    """Branch-and-bound nodes of the planner's second stage in a re-plan (0 skips it)."""
     max_replans: int = 3
+    """Re-plans per episode."""
     min_remaining_s: float = 2.0
+    """No re-plan closer than this to the end (s)."""
     quiet_s: float = 1.0
+    """No re-plan within this time of a pending planned impact (s): the local replanner owns it."""
     allow_side_switches: bool = False
-    threads: int = 1
+    """Accept a re-plan with a side switch the robot has no time for (:func:`unflyable_side_switches`); False:
+    keep the current plan."""
     predict_reachability: bool = True
+    """The prediction drops a pending impact the robot provably cannot reach in time (step 1); False: every
+    pending impact is predicted to deliver what the plan asks."""
     reach_tolerance_m: float = POSITION_TOLERANCE_M
+    """How close to the contact's position (m, per axis) counts as making it (the contact box of
+    :func:`planners.online.reachability.contact_reachable`; larger is more conservative)."""
     reach_tolerance_mps: float = VELOCITY_TOLERANCE_MPS
+    """How close to the contact's velocity (m/s, per axis) counts as making it."""
+    _: KW_ONLY
+    node_limit: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.node_limit``."""
+    time_limit_s: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.time_limit_s``."""
+    threads: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.threads``."""
 
-    def __post_init__(self) -> None:
-        for name in ("check_period_s", "time_limit_s", "min_remaining_s", "quiet_s"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise PlannerError(f"MissionConfig.{name} must be a finite number > 0, got {value!r}")
-        for name in ("reach_tolerance_m", "reach_tolerance_mps"):
-            check_number(f"MissionConfig.{name}", getattr(self, name))
-        if not 0.0 <= self.robustness_fraction <= 1.0:
-            raise PlannerError(f"MissionConfig.robustness_fraction must be in [0, 1], got {self.robustness_fraction}")
-        for name in ("node_limit", "refine_nodes", "max_replans"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise PlannerError(f"MissionConfig.{name} must be an integer >= 0, got {value!r}")
-        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 1:
-            raise PlannerError(f"MissionConfig.threads must be an integer >= 1, got {self.threads!r}")
+    def __post_init__(self, node_limit: Any, time_limit_s: Any, threads: Any) -> None:
+        check_instance(self, "solver_options", PlannerError, SolverOptions, what="a SolverOptions")
+        moved_into(self, "solver_options", {"node_limit": node_limit, "time_limit_s": time_limit_s,
+                                            "threads": threads}, PlannerError)
+        budget = self.solver_options
+        # the same observations must give the same re-plan on every machine: a node budget, pinned threads
+        check_value("MissionConfig.solver_options.node_limit", budget.node_limit, PlannerError, low=1, integer=True)
+        check_value("MissionConfig.solver_options.threads", budget.threads, PlannerError, low=1, integer=True)
+        check_value("MissionConfig.solver_options.time_limit_s", budget.time_limit_s, PlannerError, low=0,
+                    low_open=True)
+        for name in ("check_period_s", "min_remaining_s", "quiet_s"):
+            check_number(self, name, PlannerError, low=0, low_open=True)
+        check_number(self, "robustness_fraction", PlannerError, low=0, high=1)
+        check_number(self, "min_robustness_m", PlannerError)
+        for name in ("refine_nodes", "max_replans"):
+            check_integer(self, name, PlannerError, low=0)
         for name in ("allow_side_switches", "predict_reachability"):
-            if not isinstance(getattr(self, name), bool):
-                raise PlannerError(f"MissionConfig.{name} must be True or False, got {getattr(self, name)!r}")
+            check_flag(self, name, PlannerError)
+        for name in ("reach_tolerance_m", "reach_tolerance_mps"):
+            check_number(self, name, PlannerError, low=0)
 
 
 @dataclass
@@ -365,10 +393,11 @@ class MissionPlanner:
         record.intervals, record.task = intervals, derived.task
         cfg = self.config
         warm = resample_plan(plan, t, self.scenario.tf_s, intervals, self.degree)
+        budget = cfg.solver_options
         config = dataclasses.replace(self.planner_config, intervals=intervals, robot_degree=self.degree,
-                                     node_limit=cfg.node_limit, refine_nodes=cfg.refine_nodes,
-                                     time_limit_s=cfg.time_limit_s, refine_time_s=cfg.time_limit_s,
-                                     threads=cfg.threads, warm_start=warm, diagnose_infeasibility=False, progress=None)
+                                     solver_options=budget, refine_nodes=cfg.refine_nodes,
+                                     refine_time_s=budget.time_limit_s, warm_start=warm,
+                                     diagnose_infeasibility=False)
         start = time.perf_counter()
         try:
             try:
@@ -380,7 +409,7 @@ class MissionPlanner:
                 remainder = plan_spatially_robust(_without_end_states(derived), config)
         except PlanTimeoutError:
             record.solve_s = time.perf_counter() - start
-            if record.solve_s >= cfg.time_limit_s * 0.99:
+            if record.solve_s >= cfg.solver_options.time_limit_s * 0.99:
                 self.timeouts += 1
                 record.status = "kept: time limit (safety net)"
             else:

@@ -23,7 +23,6 @@ import casadi as ca
 import numpy as np
 
 from impact_env.scenario import Body
-from planners.errors import check_number
 from planners.online.freeflyer import _rk4_sx, rk4_step, state_from_sim
 from planners.online.mpc_specs import (
     _NSI,
@@ -248,9 +247,7 @@ class FreeflyerMPC:
         unknown = sorted(set(weights) - set(_WEIGHTS))
         if unknown:
             raise MPCInputError(f"unknown weight(s) {unknown}; weights are {', '.join(_WEIGHTS)}")
-        for name, value in weights.items():
-            check_number(name, value, error=MPCInputError)
-        self.config = replace(self.config, **weights)
+        self.config = replace(self.config, **weights)  # MPCConfig checks the values
         self._write_weights()
 
     def _write_weights(self) -> None:

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from impact_env.config_checks import check_value
 from impact_env.scenario import Body
 from planners.errors import ReplanInputError
 from planners.online.impact_model import ContactPlan
@@ -84,8 +85,7 @@ def box_reachable(p0, v0, p1, v1, duration_s: float, degree: int, acceleration_b
         raise ReplanInputError(f"degree must be >= 3 (two fixed control points at each end), got {degree}")
     for name, value in (("position_tolerance_m", position_tolerance_m),
                         ("velocity_tolerance_mps", velocity_tolerance_mps)):
-        if not (math.isfinite(value) and value >= 0):
-            raise ReplanInputError(f"{name} must be a finite number >= 0, got {value!r}")
+        check_value(name, value, ReplanInputError, low=0)
     acc = np.asarray(acceleration_bound, float) + tol
     if not (acc.shape == (2,) and (acc >= 0).all()):
         raise ReplanInputError(f"acceleration_bound must be >= 0 per axis, got {acceleration_bound}")
@@ -121,8 +121,7 @@ def contact_reachable(t: float, impact: PlannedImpact, plan: Plan, robot: Body, 
     it was re-planned away and the episode ended with +0.27 m (4 of 50 episodes)."""
     if impact.time_s - t <= 0.0:
         return Reachability(t, impact, True)
-    if not (math.isfinite(late_s) and late_s >= 0):
-        raise ReplanInputError(f"late_s must be a finite number >= 0, got {late_s!r}")
+    check_value("late_s", late_s, ReplanInputError, low=0)
     robot_state, object_state = np.asarray(robot_state, float), np.asarray(object_state, float)
     v_o = object_state[3:5]
     strategy = PlanContact(aim_final_position)

@@ -12,7 +12,6 @@ Why single pulls suffice, and how exact it is: ``docs/planner_design.md#exact-te
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -22,6 +21,7 @@ import shapely.ops
 from shapely.geometry import Point
 from shapely.geometry.base import BaseGeometry
 
+from impact_env.config_checks import check_integer, check_number
 from impact_env.station import Station
 from planners.errors import PlannerError
 from planners.tether.errors import TetherInfeasibleError
@@ -43,30 +43,24 @@ COVER_TOL_M = 1e-6  # a point this close to a level is in it (the rays between r
 
 @dataclass(frozen=True)
 class ReachabilityConfig:
-    """Options of the exact planner.
-
-    Attributes:
-        clearance_m: extra distance (m) kept between the cargo disc and the walls, on top of its radius.
-        stop_margin_m: a pull ends at least this far (m) outside its anchor's stop radius, so that the
-            environment does not release the tether before the planned switch point.
-        goal_margin_m: the last pull must end this far (m) inside the goal box (if the box allows it).
-        max_pulls: give up (with a PlannerError, not a proof) if the reachable set still grows after this many.
-        depth_cap_m: a switch point is chosen as deep as this inside the next level's set, then shortest path.
-    """
+    """Options of the exact planner."""
 
     clearance_m: float = 0.02
+    """Extra distance (m) kept between the cargo disc and the walls, on top of its radius."""
     stop_margin_m: float = 0.1
+    """A pull ends at least this far (m) outside its anchor's stop radius, so that the environment does not
+    release the tether before the planned switch point."""
     goal_margin_m: float = 0.15
+    """The last pull must end this far (m) inside the goal box (if the box allows it)."""
     max_pulls: int = 40
+    """Give up (with a PlannerError, not a proof) if the reachable set still grows after this many pulls."""
     depth_cap_m: float = 0.5
+    """A switch point is chosen as deep as this (m) inside the next level's set, then by shortest path."""
 
     def __post_init__(self) -> None:
         for name in ("clearance_m", "stop_margin_m", "goal_margin_m", "depth_cap_m"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise PlannerError(f"ReachabilityConfig.{name} must be a finite number >= 0, got {v!r}")
-        if self.max_pulls < 1:
-            raise PlannerError(f"ReachabilityConfig.max_pulls must be >= 1, got {self.max_pulls}")
+            check_number(self, name, PlannerError, low=0)
+        check_integer(self, "max_pulls", PlannerError, low=1)
 
 
 class ReachabilityPlanner:

@@ -21,6 +21,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Point, Polygon
 
+from impact_env.config_checks import check_choice, check_integer, check_number
 from impact_env.station import Station
 from planners.errors import PlannerError, SmtNoPlanError
 from planners.tether.automaton import RULES, ThesisMap, build_thesis_map, half_planes
@@ -41,34 +42,33 @@ def _z3():
 
 @dataclass(frozen=True)
 class SmtConfig:
-    """Options of the z3 pipeline.
-
-    Attributes:
-        rule: ``"region"`` (the thesis's anchors of a region) or ``"line_of_sight"``.
-        max_pulls_per_region: the sub-problems' bound (divide and conquer).
-        max_paths: region-graph paths tried before giving up.
-        timeout_s: z3's limit per check; a check that hits it counts as "no plan" and is reported.
-        clearance_m, stop_margin_m, goal_margin_m: as the exact planner's, so that both solve the same problem.
-        target_margin_m: shrinks each sub-problem's transition zone, so that the next sub-problem starts inside
-            its region rather than on its border.
-    """
+    """Options of the z3 pipeline (the margins as the exact planner's, so that both solve the same problem)."""
 
     rule: str = "region"
+    """The anchors a region's modes may use: ``"region"`` (the thesis's) or ``"line_of_sight"``."""
     max_pulls_per_region: int = 3
+    """The sub-problems' bound on pulls (divide and conquer)."""
     max_paths: int = 8
+    """Region-graph paths tried before giving up."""
     timeout_s: float = 60.0
+    """z3's limit per check (s); a check that hits it counts as "no plan" and is reported."""
     clearance_m: float = 0.02
+    """Extra distance (m) between the cargo disc and the walls, as the exact planner's."""
     stop_margin_m: float = 0.1
+    """A pull ends at least this far (m) outside its anchor's stop radius, as the exact planner's."""
     target_margin_m: float = 0.05
+    """Shrinks each sub-problem's transition zone (m), so that the next sub-problem starts inside its region
+    rather than on its border."""
     goal_margin_m: float = 0.15
+    """The last pull ends this far (m) inside the goal box, as the exact planner's."""
 
     def __post_init__(self) -> None:
-        if self.rule not in RULES:
-            raise PlannerError(f"SmtConfig.rule must be one of {RULES}, got {self.rule!r}")
-        if self.max_pulls_per_region < 1 or self.max_paths < 1:
-            raise PlannerError("SmtConfig.max_pulls_per_region and max_paths must be >= 1")
-        if not self.timeout_s > 0:
-            raise PlannerError(f"SmtConfig.timeout_s must be > 0, got {self.timeout_s}")
+        check_choice(self, "rule", PlannerError, RULES)
+        for name in ("max_pulls_per_region", "max_paths"):
+            check_integer(self, name, PlannerError, low=1)
+        check_number(self, "timeout_s", PlannerError, low=0, low_open=True)
+        for name in ("clearance_m", "stop_margin_m", "target_margin_m", "goal_margin_m"):
+            check_number(self, name, PlannerError, low=0)
 
 
 @dataclass
