@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+import planners.plan.schema as schema
 from planners.errors import PlanCheckError
-from planners.plan import schema
 from planners.plan.checks import check_plan
 from planners.plan.files import read_plan_json, write_plan_json
 from planners.plan.types import BodyPlan, ImpactCopies, ObjectFunnel, PlannedImpact, Segment
