@@ -8,12 +8,11 @@
 A comma-separated list of scenarios is planned side by side on the sweep engine (planners/offline/batch.py):
 ``--out`` and ``--plot`` are then folders (one ``<scenario>.json`` / ``.png`` each).
 
-Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``). Prints a header with the
-model size, a progress line at most once a second during the solve, then the robustness, solve time, gap
-and one line per planned impact. Exit codes: 0 plan found (optimal within the gap); 3 time limit reached
-with a plan (the best plan is still written, with a warning giving its gap); 2 any error that
-``impact_env.cli.main`` reports in one line (bad options, infeasible task, unsupported STL, solver missing,
-no plan within the time limit).
+Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``); prints the model size,
+progress at most once a second, then the robustness, solve time, gap and one line per planned impact. Exit
+codes: 0 plan found (optimal within the gap); 3 time limit reached with a plan (still written, with a warning
+giving its gap); 2 any error that ``impact_env.cli.main`` reports in one line (bad options, infeasible task,
+unsupported STL, solver missing, no plan within the time limit).
 """
 
 from __future__ import annotations

@@ -3,13 +3,11 @@
 Both planners maximise one quantity (rho, the STL spatial robustness, or delta, the tolerated post-impact
 velocity error) and then, keeping it, prefer plans with fewer impacts and less acceleration:
 
-1. stage 1: maximise the primary quantity (with tie-breaks below the MIP gap), to proven optimality (or
-   to ``node_limit`` nodes: the mission replanner's budget; stage 2 then runs only if it proved optimality);
+1. stage 1: maximise the primary quantity, to proven optimality or to ``solver_options.node_limit`` nodes
+   (the mission replanner's budget; stage 2 then runs only if it proved optimality);
 2. stage 2: keep it (>= its optimum - 1e-7), minimise the number of impacts plus the L1 acceleration
-   (Eq. 28 in L1 form; impacts only if the model says so, and acceleration is then left to stage 3),
-   warm-started from stage 1, cut after ``refine_nodes`` branch-and-bound nodes. A node
-   count is the same work on every machine, so the same scenario and config give the same plan however busy
-   the machine is (a time limit would not: ``benchmarks/planner_stage2.py``);
+   (Eq. 28), warm-started from stage 1, cut after ``refine_nodes`` branch-and-bound nodes: the same work on
+   every machine, so the same plan however busy the machine is (``docs/planner_design.md#lexicographic-stages``);
 3. polish: the binaries fixed, an LP with the stage-2 objective (or, with ``smooth``, a convex QP on squared
    accelerations), which also removes the integrality tolerance's leak through big-M rows.
 

@@ -1,7 +1,6 @@
 """Online control (paper Sec. VI-VII): what runs every control step while a plan is flown.
 
-- :mod:`planners.online.impact_model`: the closed-form inverse of the disc impact law
-  (:mod:`planners.impact_law`);
+- :mod:`planners.online.impact_model`: the closed-form inverse of the disc impact law;
 - :mod:`planners.online.replanner`: the two-body replanner of a robot's pre- and post-impact segments, with
   velocity and acceleration bounds and safe-segment limits (world box, obstacles, other robots);
 - :mod:`planners.online.mpc` (with ``freeflyer`` and ``mpc_specs``): the impact-aware MPC;
