@@ -26,25 +26,55 @@ import numpy as np
 from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
 from baselines.record import dataset_id, datasets_path, use_datasets_path
 from baselines.run_meta import scenario_fingerprint
+from impact_env.config_checks import check_integer, check_number, check_text, fail
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario
 
 MIN_OBS_STD = 1e-2  # features constant in the demonstrations (e.g. a passive disc's heading) are not blown up
 
 
-@dataclass
+@dataclass(frozen=True)
 class BCConfig:
+    """What ``impact-env bc SCENARIO`` fits, and how (see the module docstring)."""
+
     scenario: str
-    dataset_dir: str | None = None  # default: Minari's own folder (see baselines.record)
+    """The scenario whose expert dataset is cloned (a shipped name or a scenario file)."""
+    dataset_dir: str | None = None
+    """Where the Minari dataset is; None: Minari's own folder (see :mod:`baselines.record`)."""
     epochs: int = 30
+    """Passes over the training episodes."""
     batch_size: int = 256
+    """Observation-action pairs per Adam step."""
     learning_rate: float = 1e-3
+    """Adam's learning rate."""
     ent_weight: float = 1e-3
-    validation_share: float = 0.1  # of the episodes (at least one when there are two or more)
+    """Weight of the entropy bonus, against the negative log-likelihood."""
+    validation_share: float = 0.1
+    """Share of the episodes held out (in [0, 1]; at least one when there are two or more, never all)."""
     seed: int = 0
-    out: str | None = None  # the run folder; default <runs_dir>/bc_<scenario>_s<seed>
+    """Seed of the policy and the minibatches."""
+    out: str | None = None
+    """The run folder; None: ``<runs_dir>/bc_<scenario>_s<seed>``."""
     runs_dir: str = "runs"
+    """The parent of the default run folder."""
     net_arch: tuple[int, ...] = (128, 128)
+    """Hidden layer sizes of the policy and value networks."""
+
+    def __post_init__(self) -> None:
+        check_text(self, "scenario", ImpactEnvError)
+        check_text(self, "dataset_dir", ImpactEnvError, none="Minari's own folder")
+        for name in ("epochs", "batch_size"):
+            check_integer(self, name, ImpactEnvError, low=1)
+        check_number(self, "learning_rate", ImpactEnvError, low=0, low_open=True)
+        check_number(self, "ent_weight", ImpactEnvError, low=0)
+        check_number(self, "validation_share", ImpactEnvError, low=0, high=1)
+        check_integer(self, "seed", ImpactEnvError, low=0)
+        check_text(self, "out", ImpactEnvError, none="<runs_dir>/bc_<scenario>_s<seed>")
+        check_text(self, "runs_dir", ImpactEnvError)
+        arch = self.net_arch
+        layers = isinstance(arch, (tuple, list)) and len(arch) > 0
+        if not (layers and all(isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in arch)):
+            fail("BCConfig.net_arch", arch, "a non-empty tuple of integers >= 1 (layer sizes)", ImpactEnvError)
 
 
 def load_demonstrations(scenario_name: str,
@@ -71,8 +101,6 @@ def behaviour_clone(config: BCConfig) -> Path:
 
     from impact_env.envs.transport import TransportEnv
 
-    if config.epochs < 1 or config.batch_size < 1:
-        raise ImpactEnvError(f"epochs and batch_size must be >= 1, got {config.epochs} and {config.batch_size}")
     scenario = load_scenario(config.scenario)
     episodes = load_demonstrations(scenario.name, config.dataset_dir)
     n_val = int(round(config.validation_share * len(episodes))) if len(episodes) > 1 else 0

@@ -44,32 +44,73 @@ import numpy as np
 
 from baselines import hyperparams
 from baselines.rllib_policy import FINAL_CHECKPOINT, POLICY_FOLDER, RLlibController, export_policy
+from impact_env.config_checks import check_choice, check_flag, check_instance, check_integer, check_number, check_text
 from impact_env.errors import EngineError, ImpactEnvError, UntrustedFileError
 
 POLICY_MODES = ("shared", "independent")
 
 
-@dataclass
+@dataclass(frozen=True)
 class RLlibTrainConfig:
+    """What ``impact-env train ppo SCENARIO --engine rllib`` trains, and how (see the module docstring)."""
+
     scenario: str
-    policies: str = "independent"  # or "shared"
-    timesteps: int | None = None  # env steps; default: the hyperparameter file's n_timesteps
+    """A shipped impact scenario or a scenario file (tether stations train with stable-baselines3)."""
+    policies: str = "independent"
+    """One policy per robot (``independent``) or one for all (``shared``, parameter sharing)."""
+    timesteps: int | None = None
+    """Environment steps to train; None: the hyperparameter file's ``n_timesteps``."""
     seed: int = 0
-    env_runners: int = 1  # sampling processes (Ray actors); 0 samples in the driver
+    """Seed of RLlib's algorithm and of the evaluation episodes."""
+    env_runners: int = 1
+    """Sampling processes (Ray actors); 0 samples in the driver."""
     envs_per_runner: int = 1
-    out: str = "runs"  # the parent of the default run folder (--runs-dir)
+    """Environments per env runner."""
+    out: str = "runs"
+    """The parent of the default run folder (``--runs-dir``)."""
     env_options: dict[str, Any] = field(default_factory=dict)
-    eval_freq: int | None = None  # env steps between evaluations; default about five per run, at most 20,000
+    """Keyword arguments of the environment (reward mode, fuel penalty, noise, restitution)."""
+    eval_freq: int | None = None
+    """Environment steps between evaluations; None: about five per run, at most every 20,000."""
     eval_episodes: int = 5
+    """Episodes per evaluation."""
     checkpoint_freq: int = 100_000
+    """Environment steps between checkpoints."""
     hyperparams_file: str | None = None
+    """An rl-baselines3-zoo PPO hyperparameter file; None: ``baselines/hyperparams/ppo.yml``."""
     max_minutes: float | None = None
-    address: str | None = None  # a Ray cluster (default $RAY_ADDRESS, else a private local instance)
+    """Wall-clock budget (min); None: no budget."""
+    address: str | None = None
+    """A Ray cluster; None: ``$RAY_ADDRESS``, else a private local instance."""
     ship_code: bool = False
+    """Ship this checkout's packages to the Ray workers."""
     resume: bool = False
-    trust_pickle: bool = False  # resuming unpickles RLlib's checkpoint
+    """Continue the saved run in the run folder."""
+    trust_pickle: bool = False
+    """Trust RLlib's pickled checkpoint (resuming unpickles it)."""
     verbose: bool = True
-    run_dir: str | None = None  # the run folder (--out); default: <out>/rllib_ppo_<scenario>_<policies>_s<seed>
+    """Print a line per iteration."""
+    run_dir: str | None = None
+    """The run folder (``--out``); None: ``<out>/rllib_ppo_<scenario>_<policies>_s<seed>``."""
+
+    def __post_init__(self) -> None:
+        check_text(self, "scenario", ImpactEnvError)
+        check_choice(self, "policies", ImpactEnvError, POLICY_MODES)
+        check_integer(self, "timesteps", ImpactEnvError, low=1, none="the hyperparameter file's")
+        check_integer(self, "seed", ImpactEnvError, low=0)
+        check_integer(self, "env_runners", EngineError, low=0)
+        check_integer(self, "envs_per_runner", EngineError, low=1)
+        check_text(self, "out", ImpactEnvError)
+        check_instance(self, "env_options", ImpactEnvError, dict, what="a dict of environment keywords")
+        check_integer(self, "eval_freq", ImpactEnvError, low=1, none="about five per run")
+        for name in ("eval_episodes", "checkpoint_freq"):
+            check_integer(self, name, ImpactEnvError, low=1)
+        check_text(self, "hyperparams_file", ImpactEnvError, none="the shipped file")
+        check_number(self, "max_minutes", ImpactEnvError, low=0, low_open=True, none="no budget")
+        check_text(self, "address", EngineError, none="$RAY_ADDRESS, else a private instance")
+        for name in ("ship_code", "resume", "trust_pickle", "verbose"):
+            check_flag(self, name, ImpactEnvError)
+        check_text(self, "run_dir", ImpactEnvError, none="<out>/rllib_ppo_<scenario>_<policies>_s<seed>")
 
 
 def rllib_settings(entry: dict[str, Any], timesteps: int) -> dict[str, Any]:
@@ -111,22 +152,12 @@ def rllib_settings(entry: dict[str, Any], timesteps: int) -> dict[str, Any]:
 
 
 def _check(config: RLlibTrainConfig) -> None:
+    """What the config cannot check itself: the scenario is an impact scenario, not a tether station."""
     from baselines import tether
 
-    if config.policies not in POLICY_MODES:
-        raise ImpactEnvError(f"--policies must be one of {', '.join(POLICY_MODES)}, got {config.policies!r}")
     if tether.is_station(config.scenario):
         raise ImpactEnvError("--engine rllib trains impact scenarios; tether stations train with the default "
                              "stable-baselines3 engine")
-    if not (type(config.env_runners) is int and config.env_runners >= 0):
-        raise EngineError(f"--env-runners must be an integer >= 0, got {config.env_runners!r}")
-    if not (type(config.envs_per_runner) is int and config.envs_per_runner >= 1):
-        raise EngineError(f"--n-envs (envs per env runner) must be an integer >= 1, got {config.envs_per_runner!r}")
-    if config.max_minutes is not None and not config.max_minutes > 0:
-        raise ImpactEnvError(f"max_minutes must be > 0, got {config.max_minutes!r}")
-    for name in ("eval_episodes", "checkpoint_freq") + (("eval_freq",) if config.eval_freq is not None else ()):
-        if not (type(getattr(config, name)) is int and getattr(config, name) >= 1):
-            raise ImpactEnvError(f"{name} must be a positive integer, got {getattr(config, name)!r}")
 
 
 def run_folder(config: RLlibTrainConfig, scenario_name: str) -> Path:

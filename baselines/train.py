@@ -21,6 +21,7 @@ at the end, so a short run has a learning curve too.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import time
@@ -33,29 +34,74 @@ import numpy as np
 from baselines import ALGOS, hyperparams
 from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
 from impact_env import GYM_IDS
+from impact_env.config_checks import (
+    check_choice,
+    check_flag,
+    check_instance,
+    check_integer,
+    check_number,
+    check_text,
+)
 from impact_env.errors import ImpactEnvError
 from impact_env.scenario import load_scenario
 
 
-@dataclass
+@dataclass(frozen=True)
 class TrainConfig:
+    """What ``impact-env train ALGO SCENARIO`` trains, and how (see the module docstring)."""
+
     algo: str
+    """The stable-baselines3 algorithm: ``ppo`` or ``sac``."""
     scenario: str
-    timesteps: int | None = None  # default: the hyperparameter file's n_timesteps
+    """A shipped scenario or station name, or a scenario file."""
+    timesteps: int | None = None
+    """Environment steps to train (summed over the envs); None: the hyperparameter file's ``n_timesteps``."""
     seed: int = 0
-    n_envs: int | None = None  # default: the file's n_envs
-    out: str | None = None  # the run folder; default <runs_dir>/<algo>_<scenario>[_ma]_s<seed>
+    """Seed of the policy, the training envs and (plus 10,000) the evaluation env."""
+    n_envs: int | None = None
+    """Training envs (subprocesses when more than one); None: the hyperparameter file's ``n_envs``."""
+    out: str | None = None
+    """The run folder; None: ``<runs_dir>/<algo>_<scenario>[_ma]_s<seed>``."""
     runs_dir: str = "runs"
+    """The parent of the default run folder."""
     env_options: dict[str, Any] = field(default_factory=dict)
-    eval_freq: int | None = None  # env steps between evaluations (summed over envs); default: ~5 per run
+    """Keyword arguments of the environment (reward mode, fuel penalty, noise, ...)."""
+    eval_freq: int | None = None
+    """Environment steps between evaluations (summed over the envs); None: about five per run."""
     eval_episodes: int = 5
+    """Episodes per evaluation."""
     checkpoint_freq: int = 100_000
+    """Environment steps between checkpoints (summed over the envs)."""
     multiagent: bool = False
-    progress_bar: bool = True  # a bar on a terminal, lines otherwise; False: neither
+    """Train one shared policy on the PettingZoo env (parameter sharing) instead of central control."""
+    progress_bar: bool = True
+    """A bar on a terminal, plain lines otherwise; False: neither."""
     hyperparams_file: str | None = None
+    """An rl-baselines3-zoo hyperparameter file; None: ``baselines/hyperparams/<algo>.yml``."""
     verbose: int = 0
-    max_minutes: float | None = None  # wall-clock budget: stop early (train.json records the steps reached)
+    """stable-baselines3's verbosity (0, 1 or 2)."""
+    max_minutes: float | None = None
+    """Wall-clock budget (min): stop early, ``train.json`` records the steps reached; None: no budget."""
     resume: bool = False
+    """Continue the saved run in the run folder up to ``timesteps``."""
+
+    def __post_init__(self) -> None:
+        check_choice(self, "algo", ImpactEnvError, ALGOS)
+        check_text(self, "scenario", ImpactEnvError)
+        for name, none in (("timesteps", "the hyperparameter file's"), ("n_envs", "the hyperparameter file's"),
+                           ("eval_freq", "about five per run")):
+            check_integer(self, name, ImpactEnvError, low=1, none=none)
+        check_integer(self, "seed", ImpactEnvError, low=0)
+        check_text(self, "out", ImpactEnvError, none="<runs_dir>/<algo>_<scenario>[_ma]_s<seed>")
+        check_text(self, "runs_dir", ImpactEnvError)
+        check_instance(self, "env_options", ImpactEnvError, dict, what="a dict of environment keywords")
+        for name in ("eval_episodes", "checkpoint_freq"):
+            check_integer(self, name, ImpactEnvError, low=1)
+        for name in ("multiagent", "progress_bar", "resume"):
+            check_flag(self, name, ImpactEnvError)
+        check_text(self, "hyperparams_file", ImpactEnvError, none="the shipped file")
+        check_integer(self, "verbose", ImpactEnvError, low=0, high=2)
+        check_number(self, "max_minutes", ImpactEnvError, low=0, low_open=True, none="no budget")
 
 
 def load_world(name: str) -> Any:
@@ -117,14 +163,6 @@ def train(config: TrainConfig) -> Path:
     from baselines import train_callbacks as cb
     from impact_env.envs.transport import TransportEnv
 
-    if config.algo not in ALGOS:
-        raise ImpactEnvError(f"algorithm must be one of {ALGOS}, got {config.algo!r}")
-    if config.max_minutes is not None and not config.max_minutes > 0:
-        raise ImpactEnvError(f"max_minutes must be > 0, got {config.max_minutes!r}")
-    if config.timesteps is not None and config.timesteps < 1:
-        raise ImpactEnvError(f"timesteps must be >= 1, got {config.timesteps}")
-    if config.eval_freq is not None and config.eval_freq < 1:
-        raise ImpactEnvError(f"eval_freq must be >= 1, got {config.eval_freq}")
     station = tether.is_station(config.scenario)
     if station:  # a tether station: TetherEnv (MultiDiscrete commands), see baselines/tether.py
         from impact_env.envs.tether import TetherEnv
@@ -133,7 +171,7 @@ def train(config: TrainConfig) -> Path:
         if config.algo != "ppo" or config.multiagent:
             raise ImpactEnvError("tether stations train with ppo on the central env (their actions are discrete)")
         scenario, env_cls = load_station(config.scenario), TetherEnv
-        config.env_options = tether.env_options(config.env_options, config.scenario)
+        config = dataclasses.replace(config, env_options=tether.env_options(config.env_options, config.scenario))
     else:
         scenario, env_cls = load_scenario(config.scenario), TransportEnv
     n_robots = scenario.n_robots if station else len(scenario.robots)

@@ -30,7 +30,6 @@ their solve time) and draws success against perturbation size.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import inspect
 import json
 import os
@@ -40,27 +39,16 @@ from pathlib import Path
 import numpy as np
 
 from impact_env.sweep import EngineConfig, add_engine_arguments, engine_config, open_engine
+from planners.expert.stacks import STACKS
+from planners.expert.stacks import stack_config as expert_config
 
 SHIPPED = ("corridor", "obstacle_avoidance", "throw_and_catch_exp")
 NEW = ("ping_pong_stop", "relay", "two_objects")
-STACKS = ("paper", "+id", "+mission", "all")
 AXES = {"e": (0.1, 0.2, 0.3), "offset": (0.05, 0.10, 0.15), "thrust": (0.05, 0.10, 0.20),
         "impact": (0.005, 0.01, 0.02)}
 COMBINED = {"e": 0.2, "offset": 0.10, "thrust": 0.10}
 RESULTS = Path(__file__).resolve().parent / "results" / "robustness"  # the cached cells and plans
 _WORKER: dict = {}
-
-
-def expert_config(stack: str, allow_side_switches: bool = False):
-    """The stack's ``ExpertConfig``; ``allow_side_switches`` flies mission re-plans that have a side switch, as
-    the cells flown before ``MissionConfig.allow_side_switches`` existed were."""
-    from planners.expert import ExpertConfig
-
-    config = {"paper": ExpertConfig.paper(), "+id": ExpertConfig.paper(identification=True),
-              "+mission": ExpertConfig.paper(mission_replanning=True), "all": ExpertConfig()}[stack]
-    if allow_side_switches:
-        config = dataclasses.replace(config, mission=dataclasses.replace(config.mission, allow_side_switches=True))
-    return config
 
 
 def _stack_name(text: str) -> str:

@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from impact_env.config_checks import check_choice, check_flag, check_integer, check_text
 from impact_env.errors import EngineError, ImpactEnvError
 
 ENGINES = ("local", "ray")
@@ -54,20 +55,22 @@ SHIPPED_PACKAGES = ("impact_env", "planners", "baselines")
 
 @dataclass(frozen=True)
 class EngineConfig:
-    """How to run a sweep: ``name`` is ``local`` or ``ray``; ``workers`` the local processes (default: the CPU
-    count), or the CPUs of a private local Ray instance; ``address`` a running Ray cluster (default
-    ``$RAY_ADDRESS``); ``ship_code`` ships this checkout's packages to the Ray workers."""
+    """How to run a sweep (``--engine``, ``--workers``, ``--address``, ``--ship-code``)."""
 
     name: str = "local"
+    """``local`` (worker processes on this machine) or ``ray``."""
     workers: int | None = None
+    """Local worker processes, or the CPUs of a private local Ray instance; None: the CPU count."""
     address: str | None = None
+    """A running Ray cluster (``auto``, ``HOST:PORT``); None: ``$RAY_ADDRESS``, else a private instance."""
     ship_code: bool = False
+    """Ship this checkout's packages to the Ray workers in Ray's runtime environment."""
 
     def __post_init__(self) -> None:
-        if self.name not in ENGINES:
-            raise EngineError(f"engine must be one of {', '.join(ENGINES)}, got {self.name!r}")
-        if self.workers is not None and not (type(self.workers) is int and self.workers >= 1):
-            raise EngineError(f"workers must be a positive integer, got {self.workers!r}")
+        check_choice(self, "name", EngineError, ENGINES)
+        check_integer(self, "workers", EngineError, low=1, none="the CPU count")
+        check_text(self, "address", EngineError, none="$RAY_ADDRESS, else a private instance")
+        check_flag(self, "ship_code", EngineError)
         if self.name == "local" and (self.address or self.ship_code):
             option = "--address" if self.address else "--ship-code"
             raise EngineError(f"{option} applies to --engine ray, not to local processes")

@@ -8,12 +8,11 @@
 A comma-separated list of scenarios is planned side by side on the sweep engine (planners/offline/batch.py):
 ``--out`` and ``--plot`` are then folders (one ``<scenario>.json`` / ``.png`` each).
 
-Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``). Prints a header with the
-model size, a progress line at most once a second during the solve, then the robustness, solve time, gap
-and one line per planned impact. Exit codes: 0 plan found (optimal within the gap); 3 time limit reached
-with a plan (the best plan is still written, with a warning giving its gap); 2 any error that
-``impact_env.cli.main`` reports in one line (bad options, infeasible task, unsupported STL, solver missing,
-no plan within the time limit).
+Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``); prints the model size,
+progress at most once a second, then the robustness, solve time, gap and one line per planned impact. Exit
+codes: 0 plan found (optimal within the gap); 3 time limit reached with a plan (still written, with a warning
+giving its gap); 2 any error that ``impact_env.cli.main`` reports in one line (bad options, infeasible task,
+unsupported STL, solver missing, no plan within the time limit).
 """
 
 from __future__ import annotations
@@ -88,8 +87,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _cmd_plan(args: argparse.Namespace) -> int:
     from impact_env.scenario import load_scenario
     from impact_env.station import is_station_file
-    from planners.offline.ir_planner import IRPlannerConfig, build_ir_model, plan_impact_robust
-    from planners.offline.sr_planner import PlannerConfig, build_model, plan_spatially_robust
+    from planners.offline.config import IRPlannerConfig, PlannerConfig, SolverOptions
+    from planners.offline.impact_robust import build_ir_model, plan_impact_robust
+    from planners.offline.spatially_robust import build_model, plan_spatially_robust
 
     if "," in args.scenario:
         return _plan_list(args)
@@ -101,10 +101,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     _check_options(args)
     scenario = load_scenario(args.scenario)
     say = (lambda text: None) if args.quiet else (lambda text: print(text, flush=True))
-    common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth,
-                  solver=args.solver, time_limit_s=args.time_limit, mip_gap=args.mip_gap,
-                  threads=args.threads, seed=args.seed, refine_nodes=args.refine_nodes,
-                  progress=None if args.quiet else progress_printer())
+    budget = SolverOptions(time_limit_s=args.time_limit, mip_gap=args.mip_gap, threads=args.threads, seed=args.seed,
+                           progress=None if args.quiet else progress_printer())
+    common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth, solver=args.solver,
+                  solver_options=budget, refine_nodes=args.refine_nodes)
     if args.planner == "ir":
         config = IRPlannerConfig(copy_intervals=args.copy_intervals, **common)
         build, plan_fn = build_ir_model, plan_impact_robust
@@ -142,7 +142,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     if args.out:
         print(f"wrote {plan.save(args.out)}")
     if args.plot:
-        from planners.plotting import plot_plan
+        from planners.plan.plotting import plot_plan
 
         png = Path(args.plot) if Path(args.plot).suffix else Path(args.plot).with_suffix(".png")
         plot_plan(scenario, plan, png)
@@ -156,8 +156,7 @@ def _plan_list(args: argparse.Namespace) -> int:
     from impact_env.station import is_station_file
     from impact_env.sweep import engine_config, open_engine
     from planners.offline.batch import plan_scenarios
-    from planners.offline.ir_planner import IRPlannerConfig
-    from planners.offline.sr_planner import PlannerConfig
+    from planners.offline.config import IRPlannerConfig, PlannerConfig, SolverOptions
 
     names = [n.strip() for n in args.scenario.split(",") if n.strip()]
     stations = [n for n in names if is_station_file(n)]
@@ -165,9 +164,9 @@ def _plan_list(args: argparse.Namespace) -> int:
         raise PlannerError(f"plan tether stations one at a time ({', '.join(stations)}); lists are for impact "
                            "scenarios")
     _check_options(args)
-    common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth,
-                  solver=args.solver, time_limit_s=args.time_limit, mip_gap=args.mip_gap,
-                  threads=args.threads, seed=args.seed, refine_nodes=args.refine_nodes)
+    budget = SolverOptions(time_limit_s=args.time_limit, mip_gap=args.mip_gap, threads=args.threads, seed=args.seed)
+    common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth, solver=args.solver,
+                  solver_options=budget, refine_nodes=args.refine_nodes)
     config = (IRPlannerConfig(copy_intervals=args.copy_intervals, **common) if args.planner == "ir"
               else PlannerConfig(**common))
     with open_engine(engine_config(args), n_jobs=len(names)) as engine:
@@ -190,7 +189,7 @@ def _plan_list(args: argparse.Namespace) -> int:
             print(f"wrote {o.plan.save(Path(args.out) / f'{o.scenario}.json')}")
         if args.plot:
             from impact_env.scenario import load_scenario
-            from planners.plotting import plot_plan
+            from planners.plan.plotting import plot_plan
 
             Path(args.plot).mkdir(parents=True, exist_ok=True)
             plot_plan(load_scenario(o.scenario), o.plan, Path(args.plot) / f"{o.scenario}.png")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from impact_env.errors import ImpactEnvError
@@ -91,10 +90,3 @@ PLANNER_ERRORS: tuple[type[ImpactEnvError], ...] = (
     ReplanInputError, PlanCheckError, DecompositionError, TetherInfeasibleError, TetherPlanCheckError, SmtNoPlanError,
 )
 
-
-def check_number(name: str, value: object, positive: bool = False, error: type[PlannerError] = PlannerError) -> None:
-    """Raise ``error`` unless ``value`` is a finite real number (not a bool) >= 0, or > 0 with ``positive``;
-    the message names ``name`` (e.g. ``"MissionConfig.reach_tolerance_m"``) and what is allowed."""
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if not ok or value < 0 or (positive and value == 0):
-        raise error(f"{name} must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")

@@ -246,5 +246,5 @@ def test_identification_config_numbers_are_validated(name, value):
 def test_use_mass_ratio_must_be_a_bool_and_valid_configs_pass():
     with pytest.raises(PlannerError, match="use_mass_ratio must be True or False"):
         IdentificationConfig(use_mass_ratio=1)
-    config = ExpertConfig(identification_config=IdentificationConfig(significance=2, velocity_noise_mps=0.0))
-    assert config.identification_config.significance == 2
+    config = ExpertConfig(identification=IdentificationConfig(significance=2, velocity_noise_mps=0.0))
+    assert config.identification.significance == 2

@@ -148,7 +148,7 @@ def test_options_are_checked():
 
     with pytest.raises(PlannerError, match="copy_intervals must be in 1..5"):
         plan_impact_robust(scenario, IRPlannerConfig(copy_intervals=6))
-    with pytest.raises(PlannerError, match="min_delta_mps must be > 0"):
+    with pytest.raises(PlannerError, match="IRPlannerConfig.min_delta_mps must be a finite number > 0"):
         plan_impact_robust(scenario, IRPlannerConfig(min_delta_mps=0.0))
     with pytest.raises(PlannerError, match="robot_object_separation"):
         plan_impact_robust(scenario, IRPlannerConfig(robot_object_separation=True))

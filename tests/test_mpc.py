@@ -368,7 +368,7 @@ def test_bad_impact_and_avoid_specs(mpc: FreeflyerMPC) -> None:
     ({"horizon": 1}, "horizon must be an integer >= 2"),
     ({"dt_s": 0.0}, "dt_s must be a finite number > 0"),
     ({"q_pos": -1.0}, "q_pos must be a finite number >= 0"),
-    ({"thrust_fraction": 1.5}, r"thrust_fraction must be in \(0, 1\]"),
+    ({"thrust_fraction": 1.5}, r"MPCConfig.thrust_fraction must be a finite number in \(0, 1\]"),
     ({"solver": "highs"}, "solver must be one of sqp, fatrop, ipopt"),
 ])
 def test_bad_config(kwargs: dict, match: str) -> None:

@@ -214,7 +214,7 @@ def test_stage_two_is_cut_by_work_not_time_so_load_does_not_change_the_plan(plan
 
 
 def test_refine_nodes_is_checked_and_zero_skips_stage_two():
-    with pytest.raises(PlannerError, match="refine_nodes must be >= 0"):
+    with pytest.raises(PlannerError, match=r"PlannerConfig.refine_nodes must be None \(no limit\) or an integer >= 0"):
         plan_spatially_robust(load_scenario("corridor"), PlannerConfig(refine_nodes=-1))
     plan = plan_spatially_robust(load_scenario("throw_and_catch_exp"), PlannerConfig(refine_nodes=0))
     assert plan.stats["refine_status"] == "skipped"

@@ -27,7 +27,8 @@ CASE = Path(__file__).parent / "data" / "two_objects_replan_at_10s.json"
 
 @pytest.mark.parametrize("threads", [0, -1, 1.5, True, None])
 def test_mission_threads_must_be_a_positive_integer(threads):
-    with pytest.raises(PlannerError, match="MissionConfig.threads must be an integer >= 1"):
+    with pytest.raises(PlannerError, match=r"(MissionConfig\.solver_options|SolverOptions)\.threads must be "
+                                            r"(None \(the solver chooses\) or )?an integer >= 1"):
         MissionConfig(threads=threads)
 
 
@@ -38,7 +39,7 @@ def test_a_mission_replan_solves_with_the_configured_threads(monkeypatch, thread
     real = mission.plan_spatially_robust
 
     def spy(scenario, config):
-        seen.append(config.threads)
+        seen.append(config.solver_options.threads)
         return real(scenario, config)
 
     monkeypatch.setattr(mission, "plan_spatially_robust", spy)
@@ -71,4 +72,4 @@ def test_a_planned_list_pins_one_thread_per_job_unless_configured(threads, expec
     engine = _RecordingEngine()
     outcomes = plan_scenarios(["corridor", "relay"], PlannerConfig(threads=threads), engine)
     assert [o.error for o in outcomes] == ["not planned", "not planned"]
-    assert [options["threads"] for _, _, options in engine.jobs] == [expected, expected]
+    assert [options["solver_options"].threads for _, _, options in engine.jobs] == [expected, expected]

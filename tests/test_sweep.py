@@ -42,8 +42,8 @@ def test_local_sharing_is_the_path_itself(tmp_path):
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    ({"name": "dask"}, "engine must be one of local, ray"),
-    ({"workers": 0}, "workers must be a positive integer"),
+    ({"name": "dask"}, "EngineConfig.name must be one of local, ray"),
+    ({"workers": 0}, r"EngineConfig.workers must be None \(the CPU count\) or an integer >= 1"),
     ({"address": "auto"}, "--address applies to --engine ray"),
     ({"ship_code": True}, "--ship-code applies to --engine ray"),
 ])

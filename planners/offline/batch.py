@@ -1,9 +1,9 @@
 """Plan a list of scenarios side by side on the sweep engine: ``impact-env plan corridor,relay,two_objects``.
 
 Each scenario is one job of :mod:`impact_env.sweep` (local processes, or Ray tasks with ``--engine ray``): the
-spatially robust planner with the same :class:`~planners.offline.sr_planner.PlannerConfig`, or the
-impact-robust one when the config is an :class:`~planners.offline.ir_planner.IRPlannerConfig`. The stage-2 cut is a
-node count and the solver's threads are pinned (1 per job unless the config sets ``threads``: the jobs are
+spatially robust planner with the same :class:`~planners.offline.config.PlannerConfig`, or the impact-robust
+one when the config is an :class:`~planners.offline.config.IRPlannerConfig`. The stage-2 cut is a node count
+and the solver's threads are pinned (1 per job unless the config's ``solver_options`` set ``threads``: the jobs are
 the parallelism, and HiGHS left to choose takes a count from the worker's cores, which can change a MILP's
 last bits), so a scenario's plan is the same on any worker, bit for bit (``Plan.fingerprint()``). A scenario
 whose task is infeasible, or that hits the time limit without a plan, does not stop the others: its outcome
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from planners.errors import PlannerError, PlanTimeoutError
-from planners.offline.sr_planner import PlannerConfig
+from planners.offline.config import PlannerConfig
 from planners.plan import Plan
 
 
@@ -37,8 +37,8 @@ def plan_job(job: tuple[str, str, dict[str, Any]]) -> dict[str, Any]:
     """A sweep job: plan one scenario (name, "sr" or "ir", config fields); JSON data back (a plan travels as
     its dict)."""
     from impact_env.scenario import load_scenario
-    from planners.offline.ir_planner import IRPlannerConfig, plan_impact_robust
-    from planners.offline.sr_planner import plan_spatially_robust
+    from planners.offline.impact_robust import IRPlannerConfig, plan_impact_robust
+    from planners.offline.spatially_robust import plan_spatially_robust
 
     name, kind, options = job
     start = time.perf_counter()
@@ -58,14 +58,14 @@ def plan_job(job: tuple[str, str, dict[str, Any]]) -> dict[str, Any]:
 
 def plan_scenarios(names: list[str], config: PlannerConfig, engine: Any) -> list[PlanOutcome]:
     """Plan every scenario in ``names`` with ``config`` on an open :class:`impact_env.sweep.Engine`."""
-    if config.progress is not None or config.warm_start is not None:
+    if config.solver_options.progress is not None or config.warm_start is not None:
         raise PlannerError("planning a list of scenarios takes no progress callback and no warm start")
-    from planners.offline.ir_planner import IRPlannerConfig
+    from planners.offline.impact_robust import IRPlannerConfig
 
     kind = "ir" if isinstance(config, IRPlannerConfig) else "sr"
     options = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
-    if options["threads"] is None:
-        options["threads"] = 1
+    if options["solver_options"].threads is None:
+        options["solver_options"] = dataclasses.replace(options["solver_options"], threads=1)
     outcomes = []
     for r in engine.map(plan_job, [(name, kind, options) for name in names]):
         plan = None if r["plan"] is None else Plan.from_dict(r["plan"])

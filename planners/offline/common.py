@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 from impact_env.scenario import Scenario
 from planners.errors import PlannerError
+from planners.offline.config import PlannerConfig
 from planners.offline.milp.model import LinExpr, Model
 from planners.offline.milp.stl_encoding import STLEncoder
 from planners.offline.milp.trajectories import Grid
@@ -16,15 +17,11 @@ DEFAULT_INTERVALS = 10
 DEFAULT_DEGREE = 4
 
 
-def check_common_options(scenario: Scenario, config) -> tuple[Grid, int]:
-    """Validate the options both planners share; return the time grid and the robots' curve degree."""
+def check_common_options(scenario: Scenario, config: PlannerConfig) -> tuple[Grid, int]:
+    """The time grid and the robots' curve degree from the options (their own checks are the config's) and the
+    scenario's hints; PlannerError if the scenario has no object or the hints make too small a grid."""
     if not scenario.objects:
         raise PlannerError(f"scenario {scenario.name!r} has no object to transport")
-    if not 0.0 < config.thrust_fraction <= 1.0:
-        raise PlannerError(f"thrust_fraction must be in (0, 1], got {config.thrust_fraction}")
-    if config.refine_nodes is not None and config.refine_nodes < 0:
-        raise PlannerError(f"refine_nodes must be >= 0 (0 skips stage 2) or None (no node limit), "
-                           f"got {config.refine_nodes}")
     n = config.intervals or scenario.planner_intervals or DEFAULT_INTERVALS
     degree = config.robot_degree or scenario.planner_robot_degree or DEFAULT_DEGREE
     if n < 2 or degree < 2:

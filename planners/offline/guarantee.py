@@ -3,7 +3,7 @@
 :func:`rollout` flies the plan's point-mass model (the planner's Assumption 1-2) when impact i sends the
 object off with a velocity error ``errors[i]`` (m/s per axis, on top of the point-mass law): between
 impacts objects fly straight; at each impact the impacting robot flies the multilinear blend of its copies
-that the object's state selects (:meth:`~planners.funnels.ImpactCopies.blend`), and the object leaves with
+that the object's state selects (:meth:`~planners.plan.types.ImpactCopies.blend`), and the object leaves with
 Eq. (5) applied to the blended robot's pre-impact velocity, plus the error. The result says whether the task
 holds (STL robustness of the sampled trace), whether every object ends inside its final box, and how far
 out of its box the object ever was at an impact (|xi| <= 1: inside). A plan with delta promises all three
@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from impact_env.scenario import Scenario
-from planners.funnels import box_coordinates
-from planners.offline.milp.impacts import mass_fractions
+from planners.impact_law import mass_fractions
 from planners.plan import BodyPlan, Plan, Segment
+from planners.plan.funnels import box_coordinates
 
 
 @dataclass

@@ -3,13 +3,11 @@
 Both planners maximise one quantity (rho, the STL spatial robustness, or delta, the tolerated post-impact
 velocity error) and then, keeping it, prefer plans with fewer impacts and less acceleration:
 
-1. stage 1: maximise the primary quantity (with tie-breaks below the MIP gap), to proven optimality (or
-   to ``node_limit`` nodes: the mission replanner's budget; stage 2 then runs only if it proved optimality);
+1. stage 1: maximise the primary quantity, to proven optimality or to ``solver_options.node_limit`` nodes
+   (the mission replanner's budget; stage 2 then runs only if it proved optimality);
 2. stage 2: keep it (>= its optimum - 1e-7), minimise the number of impacts plus the L1 acceleration
-   (Eq. 28 in L1 form; impacts only if the model says so, and acceleration is then left to stage 3),
-   warm-started from stage 1, cut after ``refine_nodes`` branch-and-bound nodes. A node
-   count is the same work on every machine, so the same scenario and config give the same plan however busy
-   the machine is (a time limit would not: ``benchmarks/planner_stage2.py``);
+   (Eq. 28), warm-started from stage 1, cut after ``refine_nodes`` branch-and-bound nodes: the same work on
+   every machine, so the same plan however busy the machine is (``docs/planner_design.md#lexicographic-stages``);
 3. polish: the binaries fixed, an LP with the stage-2 objective (or, with ``smooth``, a convex QP on squared
    accelerations), which also removes the integrality tolerance's leak through big-M rows.
 
@@ -19,17 +17,19 @@ planner the same way for both (read the plan back, check it, report a time limit
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from planners.errors import InfeasiblePlanError, PlannerError, PlanTimeoutError
+from planners.offline.config import PlannerConfig
 from planners.offline.milp.model import LinExpr, Model
 from planners.offline.solvers import solve
-from planners.offline.solvers.base import Progress, SolveResult, SolverOptions, Status
+from planners.offline.solvers.base import SolveResult, SolverOptions, Status
 
 if TYPE_CHECKING:
     from impact_env.scenario import Scenario
@@ -37,23 +37,6 @@ if TYPE_CHECKING:
 
 DIAGNOSE_NODES = 100  # branch-and-bound nodes per check of the infeasibility diagnosis
 DIAGNOSE_SAFETY_S = 20.0  # and a time limit per check that only a pathological model reaches
-
-
-class StageConfig(Protocol):
-    """The options the stages read (both planners' configs have them)."""
-
-    solver: str
-    time_limit_s: float | None
-    node_limit: int | None
-    mip_gap: float
-    threads: int | None
-    verbose: bool
-    seed: int
-    refine_nodes: int | None
-    refine_time_s: float
-    smooth: bool
-    diagnose_infeasibility: bool
-    progress: Callable[[Progress], None] | None
 
 
 @dataclass
@@ -86,7 +69,7 @@ class StagedSolution:
     stats: dict[str, Any]
 
 
-def solve_stages(staged: StagedModel, config: StageConfig, scenario_name: str,
+def solve_stages(staged: StagedModel, config: PlannerConfig, scenario_name: str,
                  warm_start: np.ndarray | None = None, progress=None) -> StagedSolution:
     """Run stages 1-3; see the module docstring.
 
@@ -98,9 +81,7 @@ def solve_stages(staged: StagedModel, config: StageConfig, scenario_name: str,
         PlanTimeoutError: stage 1 found no solution within the time limit (with a solution, the caller
             decides: ``result.status`` is ``TIME_LIMIT``).
     """
-    options = SolverOptions(time_limit_s=config.time_limit_s, node_limit=config.node_limit, mip_gap=config.mip_gap,
-                            threads=config.threads, verbose=config.verbose, progress=progress, seed=config.seed,
-                            warm_start=warm_start)
+    options = dataclasses.replace(config.solver_options, warm_start=warm_start, progress=progress)
     result = solve(staged.model, config.solver, options)
     if result.status == Status.INFEASIBLE:
         if config.diagnose_infeasibility:
@@ -115,7 +96,7 @@ def solve_stages(staged: StagedModel, config: StageConfig, scenario_name: str,
         raise PlannerError(f"solver {config.solver} failed on {scenario_name!r}: {result.status.value} "
                            f"{result.message}")
     if not result.has_solution:
-        raise PlanTimeoutError(f"no plan found within the time limit of {config.time_limit_s} s "
+        raise PlanTimeoutError(f"no plan found within the time limit of {config.solver_options.time_limit_s} s "
                                f"(try a longer --time-limit or fewer intervals)")
     x = result.x
     stats: dict[str, Any] = {"refine_status": "skipped"}
@@ -128,25 +109,26 @@ def solve_stages(staged: StagedModel, config: StageConfig, scenario_name: str,
     return StagedSolution(x, result, stats)
 
 
-def solve_to_plan(staged: StagedModel, config: StageConfig, scenario: Scenario,
+def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario,
                   extract: Callable[[np.ndarray, str, float, float], Plan], best: Callable[[Plan], str],
                   warm_start: np.ndarray | None = None) -> Plan:
-    """Run the stages (:func:`solve_stages`, with ``config.progress``) and end a planner with their answer:
-    ``extract(x, solver, solve_time_s, mip_gap)`` reads the plan back, its stages' statistics join its stats,
-    and it is checked against the scenario (:meth:`Plan.check`, 1e-6).
+    """Run the stages (:func:`solve_stages`, reporting to ``config.solver_options.progress``) and end a planner
+    with their answer: ``extract(x, solver, solve_time_s, mip_gap)`` reads the plan back, its stages'
+    statistics join its stats, and it is checked against the scenario (:meth:`Plan.check`, 1e-6).
 
     Raises what :func:`solve_stages` raises, and PlanTimeoutError when the time limit cut stage 1 after it
     found a plan: ``.plan`` is that plan, ``.mip_gap`` its gap, and the message ends with ``best(plan)``
     (e.g. ``"best robustness 0.1234 m"``).
     """
-    solution = solve_stages(staged, config, scenario.name, warm_start=warm_start, progress=config.progress)
+    solution = solve_stages(staged, config, scenario.name, warm_start=warm_start,
+                            progress=config.solver_options.progress)
     result = solution.result
     plan = extract(solution.x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
     plan.stats.update(solution.stats)
     plan.check(scenario, tol=1e-6)
     if result.status == Status.TIME_LIMIT:
-        raise PlanTimeoutError(f"time limit of {config.time_limit_s} s reached with gap {result.mip_gap:.3g}; "
-                               f"{best(plan)}", plan=plan, mip_gap=result.mip_gap)
+        raise PlanTimeoutError(f"time limit of {config.solver_options.time_limit_s} s reached with gap "
+                               f"{result.mip_gap:.3g}; {best(plan)}", plan=plan, mip_gap=result.mip_gap)
     return plan
 
 
@@ -165,7 +147,7 @@ def _stage2_objective(staged: StagedModel) -> LinExpr:
     return staged.impact_count + staged.acceleration_cost * (0.5 / (n_terms * staged.acceleration_scale))
 
 
-def refine(staged: StagedModel, x: np.ndarray, config: StageConfig) -> tuple[np.ndarray, dict[str, Any]]:
+def refine(staged: StagedModel, x: np.ndarray, config: PlannerConfig) -> tuple[np.ndarray, dict[str, Any]]:
     """Stage 2: keep the primary quantity, minimise impacts + L1 acceleration. Returns the better of x and the
     new incumbent, and stats: solve time, the stage-2 objective of what is returned, and how the solve ended
     (``node_limit`` is the normal, deterministic end; ``time_limit`` means the safety net cut it and the
@@ -173,8 +155,9 @@ def refine(staged: StagedModel, x: np.ndarray, config: StageConfig) -> tuple[np.
     m = copy_model(staged.model, "refine")
     m.add(staged.primary >= staged.primary.value(x) - 1e-7, group=f"keep {staged.primary_name}")
     m.set_objective(_stage2_objective(staged), maximize=False)
+    budget = config.solver_options
     options = SolverOptions(time_limit_s=config.refine_time_s, node_limit=config.refine_nodes, mip_gap=1e-3,
-                            threads=config.threads, verbose=config.verbose, seed=config.seed, warm_start=x,
+                            threads=budget.threads, verbose=budget.verbose, seed=budget.seed, warm_start=x,
                             heuristics=staged.refine_heuristics)
     result = solve(m, config.solver, options)
     stopped = (Status.OPTIMAL, Status.NODE_LIMIT, Status.TIME_LIMIT)
@@ -184,7 +167,7 @@ def refine(staged: StagedModel, x: np.ndarray, config: StageConfig) -> tuple[np.
                "refine_objective": float(m.objective.value(x))}
 
 
-def polish(staged: StagedModel, x: np.ndarray, config: StageConfig) -> np.ndarray:
+def polish(staged: StagedModel, x: np.ndarray, config: PlannerConfig) -> np.ndarray:
     """Stage 3: binaries fixed exactly, the primary quantity kept, then minimise squared accelerations
     (Eq. 28) if ``config.smooth`` (a convex QP), else the stage-2 objective's acceleration (an LP). Fixing the
     binaries also removes the integrality tolerance's leak through big-M rows, so the impact law holds to
@@ -203,7 +186,8 @@ def polish(staged: StagedModel, x: np.ndarray, config: StageConfig) -> np.ndarra
                     fixed.add_quadratic(p[axis], 1.0)
     else:
         fixed.set_objective(staged.acceleration_cost, maximize=False)
-    result = solve(fixed, "highs", SolverOptions(time_limit_s=config.time_limit_s, verbose=config.verbose))
+    result = solve(fixed, "highs", SolverOptions(time_limit_s=config.solver_options.time_limit_s,
+                                                 verbose=config.solver_options.verbose))
     if result.status == Status.OPTIMAL and result.x is not None:
         return result.x
     return x

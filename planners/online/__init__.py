@@ -1,6 +1,6 @@
 """Online control (paper Sec. VI-VII): what runs every control step while a plan is flown.
 
-- :mod:`planners.online.impact_model`: the circular two-body impact model and its closed-form inverse;
+- :mod:`planners.online.impact_model`: the closed-form inverse of the disc impact law;
 - :mod:`planners.online.replanner`: the two-body replanner of a robot's pre- and post-impact segments, with
   velocity and acceleration bounds and safe-segment limits (world box, obstacles, other robots);
 - :mod:`planners.online.mpc` (with ``freeflyer`` and ``mpc_specs``): the impact-aware MPC;
@@ -12,5 +12,5 @@
 - :mod:`planners.online.identification`: restitution and mass ratio from observed impacts;
 - :mod:`planners.online.mission`: mission-level replanning with the offline planner.
 
-``planners/expert.py`` composes them.
+The expert (:mod:`planners.expert`) composes them.
 """

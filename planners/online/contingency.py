@@ -1,26 +1,13 @@
 """Flying an impact-robust plan: its robot copies as contingency plans for every object state in the box.
 
-An impact-robust plan (``planners.offline.ir_planner``) carries, for each impact, four copies of the
+An impact-robust plan (:mod:`planners.offline.impact_robust`) carries, for each impact, four copies of the
 impacting robot's curve that meet the vertices of the object's state box, and a feedback law: an object hit
-at normalised box coordinates xi (per axis, xi_p for position and xi_v for velocity, in [-1, 1]) leaves with
-
-    v_des = t_c + A xi_p + B xi_v            (the copies' multilinear blend; t_c the nominal velocity)
-
-and the next impact's copies are ready for wherever that sends it (``planners/funnels.py``). The expert's
-replanner uses this instead of the spatially robust plan's rule (re-aim the object at its next planned
-impact point):
-
-- :meth:`CopyContact.contact` gives the replanner (Eq. 29) the contact for the object's predicted state:
-  the feedback velocity above (extrapolated, not clipped, when the object is outside its box: the plan's
-  steering law continued), reached through the disc contact inverse (Eq. 6-7) with the identified
-  restitution, as for the spatially robust plan;
-- :meth:`CopyContact.observe` fixes, from the moment an impact's copy window opens, the blend of copies
-  that matches the object's predicted state (refreshed every step until the impact, then frozen), and
-  :meth:`CopyContact.plan_state` makes it the robot's plan inside the window: the replanner starts from the
-  matching copy and rejoins it, not the mean of the copies (the nominal curve).
-
-A plan without copies (a spatially robust plan, or the spatially robust remainder a mission re-plan
-splices in) is flown by the ``fallback`` strategy.
+at normalised box coordinates xi leaves with v_des = t_c + A xi_p + B xi_v (the copies' blend), and the next
+impact's copies are ready for wherever that sends it (:mod:`planners.plan.funnels`). :class:`CopyContact`
+gives the replanner (Eq. 29) the contact for that feedback velocity (extrapolated outside the box), and makes
+the blend of copies that matches the object's predicted state the robot's plan inside the copy window
+(:meth:`CopyContact.observe`, :meth:`CopyContact.plan_state`). A plan without copies (a spatially robust
+plan, or the remainder a mission re-plan splices in) is flown by the ``fallback`` strategy.
 """
 
 from __future__ import annotations
@@ -31,10 +18,10 @@ import numpy as np
 
 from impact_env.scenario import Body, Scenario
 from planners import bezier
-from planners.funnels import ImpactCopies, box_coordinates, copy_targets
 from planners.online.impact_model import ContactPlan, required_contact
 from planners.online.reference import ContactQuery, ContactStrategy, PlanContact
-from planners.plan import Plan, PlannedImpact
+from planners.plan import ImpactCopies, Plan, PlannedImpact
+from planners.plan.funnels import box_coordinates, copy_targets
 
 
 def copies_of(plan: Plan, impact: PlannedImpact) -> ImpactCopies | None:

@@ -1,62 +1,17 @@
 """Online identification of the impact model: each pair's restitution (and mass ratio) from observed impacts.
 
-Every robot-object contact that the environment reports (velocities of both bodies at first touch and at
-separation) is one measurement. Frictionless discs exchange momentum only along the line of centres, so
-the object's velocity change gives the contact normal exactly, n = dv_O / |dv_O| (Eq. 6-7), and along n the
-point-mass law (Eq. 5) gives
+Every robot-object contact the environment reports (both bodies' velocities at first touch and at
+separation) is one measurement. The object's velocity change gives the contact normal n exactly (Eq. 6-7),
+and along it the point-mass law (Eq. 5) gives
 
-    e = (v_O+ - v_R+) . n / (v_R- - v_O-) . n,        m_O / m_R = -(dv_R . n) / (dv_O . n).
+    e = (v_O+ - v_R+) . n / (v_R- - v_O-) . n,        m_O / m_R = -(dv_R . n) / (dv_O . n),
 
-The robot keeps thrusting during the contact, so its measured velocity after the contact is off by up
-to a * duration; the restitution therefore uses the robot's post-impact velocity implied by momentum
-conservation with the current mass-ratio estimate, v_R+ = v_R- - (m_O / m_R) dv_O, which the thrust does
-not touch. The mass ratio is estimated from the robot's measured change (so it carries that thrust error,
-which its uncertainty reflects).
+with v_R+ from momentum (the robot thrusts during the contact). Each is a Gaussian estimate per pair, updated
+by the conjugate rule, pooled over the pairs until a pair is observed, and the scenario file's value before
+any impact. With ``IdentificationConfig.significance = k`` an estimate replaces the file's value only when
+the measurements alone put it more than k standard errors away (:func:`significance_test`).
 
-Each quantity is a Gaussian estimate (mean, variance), updated by the standard conjugate rule; a
-measurement's variance is that of a velocity error ``velocity_noise_mps`` divided by the normal approach
-speed, so a glancing touch counts little. Pairs are estimated separately (on hardware two objects may be
-of different materials); a pair not yet observed uses the estimate pooled over all pairs, and before any
-impact the scenario file's value with the prior's uncertainty.
-
-Significance test (``IdentificationConfig.significance = k``; off by default). An estimate replaces the
-scenario file's value e_file in the contact inverse only when the data say the restitution really differs:
-
-    |m - e_file| > k * s_m,
-
-with m the data's weighted mean and s_m its standard error, both computed without the prior (the test asks
-what the measurements alone say). Each measurement i is read twice. The object's reading e_i (above) carries
-the object's velocity error; the robot's reading r_i applies Eq. 5 to the robot's velocity change alone (its
-direction gives the normal, momentum with the contact inverse's mass ratio the object's change,
-r = -1 + (1 + m_O/m_R) |dv_R| / ((m_O/m_R) (v_R- - v_O-) . n_R)), and carries the robot's thrust during the
-contact. The two errors are independent, so d_i = r_i - e_i is one sample of the difference of the errors,
-E[d_i^2] = var(e_i) + var(r_i) >= var(e_i): a one-impact look at the error actually present, which the
-assumed noise cannot give. Measurement i's variance in the test is the larger of the assumed and the seen,
-
-    v_i = max(sigma_i^2, d_i^2),      sigma_i = velocity_noise_mps (1 + e_i) / (normal approach speed),
-
-and with w_i = 1 / v_i over the pair's n measurements (or all of them, for the pooled estimate)
-
-    m = sum w_i e_i / sum w_i,        s_m^2 = max(1, chi2 / (n - 1)) / sum w_i,  chi2 = sum w_i (e_i - m)^2,
-
-the standard error inflated by the Birge ratio chi2 / (n - 1) when the measurements scatter more than their
-variances allow (n >= 2; a scatter smaller than expected never shrinks it). Why this is conservative in the
-right direction: when the file is right and only the object's reported velocity is noisy, e_i - e_file and d_i
-are nearly the same number (the robot's reading is near the truth), so |m - e_file| / s_m stays near 1 or
-below and any k >= 2 keeps the file's value, even after one impact and whatever noise the user assumed. When
-the restitution is really off and the impact noise-free, d_i is only the robot's thrust error (a few
-thousandths), so a mismatch of 0.1 is tens of standard errors and the estimate is used after one impact; then
-sigma_i bounds the power: with the default 1 mm/s, k = 3 takes a 0.1 mismatch from one contact approached
-faster than about 5 cm/s (3 * 1.5 * 0.001 / 0.045 = 0.1). k = 3 rather than 2 leaves room for the case the
-test is weak in: a robot thrusting hard through a slow contact, where its reading is off by as much as the
-object's and the two can agree on a wrong value by chance (then the file's value is also kept when a small
-mismatch is real: the conservative side). A wrong file mass ratio also makes the two readings disagree, which
-keeps the file's value (the restitution measurement cannot be trusted then). With the test on, each
-measurement's momentum balance uses the mass ratio the contact inverse uses
-(:meth:`ImpactIdentifier.masses_for`), not the running ratio estimate, which one noisy impact would otherwise
-move and carry into the pair's next measurements. A pair that has been observed is decided on its own
-measurements, one that has not on all of them (the pooled estimate); when the test passes the contact inverse
-uses the pair's (or the pooled) Gaussian estimate above, as with the test off.
+Why each step, and the significance test's derivation: ``docs/expert_design.md#identification``.
 """
 
 from __future__ import annotations
@@ -66,7 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planners.errors import PlannerError, check_number
+from impact_env.config_checks import check_flag, check_number
+from planners.errors import PlannerError
 
 
 @dataclass
@@ -145,18 +101,9 @@ def significance_test(values: list[float], variances: list[float], reference: fl
     return Significance(mean, std, z, len(e), bool(z > k))
 
 
-@dataclass
+@dataclass(frozen=True)
 class IdentificationConfig:
     """Prior uncertainties and measurement noise of :class:`ImpactIdentifier`.
-
-    ``restitution_prior_std`` and ``mass_ratio_prior_std``: how far the scenario file may be off;
-    ``velocity_noise_mps``: error of a reported velocity along the normal (the contact is detected at a
-    substep, so the line of centres is known exactly but the velocities carry about one substep of thrust);
-    ``min_normal_speed_mps``: slower approaches are not used (their ratio is noise); ``use_mass_ratio``: let
-    the contact inverse use the estimated mass ratio once its std is below ``mass_ratio_max_std``;
-    ``significance``: k of the significance test (module docstring): a pair's (or the pooled) estimate
-    replaces the file's restitution only when it differs from it by more than k standard errors; None (the
-    default) uses every estimate as soon as it exists.
 
     ``significance`` is off by default for now: turning it on changes every published benchmark cell that
     flies identification, and those must be flown again before the default can change (3 is the value
@@ -165,25 +112,29 @@ class IdentificationConfig:
     """
 
     restitution_prior_std: float = 0.25
+    """How far the scenario file's restitution may be off (standard deviation, dimensionless)."""
     mass_ratio_prior_std: float = 0.5
+    """How far the file's mass ratio m_object / m_robot may be off (standard deviation, relative)."""
     velocity_noise_mps: float = 1e-3
+    """Error of a reported velocity along the normal (m/s): the contact is detected at a substep, so the
+    line of centres is exact but the velocities carry about one substep of thrust."""
     min_normal_speed_mps: float = 0.01
+    """Slower approaches (m/s, along the normal) are not used: their ratio is noise."""
     use_mass_ratio: bool = False
+    """Let the contact inverse use the estimated mass ratio once its std is below ``mass_ratio_max_std``."""
     mass_ratio_max_std: float = 0.02
+    """The std (relative) below which an estimated mass ratio is used (with ``use_mass_ratio``)."""
     significance: float | None = None
+    """k of the significance test (standard errors, see the module docstring): a pair's (or the pooled)
+    estimate replaces the file's restitution only when it differs from it by more than k standard errors;
+    None uses every estimate as soon as it exists."""
 
     def __post_init__(self) -> None:
         for name in ("restitution_prior_std", "mass_ratio_prior_std", "velocity_noise_mps", "min_normal_speed_mps",
                      "mass_ratio_max_std"):
-            check_number(f"IdentificationConfig.{name}", getattr(self, name))
-        if not isinstance(self.use_mass_ratio, bool):
-            raise PlannerError(f"IdentificationConfig.use_mass_ratio must be True or False, got "
-                               f"{self.use_mass_ratio!r}")
-        k = self.significance
-        if k is not None and (isinstance(k, bool) or not (isinstance(k, (int, float)) and math.isfinite(k)
-                                                          and k > 0)):
-            raise PlannerError(f"IdentificationConfig.significance must be None (off) or a finite number of "
-                               f"standard errors > 0 (e.g. 3), got {k!r}")
+            check_number(self, name, PlannerError, low=0)
+        check_flag(self, "use_mass_ratio", PlannerError)
+        check_number(self, "significance", PlannerError, low=0, low_open=True, none="off")
 
 
 @dataclass

@@ -1,8 +1,5 @@
-"""The circular two-body impact model (paper Eq. 6-7) and its closed-form inverse (docs/background.md#planner, item 5).
-
-Frictionless discs that do not spin exchange momentum only along the contact normal n, the line of
-centres at contact: in the contact frame the normal components follow the point-mass law (Eq. 5) and the
-tangential ones are kept; Eq. 7 rotates back to the world frame.
+"""The inverse of the disc impact law (paper Eq. 6-7, :func:`planners.impact_law.disc_impact`): where and how fast
+a robot must hit an object so that it leaves with a wanted velocity (docs/background.md#planner, item 5).
 
 The inverse needs no solver (the paper's replanner solves Eq. 7 numerically): to change an object's
 velocity from v_O to v_des, the velocity change Delta = v_des - v_O can only lie along n, so
@@ -18,21 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planners.offline.milp.impacts import mass_fractions
+from planners.impact_law import disc_impact, mass_fractions
 
-
-def disc_impact(p_robot, v_robot, m_robot: float, p_object, v_object, m_object: float, e: float
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Post-impact velocities (robot, object) of two discs touching at these centres (Eq. 6-7)."""
-    n = np.asarray(p_object, float) - np.asarray(p_robot, float)
-    n /= np.linalg.norm(n)
-    t = np.array([-n[1], n[0]])
-    vr, vo = np.asarray(v_robot, float), np.asarray(v_object, float)
-    m1, m2, m3, m4 = mass_fractions(m_robot, m_object, e)
-    vrn, von = vr @ n, vo @ n
-    if vrn - von <= 0.0:  # separating or sliding: no impulse
-        return vr.copy(), vo.copy()
-    return (m1 * vrn + m2 * von) * n + (vr @ t) * t, (m3 * vrn + m4 * von) * n + (vo @ t) * t
+__all__ = ["ContactPlan", "disc_impact", "required_contact"]
 
 
 @dataclass

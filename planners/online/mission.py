@@ -2,64 +2,17 @@
 mission from the current state when it leaves the plan's tolerance.
 
 The paper's stack is open loop at the mission level: the local replanner (Eq. 29) re-aims each planned
-impact, but once an impact goes wrong (a restitution that is not the model's, a stop that leaves the object
-drifting) nothing re-decides the impacts that follow. Here, at every observed robot-object impact and every
-``check_period_s``:
+impact, but once an impact goes wrong nothing re-decides the impacts that follow. Here, at every observed
+robot-object impact and every ``check_period_s``, (1) the rest of the episode is predicted from the observed
+states as the local layer will fly it, without the impacts the robot provably cannot reach
+(:mod:`planners.online.reachability`); (2) when the task's predicted robustness fails the test of
+:class:`MissionConfig`, (3) the offline planner re-plans the rest from the current state (a derived scenario
+with the task progressed to now) and the new plan is spliced after the executed part, unless it is no better
+or has a side switch the robot has no time for (:mod:`planners.online.side_switch`).
 
-1. **Prediction.** The rest of the episode is predicted from the observed states: each object flies freely
-   to its next planned impact, leaves it toward the position the plan needs at the impact after (which is
-   what the local replanner aims for), and follows the plan after that; after its last impact it leaves
-   with the planned velocity, corrected toward the planned end position when the expert aims there; an
-   object with no impact left flies freely to the end. The prediction models what the local layer will do:
-   a pessimistic one (measured: the corridor's catch predicted short of the goal when the local layer puts
-   the object in it) triggers replans that only lose margin. Robots follow the plan. The task's robustness
-   is evaluated on the executed trace so far followed by this prediction.
-   **Reachability** (``predict_reachability``, default on): the local layer can re-aim an impact only if
-   the robot can still get to the contact. For each object's next pending impact whose robot has no
-   earlier impact pending (and no late one still approached), :func:`planners.online.reachability.
-   contact_reachable` computes the contact the local layer would ask for (the contact inverse with the
-   expert's current model of the pair, the ``model`` passed to :meth:`MissionPlanner.step`: the identified
-   restitution when identification is on) and proves, with the closed form of
-   :mod:`planners.online.segment_feasibility` at the robot's full thrust, whether any replanner segment from
-   the robot's observed state gets within ``reach_tolerance_m`` / ``reach_tolerance_mps`` of it by the
-   impact time, or up to ``late_grace_s`` after it (the expert still approaches a late impact that long, and
-   a late contact still delivers most of it: measured on ``relay``, 0.51 s late and 0.029 m/s off).
-   Proven unreachable, the object is predicted not to get that impact and to fly freely from then on, its
-   later impacts dropped too. That is what happens first: the local layer, out of thrust,
-   flies a segment that asks for more than the robot has, and the contact comes late or not at all
-   (measured on ``relay`` at e = 0.15). The later impacts were planned for the state the lost one would
-   have made; the local layer would re-aim them from what the object really does, which this prediction
-   does not try to model (it is the re-plan's job). The verdict is conservative (see the reachability
-   module); when every tested impact is reachable the prediction is the one above, bit for bit.
-2. **Test** (documented, configurable): re-plan when the predicted robustness is below
-   ``robustness_fraction`` times the robustness the flown plan was made with (default 0.5) or below
-   ``min_robustness_m`` (default 0: a predicted failure).
-3. **Re-plan.** A derived scenario is built (``dataclasses.replace``): the bodies' observed positions and
-   velocities as initial conditions, the remaining time as ``tf_s``, the task progressed to now
-   (:func:`impact_env.stl.progress`) and shifted to start at 0 with its decided parts dropped
-   (:func:`impact_env.stl.without_constants`), and a grid of proportionally fewer intervals. The offline
-   planner (:func:`planners.offline.sr_planner.plan_spatially_robust`, untouched) solves it, warm-started
-   from the current plan resampled onto the new grid (:func:`resample_plan`). The new plan may add impacts,
-   e.g. a trimming impact that stops a drifting object. It is shifted back to absolute time and spliced
-   after the executed part (:func:`splice`). If the derived problem is infeasible, it is tried once more
-   without the bodies' end states (robots home, objects at rest at tf): late in a mission they can be
-   what stands in the way, and the task outranks them. A re-plan that fails, is infeasible, or predicts
-   no better than the current plan keeps the current plan; so does one with a **side switch** the robot
-   has no time for (:func:`unflyable_side_switches`, unless ``allow_side_switches``): one robot hitting one
-   object twice in a row with velocity changes more than 90 degrees apart (a push from behind, then a stop
-   from the front), with less time in between than getting round the object takes. The planner's bodies are
-   points, so its robot simply flies through the object; a disc robot has to get round an object that moves
-   away from it, and measured on ``two_objects`` it either does not get past in time or meets the object
-   from the wrong side (the stop becomes a push out of the goal).
-
-Determinism. The compute budget is a number of branch-and-bound nodes (``node_limit`` for the robustness
-stage, ``refine_nodes`` for the second stage), so the same observations give the same plan on an idle and
-on a busy machine. ``time_limit_s`` is only a safety net, set far above the measured replan times: if it
-ever fires, the re-plan is DISCARDED (the current plan is kept, never a partial result) and counted in the
-report's ``timeouts``, so a run whose report shows 0 timeouts flew exactly what the node budget decided.
-The solver's thread count is pinned too (``threads``, default 1): HiGHS left to choose its own takes a
-count from the machine's cores, and a different count can change a MILP's last bits, so the same episode
-could fly another re-plan on a machine with more cores (or on a Ray node).
+The compute budget is a node count and the solver's threads are pinned (``MissionConfig.solver_options``), so
+the same observations give the same re-plan on any machine; a re-plan cut by the time limit is discarded.
+The design and its measurements: ``docs/expert_design.md#mission-replanning``.
 """
 
 from __future__ import annotations
@@ -67,73 +20,101 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, InitVar, dataclass, field
 from typing import Any
 
 import numpy as np
 
+from impact_env.config_checks import (
+    NOT_GIVEN,
+    check_flag,
+    check_instance,
+    check_integer,
+    check_number,
+    check_value,
+    moved_into,
+)
 from impact_env.scenario import Body, Scenario
 from impact_env.stl import progress, robustness, without_constants
 from planners import bezier
-from planners.errors import PlannerError, check_number
-from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
+from planners.errors import PlannerError
+from planners.offline.solvers.base import SolverOptions
+from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
 from planners.online.reachability import POSITION_TOLERANCE_M, VELOCITY_TOLERANCE_MPS, Reachability, contact_reachable
 from planners.online.sampling import PlanSampler
 from planners.online.side_switch import SideSwitch, side_switches, unflyable_side_switches
 from planners.plan import BodyPlan, Plan, Segment
 
 
-@dataclass
+def _replan_budget() -> SolverOptions:
+    return SolverOptions(node_limit=200, time_limit_s=60.0, threads=1)
+
+
+@dataclass(frozen=True)
 class MissionConfig:
     """When and how the mission is re-planned (see the module docstring).
 
-    ``check_period_s``: prediction period between impacts (s); ``robustness_fraction`` and
-    ``min_robustness_m``: the test; ``node_limit`` / ``refine_nodes``: the planner's node budget for the
-    robustness stage and the second stage; ``time_limit_s``: safety net per planner stage (s);
-    ``max_replans``: per episode; ``min_remaining_s``: no re-plan closer than this to the end;
-    ``quiet_s``: no re-plan within this time of a pending planned impact (the local replanner owns it);
-    ``allow_side_switches``: accept a re-plan with a side switch the robot has no time for
-    (:func:`unflyable_side_switches`; default: keep the current plan); ``threads``: the solver's threads
-    for a re-plan (pinned, see the module docstring); ``predict_reachability``: the prediction drops a
-    pending impact the robot provably cannot reach in time (step 1; off: every pending impact is
-    predicted to deliver what the plan asks); ``reach_tolerance_m`` / ``reach_tolerance_mps``: how close
-    (per axis) to the contact's position and velocity counts as making it (the contact box of
-    :func:`planners.online.reachability.contact_reachable`; larger is more conservative).
+    The old keywords ``node_limit``, ``time_limit_s`` and ``threads`` are still accepted for one release, with
+    a ``DeprecationWarning``, and set in :attr:`solver_options`.
     """
 
     check_period_s: float = 1.0
+    """Prediction period between impacts (s)."""
     robustness_fraction: float = 0.5
+    """Re-plan when the predicted robustness is below this share (in [0, 1]) of the flown plan's ..."""
     min_robustness_m: float = 0.0
-    node_limit: int = 200
+    """... or below this (m; 0: when a failure is predicted)."""
+    solver_options: SolverOptions = field(default_factory=_replan_budget)
+    """A re-plan's solver budget: ``node_limit`` branch-and-bound nodes of the robustness stage (200), the
+    budget; ``time_limit_s`` per planner stage (60 s), a safety net (a re-plan it cuts is discarded); ``threads``
+    pinned (1: HiGHS's own choice depends on the machine's cores). The planner config's own are not used."""
     refine_nodes: int = 0
-    time_limit_s: float = 60.0
+    """Branch-and-bound nodes of the planner's second stage in a re-plan (0 skips it)."""
     max_replans: int = 3
+    """Re-plans per episode."""
     min_remaining_s: float = 2.0
+    """No re-plan closer than this to the end (s)."""
     quiet_s: float = 1.0
+    """No re-plan within this time of a pending planned impact (s): the local replanner owns it."""
     allow_side_switches: bool = False
-    threads: int = 1
+    """Accept a re-plan with a side switch the robot has no time for (:func:`unflyable_side_switches`); False:
+    keep the current plan."""
     predict_reachability: bool = True
+    """The prediction drops a pending impact the robot provably cannot reach in time (step 1); False: every
+    pending impact is predicted to deliver what the plan asks."""
     reach_tolerance_m: float = POSITION_TOLERANCE_M
+    """How close to the contact's position (m, per axis) counts as making it (the contact box of
+    :func:`planners.online.reachability.contact_reachable`; larger is more conservative)."""
     reach_tolerance_mps: float = VELOCITY_TOLERANCE_MPS
+    """How close to the contact's velocity (m/s, per axis) counts as making it."""
+    _: KW_ONLY
+    node_limit: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.node_limit``."""
+    time_limit_s: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.time_limit_s``."""
+    threads: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.threads``."""
 
-    def __post_init__(self) -> None:
-        for name in ("check_period_s", "time_limit_s", "min_remaining_s", "quiet_s"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise PlannerError(f"MissionConfig.{name} must be a finite number > 0, got {value!r}")
-        for name in ("reach_tolerance_m", "reach_tolerance_mps"):
-            check_number(f"MissionConfig.{name}", getattr(self, name))
-        if not 0.0 <= self.robustness_fraction <= 1.0:
-            raise PlannerError(f"MissionConfig.robustness_fraction must be in [0, 1], got {self.robustness_fraction}")
-        for name in ("node_limit", "refine_nodes", "max_replans"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise PlannerError(f"MissionConfig.{name} must be an integer >= 0, got {value!r}")
-        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 1:
-            raise PlannerError(f"MissionConfig.threads must be an integer >= 1, got {self.threads!r}")
+    def __post_init__(self, node_limit: Any, time_limit_s: Any, threads: Any) -> None:
+        check_instance(self, "solver_options", PlannerError, SolverOptions, what="a SolverOptions")
+        moved_into(self, "solver_options", {"node_limit": node_limit, "time_limit_s": time_limit_s,
+                                            "threads": threads}, PlannerError)
+        budget = self.solver_options
+        # the same observations must give the same re-plan on every machine: a node budget, pinned threads
+        check_value("MissionConfig.solver_options.node_limit", budget.node_limit, PlannerError, low=1, integer=True)
+        check_value("MissionConfig.solver_options.threads", budget.threads, PlannerError, low=1, integer=True)
+        check_value("MissionConfig.solver_options.time_limit_s", budget.time_limit_s, PlannerError, low=0,
+                    low_open=True)
+        for name in ("check_period_s", "min_remaining_s", "quiet_s"):
+            check_number(self, name, PlannerError, low=0, low_open=True)
+        check_number(self, "robustness_fraction", PlannerError, low=0, high=1)
+        check_number(self, "min_robustness_m", PlannerError)
+        for name in ("refine_nodes", "max_replans"):
+            check_integer(self, name, PlannerError, low=0)
         for name in ("allow_side_switches", "predict_reachability"):
-            if not isinstance(getattr(self, name), bool):
-                raise PlannerError(f"MissionConfig.{name} must be True or False, got {getattr(self, name)!r}")
+            check_flag(self, name, PlannerError)
+        for name in ("reach_tolerance_m", "reach_tolerance_mps"):
+            check_number(self, name, PlannerError, low=0)
 
 
 @dataclass
@@ -412,10 +393,11 @@ class MissionPlanner:
         record.intervals, record.task = intervals, derived.task
         cfg = self.config
         warm = resample_plan(plan, t, self.scenario.tf_s, intervals, self.degree)
+        budget = cfg.solver_options
         config = dataclasses.replace(self.planner_config, intervals=intervals, robot_degree=self.degree,
-                                     node_limit=cfg.node_limit, refine_nodes=cfg.refine_nodes,
-                                     time_limit_s=cfg.time_limit_s, refine_time_s=cfg.time_limit_s,
-                                     threads=cfg.threads, warm_start=warm, diagnose_infeasibility=False, progress=None)
+                                     solver_options=budget, refine_nodes=cfg.refine_nodes,
+                                     refine_time_s=budget.time_limit_s, warm_start=warm,
+                                     diagnose_infeasibility=False)
         start = time.perf_counter()
         try:
             try:
@@ -427,7 +409,7 @@ class MissionPlanner:
                 remainder = plan_spatially_robust(_without_end_states(derived), config)
         except PlanTimeoutError:
             record.solve_s = time.perf_counter() - start
-            if record.solve_s >= cfg.time_limit_s * 0.99:
+            if record.solve_s >= cfg.solver_options.time_limit_s * 0.99:
                 self.timeouts += 1
                 record.status = "kept: time limit (safety net)"
             else:

@@ -1,59 +1,16 @@
 """Impact-aware nonlinear MPC of one planar freeflyer (paper Sec. VII, Eq. 30-31).
 
-Model (Eq. 30, planar): state ``x = [px, py, theta, vx, vy, omega]`` (m, rad, m/s, rad/s), input
-``u = [Fx, Fy, tau]`` in the BODY frame (N, N m), ``p' = v``, ``v' = R(theta) F / m``, ``theta' = omega``,
-``omega' = tau / I``. One RK4 step of ``dt_s`` with the input held (what the simulator does over a control
-period); no gravity, friction or damping. :func:`rk4_step` is the same step in numpy.
+Model (Eq. 30): state ``x = [px, py, theta, vx, vy, omega]`` (m, rad, m/s, rad/s), input ``u = [Fx, Fy, tau]``
+in the BODY frame (N, N m), one RK4 step of ``dt_s`` per control period with the input held
+(:func:`rk4_step` is the same step in numpy). The problem (Eq. 31) tracks a reference over N nodes with
+bounded inputs; a planned impact (:class:`ImpactSpec`) fixes the pre-impact state at its node through exact
+L1 penalties and continues the prediction from the post-impact velocity; keep-offs (:class:`AvoidSpec`,
+:class:`HalfPlaneSpec`) are half-planes with slacks, re-linearised every solve.
 
-Optimal control problem (Eq. 31), horizon N, nodes k = 0..N (node 0 is the measured state):
-
-- cost, nodes 1..N, node N weighted ``terminal_factor`` times: ``q_pos |p - p_ref|^2 + q_vel |v - v_ref|^2
-  + q_heading (theta - theta_ref)^2 + q_omega omega^2``; inputs 0..N-1: ``r_input |u / u_limit|^2``
-  (normalised by the body's limits); plus the slack penalties below;
-- input bounds ``|Fx| <= thrust_fraction * thrust_limit_N[0]`` etc. (thrust_fraction scales the torque too:
-  the same thrusters make both);
-- planned impact at node s (:class:`ImpactSpec`, 0 <= s <= N). (a) Pre-impact state: ``[p_s, v_s]`` equals
-  the planned ``[position, velocity_before]``: a hard constraint with L1 slacks,
-  ``[p_s, v_s] - sigma+ + sigma- = target``, ``sigma+- >= 0``, cost ``impact_penalty * sum(sigma+-)``. An
-  exact penalty: the constraint holds exactly whenever it can be met (the penalty exceeds its multiplier),
-  and the problem stays feasible when it cannot (then the robot gets as close as it can). The split slack
-  keeps the active set non-degenerate when the constraint is met (``-sigma <= z - target <= sigma`` stalls
-  qrqp there). (b) Velocity jump: the model does not simulate the collision, so the step from node s to s+1
-  starts from ``[p_s, theta_s, velocity_after, omega_s]`` instead of ``x_s``; ``predicted[s]`` shows the
-  pre-impact velocity and ``predicted[s+1:]`` continue from ``velocity_after``. The impact step is a
-  parameter, not a rebuild: every node carries a 0/1 parameter that switches (b) on, and the rows of (a)
-  are switched on by their bounds (+-inf when off), so one compiled solver serves every impact step and
-  "no impact". At s = 0 (impact due at the start of the coming period, not yet measured) only (b) applies.
-- keep-off, up to ``keep_off_rows`` constraints per solve, each a row per node with its own slack. A disc
-  (:class:`AvoidSpec`, an object or another robot): where active, ``n_k . (p_k - c_k) >= d - sigma_k``, the
-  half-plane tangent to the disc ``|p - c_k| >= d`` with the unit normal ``n_k`` from c_k towards the
-  previous plan's p_k (re-linearised every solve, as the horizon recedes); a fixed half-plane
-  (:class:`HalfPlaneSpec`, a wall or an obstacle face): ``n_k . p_k >= b_k - sigma_k``. Cost
-  ``avoid_penalty * (sigma_k + sigma_k^2)`` per row. The
-  half-plane lies outside the disc, so meeting it implies ``|p_k - c_k| >= d``. Why not the exact
-  ``|p - c|^2 >= d^2``: it is non-convex. Measured over 150-step closed loops past a disc 0-10 cm off the
-  reference line (N = 10 and 20), sqpmethod failed in up to 6 % of the solves with it and fatrop in up to
-  half; with the half-plane fatrop and ipopt never failed, and sqpmethod only in the head-on stress case
-  (reference through the centre, robot blocked for seconds), where the fallback took 7 of 150 solves. Why
-  not a discrete CBF ``h_(k+1) >= (1 - gamma) h_k``: the 1 s horizon already spans the reaction (an object
-  ahead enters it about 1 s before contact, enough to deflect or brake at 0.2-0.3 m/s), and the CBF would
-  also slow the approach to a planned impact once the expert deactivates the constraint. Node 0 is never
-  constrained. A reference running straight at the centre gives a symmetric problem: the robot then holds
-  its distance in front rather than picking a side (what the expert wants before an impact; offset the
-  reference to pass).
-
-Solvers (``MPCConfig.solver``), all built ONCE in ``__init__`` with every per-step quantity a parameter:
-``"sqp"`` (default) = CasADi sqpmethod + qrqp, Gauss-Newton Hessian (the cost's) and full steps (see
-``_make_solver``); ``"fatrop"`` (stage-wise structure given explicitly); ``"ipopt"``. Never CasADi's
-``highs`` plugin (its libhighs clashes with highspy in the same process). Warm start: the previous
-solution and multipliers shifted by one step; a cold start puts the states on the reference and the slack
-bounds active. If the primary solver reports failure (``stats()["success"]`` is checked: some solvers
-return numbers while failing), the ``fallback_solver`` (default ipopt) retries from the same guess; if that
-fails too the result has ``success=False`` and a wrench clipped to the bounds (never NaN), and
-``failures`` is incremented. Timings per solver, horizon and case: ``benchmarks/mpc.py``.
-
-Variables are ordered stage by stage (u_0, [x_k, u_k, sigma_k] for k = 1..N-1, [x_N, sigma_N]) and the
-constraints as (dynamics_k, path_k) pairs: fatrop's OCP layout, harmless for the other solvers.
+The solvers (``MPCConfig.solver``: ``"sqp"``, ``"fatrop"``, ``"ipopt"``) are built ONCE, every per-step
+quantity a parameter, and warm-started from the previous solution; a failed solve is retried by
+``fallback_solver`` and never returns NaN. Never CasADi's ``highs`` plugin (its libhighs clashes with highspy
+in one process). The formulation in full, and why keep-offs are half-planes: ``docs/expert_design.md#mpc``.
 """
 
 from __future__ import annotations
@@ -66,7 +23,6 @@ import casadi as ca
 import numpy as np
 
 from impact_env.scenario import Body
-from planners.errors import check_number
 from planners.online.freeflyer import _rk4_sx, rk4_step, state_from_sim
 from planners.online.mpc_specs import (
     _NSI,
@@ -291,9 +247,7 @@ class FreeflyerMPC:
         unknown = sorted(set(weights) - set(_WEIGHTS))
         if unknown:
             raise MPCInputError(f"unknown weight(s) {unknown}; weights are {', '.join(_WEIGHTS)}")
-        for name, value in weights.items():
-            check_number(name, value, error=MPCInputError)
-        self.config = replace(self.config, **weights)
+        self.config = replace(self.config, **weights)  # MPCConfig checks the values
         self._write_weights()
 
     def _write_weights(self) -> None:

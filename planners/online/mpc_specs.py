@@ -7,7 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from planners.errors import MPCInputError, check_number
+from impact_env.config_checks import check_choice, check_integer, check_number, check_value
+from planners.errors import MPCInputError
 
 SOLVERS = ("sqp", "fatrop", "ipopt")
 NX, NU = 6, 3  # state [px, py, theta, vx, vy, omega], input [Fx, Fy, tau]
@@ -15,52 +16,56 @@ _NSI = 8  # impact slacks per node: (p, v) positive and negative parts; plus one
 _WEIGHTS = ("q_pos", "q_vel", "q_heading", "q_omega", "r_input", "terminal_factor")
 
 
-@dataclass
+@dataclass(frozen=True)
 class MPCConfig:
-    """Structure (horizon, dt, solver) is fixed at construction; weights can change via ``update_weights``.
-
-    Weights: q_pos in 1/m^2, q_vel in s^2/m^2, q_heading in 1/rad^2, q_omega in s^2/rad^2, r_input per
-    (input / limit)^2; penalties per m or m/s of impact-state violation and per m of keep-off violation.
-    ``fallback_solver`` (None: none) retries a solve the primary ``solver`` failed; ``sqp_max_iter`` caps the
-    iterations of the ``"sqp"`` solver (converged solves take <= 27 in ``benchmarks/mpc.py`` and the keep-off
-    stress cases, so a solve that needs more is handed to the fallback early); fatrop and ipopt get 100.
-    ``keep_off_rows``: how many keep-off constraints (:class:`AvoidSpec` discs or :class:`HalfPlaneSpec`
-    half-planes) one solve can take, each with its own slack per node (the expert uses one for the nearest
-    object, one per other robot, and one for the nearest wall or obstacle face).
-    """
+    """Options of the impact-aware MPC. Structure (horizon, dt, solver) is fixed at construction; the weights
+    can change via :meth:`FreeflyerMPC.update_weights <planners.online.mpc.FreeflyerMPC.update_weights>`."""
 
     horizon: int = 10
+    """Nodes N of the horizon (node 0 is the measured state)."""
     dt_s: float = 0.1
+    """Time between nodes (s): the control period."""
     q_pos: float = 100.0
+    """Weight of the position error (1/m^2)."""
     q_vel: float = 10.0
+    """Weight of the velocity error (s^2/m^2)."""
     q_heading: float = 100.0
+    """Weight of the heading error (1/rad^2)."""
     q_omega: float = 10.0
+    """Weight of the angular velocity (s^2/rad^2)."""
     r_input: float = 0.1
+    """Weight of the inputs, per (input / limit)^2."""
     terminal_factor: float = 10.0
+    """The last node's state weights are this many times the others' (dimensionless)."""
     thrust_fraction: float = 1.0
+    """Share of the body's thrust and torque limits the inputs may use (in (0, 1])."""
     impact_penalty: float = 3e3
+    """Exact L1 penalty per m or m/s of impact-state violation."""
     avoid_penalty: float = 3e3
+    """Penalty per m of keep-off violation (linear and quadratic)."""
     solver: str = "sqp"
+    """The NLP solver: ``sqp`` (CasADi sqpmethod + qrqp), ``fatrop`` or ``ipopt``."""
     fallback_solver: str | None = "ipopt"
+    """Retries a solve the primary ``solver`` failed; None: no retry."""
     sqp_max_iter: int = 30
+    """Iterations of the ``sqp`` solver (converged solves take <= 27 in ``benchmarks/mpc.py`` and the keep-off
+    stress cases, so a solve that needs more is handed to the fallback early); fatrop and ipopt get 100."""
     keep_off_rows: int = 1
+    """Keep-off constraints (:class:`AvoidSpec` discs or :class:`HalfPlaneSpec` half-planes) one solve can
+    take, each with its own slack per node (the expert uses one for the nearest object, one per other robot,
+    and one for the nearest wall or obstacle face)."""
 
     def __post_init__(self) -> None:
-        if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 2:
-            raise MPCInputError(f"horizon must be an integer >= 2, got {self.horizon!r}")
-        for name in ("dt_s", "impact_penalty", "avoid_penalty") + _WEIGHTS:
-            check_number(name, getattr(self, name), name in ("dt_s", "impact_penalty", "avoid_penalty"), MPCInputError)
-        if not (isinstance(self.thrust_fraction, (int, float)) and 0.0 < self.thrust_fraction <= 1.0):
-            raise MPCInputError(f"thrust_fraction must be in (0, 1], got {self.thrust_fraction!r}")
-        if self.solver not in SOLVERS:
-            raise MPCInputError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
-        if self.fallback_solver is not None and self.fallback_solver not in SOLVERS:
-            raise MPCInputError(f"fallback_solver must be None or one of {', '.join(SOLVERS)}, "
-                                f"got {self.fallback_solver!r}")
-        if isinstance(self.sqp_max_iter, bool) or not isinstance(self.sqp_max_iter, int) or self.sqp_max_iter < 1:
-            raise MPCInputError(f"sqp_max_iter must be an integer >= 1, got {self.sqp_max_iter!r}")
-        if isinstance(self.keep_off_rows, bool) or not isinstance(self.keep_off_rows, int) or self.keep_off_rows < 1:
-            raise MPCInputError(f"keep_off_rows must be an integer >= 1, got {self.keep_off_rows!r}")
+        check_integer(self, "horizon", MPCInputError, low=2)
+        for name in ("dt_s", "impact_penalty", "avoid_penalty"):
+            check_number(self, name, MPCInputError, low=0, low_open=True)
+        for name in _WEIGHTS:
+            check_number(self, name, MPCInputError, low=0)
+        check_number(self, "thrust_fraction", MPCInputError, low=0, high=1, low_open=True)
+        check_choice(self, "solver", MPCInputError, SOLVERS)
+        check_choice(self, "fallback_solver", MPCInputError, SOLVERS, none="no retry")
+        check_integer(self, "sqp_max_iter", MPCInputError, low=1)
+        check_integer(self, "keep_off_rows", MPCInputError, low=1)
 
 
 def _vector(value: object, shape: tuple[int, ...], name: str) -> np.ndarray:
@@ -115,10 +120,8 @@ class AvoidSpec:
     active: np.ndarray
 
     def __post_init__(self) -> None:
-        d = self.min_distance
-        if not (isinstance(d, (int, float, np.floating)) and math.isfinite(d) and d > 0):
-            raise MPCInputError(f"AvoidSpec.min_distance must be a finite number > 0 (m), got {d!r}")
-        self.min_distance = float(d)
+        check_value("AvoidSpec.min_distance", self.min_distance, MPCInputError, low=0, low_open=True)
+        self.min_distance = float(self.min_distance)
         self.active = np.asarray(self.active, dtype=bool)
 
     def check(self, horizon: int) -> None:

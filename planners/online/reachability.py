@@ -2,64 +2,16 @@
 
 The mission monitor (:mod:`planners.online.mission`) predicts each object's flight assuming that its next
 planned impact delivers what the local layer asks for (the replanner re-aims it, Eq. 29). That holds only
-while the robot can get to the contact in time. This module decides, from the observed states, when it
-provably cannot.
+while the robot can get to the contact in time; this module decides, from the observed states, when it
+provably cannot. The contact is the one the local layer would ask for (the reference's
+:class:`~planners.online.reference.PlanContact` and the disc law's inverse, with the expert's current model
+of the pair). The test is the closed form of :mod:`planners.online.segment_feasibility` at the robot's full
+thrust, for a contact box (``position_tolerance_m``, ``velocity_tolerance_mps`` per axis) rather than the
+exact contact state (:func:`box_reachable`).
 
-**The contact** is the one the local layer would ask for (:class:`planners.online.reference.PlanContact`): the
-object's state at the impact time by free flight from its observed state, the velocity it must leave with
-(:func:`planners.online.reference.desired_object_velocity`) and the circular impact model's closed-form
-inverse (:func:`planners.online.impact_model.required_contact`, Eq. 6-7) with the expert's current model of
-the pair (the identified restitution and masses when identification is on). It gives the robot's centre at
-contact and its velocity just before.
-
-**The test.** The robot must fly from its observed state (position, velocity) at ``t`` to that contact state
-at the impact time ``t_i``, through a segment of the replanner's class (a degree-``DEGREE`` Bezier curve with
-fixed end states). Whether one exists within an acceleration bound is the closed form of
-:mod:`planners.online.segment_feasibility` (:func:`~planners.online.segment_feasibility.bounds_feasible`).
-A False verdict must be a proof (a wrongly pessimistic prediction triggers re-plans that lose margin), so:
-
-- the acceleration bound is the robot's FULL thrust over its mass, not the replanner's ``thrust_fraction``
-  share of it (the MPC's input bounds allow all of it), per world axis at the robot's observed heading
-  (``(Fx |cos theta| + Fy |sin theta|) / m`` along x, likewise along y: the box of body-frame thrusts,
-  rotated; at heading 0 the replanner's per-axis bound). A contact the replanner reaches only by raising its
-  acceleration bound up to the robot's thrust is not flagged;
-- no velocity bound: when the contact needs the robot faster than ``velocity_bound_mps`` (or the robot is
-  faster now), the replanner gives the bound up (:func:`planners.online.replanner.replan_segment` falls
-  back to its unbounded closed form) and the MPC, which has no velocity constraint, flies it. The speed the
-  contact needs is compared with the bound and reported (``contact_speed_above_bound``), not judged;
-- the contact state is a box, not a point: the robot only has to get within ``position_tolerance_m`` of the
-  contact position and ``velocity_tolerance_mps`` of the contact velocity, per axis. The exact state is too
-  strict: near the impact any small mismatch needs an acceleration that grows like 1 / T^2, yet the contact
-  still happens, a few hundredths of a second early or late and a little slow (measured on ``relay`` at
-  e = 0.15: from 2.8 s before an impact the exact contact state was out of reach, the contact came 0.02 s
-  early and the object left 0.008 m/s off);
-- the bounds are loosened by the replanner's own tolerance (``FEASIBILITY_TOL``), as in ``bounds_feasible``.
-
-**The box test** (:func:`box_reachable`). Per axis, ``bounds_feasible`` asks ``sum l(v1) <= S(p1) <= sum
-u(v1)`` with ``S = d (p1 - p0) / T`` (module docstring of ``segment_feasibility``), where v1 must satisfy
-``|v1 - v0| <= A T`` (its condition (b)). ``sum u`` and ``sum l`` are continuous and nondecreasing in v1 (each
-term is), ``sum l <= sum u`` where (b) holds, and S increases with p1. Let ``[v_lo, v_hi]`` be the velocity
-interval of the box cut to (b). *Claim:* the box holds a reachable state if and only if ``v_lo <= v_hi``,
-``sum u(v_hi) >= S(p1 - eps_p)`` and ``sum l(v_lo) <= S(p1 + eps_p)``. Necessary: a reachable (p, v) in the
-box has ``S(p1 - eps_p) <= S(p) <= sum u(v) <= sum u(v_hi)``, likewise below. Sufficient: let v* be the least
-v in ``[v_lo, v_hi]`` with ``sum u(v) >= S(p1 - eps_p)`` (it exists by continuity); if v* = v_lo, ``sum
-l(v*) <= S(p1 + eps_p)`` is given; else ``sum u(v*) = S(p1 - eps_p)`` and ``sum l(v*) <= sum u(v*)``. Either
-way ``[sum l(v*), sum u(v*)]`` meets ``[S(p1 - eps_p), S(p1 + eps_p)]``: a p in it is reachable with v*. The
-axes are independent, so the box is reachable when every axis is. With zero tolerances it is
-``bounds_feasible`` without a velocity bound (tested).
-
-What a False verdict proves, and what it does not: no segment of the replanner's class gets the robot within
-the tolerances of the contact state with the robot's thrust, so the local layer has to ask for more than the
-robot has, the MPC saturates, and the contact comes late, slow or not at all (measured on ``relay`` at
-e = 0.15: late by 0.4-0.8 s or missed). A robot that is not restricted to Bezier curves could do a little
-better (from rest to rest the degree-10 class reaches 8/9 of the bang-bang displacement, 2 A T^2 / 9 against
-A T^2 / 4), a robot that turns could get up to sqrt(2) more thrust along a diagonal (the MPC holds the
-heading), and an unplanned contact could change its velocity on the way: the verdict is about the local
-layer's segments, not a bound on every trajectory.
-
-Only an impact that is the robot's next one is tested (:meth:`planners.online.mission.MissionPlanner.
-reachability`): if the robot has an earlier pending impact its velocity changes there, and its current state
-says nothing about the later contact.
+A False verdict is a proof about the local layer's segments, so a wrong verdict never triggers a re-plan;
+it is not a bound on every trajectory. Only an impact that is the robot's next one is tested. Why each
+choice, the box test's proof and the measurements behind it: ``docs/expert_design.md#reachability``.
 """
 
 from __future__ import annotations
@@ -69,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from impact_env.config_checks import check_value
 from impact_env.scenario import Body
 from planners.errors import ReplanInputError
 from planners.online.impact_model import ContactPlan
@@ -132,8 +85,7 @@ def box_reachable(p0, v0, p1, v1, duration_s: float, degree: int, acceleration_b
         raise ReplanInputError(f"degree must be >= 3 (two fixed control points at each end), got {degree}")
     for name, value in (("position_tolerance_m", position_tolerance_m),
                         ("velocity_tolerance_mps", velocity_tolerance_mps)):
-        if not (math.isfinite(value) and value >= 0):
-            raise ReplanInputError(f"{name} must be a finite number >= 0, got {value!r}")
+        check_value(name, value, ReplanInputError, low=0)
     acc = np.asarray(acceleration_bound, float) + tol
     if not (acc.shape == (2,) and (acc >= 0).all()):
         raise ReplanInputError(f"acceleration_bound must be >= 0 per axis, got {acceleration_bound}")
@@ -169,8 +121,7 @@ def contact_reachable(t: float, impact: PlannedImpact, plan: Plan, robot: Body, 
     it was re-planned away and the episode ended with +0.27 m (4 of 50 episodes)."""
     if impact.time_s - t <= 0.0:
         return Reachability(t, impact, True)
-    if not (math.isfinite(late_s) and late_s >= 0):
-        raise ReplanInputError(f"late_s must be a finite number >= 0, got {late_s!r}")
+    check_value("late_s", late_s, ReplanInputError, low=0)
     robot_state, object_state = np.asarray(robot_state, float), np.asarray(object_state, float)
     v_o = object_state[3:5]
     strategy = PlanContact(aim_final_position)

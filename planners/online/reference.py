@@ -1,24 +1,14 @@
 """Reference selection: what each robot's MPC tracks this control step (paper Eq. 29, Sec. VII).
 
-For each robot, each control step:
-
-1. if one of its planned impacts is less than ``replan_intervals`` grid intervals away (and its previous
-   impact is over), the replanner (Eq. 29) recomputes its pre- and post-impact segments from its current
-   state. The object's state at the impact time is predicted from its observed position and velocity (free
-   flight); a :class:`ContactStrategy` says where and how fast the robot must hit it. The default,
-   :class:`PlanContact`, asks the object to leave with the velocity that takes it to where the plan needs it
-   at its next impact (or the planned one after its last impact), and the circular impact model's
-   closed-form inverse (Eq. 6-7) with the identified restitution gives the contact;
-2. after the impact, the post-impact segment is re-solved from where the robot really is until it rejoins
-   the plan; otherwise the reference is the plan itself.
-
-The strategy is the hook for other planners' plans: an impact-robust plan carries robot copies for every
-vertex of the object's state box, and its strategy (:class:`planners.online.contingency.CopyContact`) returns
-the contact of the blend of copies that matches the observed object state. A strategy may also have
-``observe(plan, robot, t, next_impact, object_state)`` (called every step before the reference is chosen),
-``plan_state(plan, name, times, sampled)`` (adjusts the plan's robot states the reference starts from and
-rejoins) and ``reset()``. Segments are "safe" when :class:`SegmentLimits` are given (world
-box, obstacle faces and other robots; see :mod:`planners.online.replanner`).
+For each robot, each control step: when one of its planned impacts is less than ``replan_intervals`` grid
+intervals away (and its previous impact is over), the replanner (Eq. 29) recomputes its pre- and post-impact
+segments from its current state toward the contact a :class:`ContactStrategy` asks for; after the impact the
+post-impact segment is re-solved until the robot rejoins the plan; otherwise the reference is the plan itself.
+The default strategy, :class:`PlanContact`, sends the object to where the plan needs it at its next impact
+(or off at its planned velocity after its last), through the disc law's inverse with the identified
+restitution. The strategy is the hook for other planners' plans
+(:class:`planners.online.contingency.CopyContact` flies an impact-robust plan's copies). Segments are "safe"
+when :class:`SegmentLimits` are given (world box, obstacle faces and other robots).
 """
 
 from __future__ import annotations
@@ -57,7 +47,11 @@ class ContactQuery:
 
 
 class ContactStrategy(Protocol):
-    """Gives the robot's contact (position, pre- and post-impact velocity) for an observed object state."""
+    """Gives the robot's contact (position, pre- and post-impact velocity) for an observed object state.
+
+    A strategy may also have ``observe(plan, robot, t, next_impact, object_state)`` (called every step before
+    the reference is chosen), ``plan_state(plan, name, times, sampled)`` (adjusts the plan's robot states the
+    reference starts from and rejoins) and ``reset()``; the selector calls them when they exist."""
 
     def contact(self, query: ContactQuery) -> ContactPlan | None: ...
 

@@ -1,29 +1,17 @@
 """The online two-body replanner (paper Eq. 29): re-solve a robot's pre- and post-impact segments.
 
-When a robot is on its pre-impact segment and its object flies freely toward the planned impact, the
-replanner takes the robot's current state, the contact it must make (from the circular impact model,
-:func:`planners.online.impact_model.required_contact`: contact position, pre- and post-impact velocities) and
-the point where it rejoins the offline plan, and returns two segments:
+From the robot's current state, the contact it must make (position, pre- and post-impact velocities, from
+the disc law's inverse in :mod:`planners.online.impact_model`) and the point where it rejoins the offline
+plan, it returns two segments:
 
     pre:  (p_now, v_now) at t_now      -> (p_contact, v_before) at t_impact
     post: (p_contact, v_after) at t_impact -> (p_rejoin, v_rejoin) at t_rejoin
 
-each minimising the integral of |r''|^2 (Eq. 29's acceleration cost; the contact state is imposed exactly
-rather than through Eq. 29c-d's penalties, since the closed-form impact inverse is exact). Without bounds
-the minimiser is the cubic Hermite curve (closed form, microseconds). If that breaks a bound, the bounded QP
-of :mod:`planners.online.segment_qp` is solved: velocity bounds (Eq. 25), acceleration bounds (the thrust
-limits, so that the MPC can fly the segment: a segment that asks for more makes the robot arrive late and
-slow; measured: 0.26 m/s instead of 0.30 at a planned impact, the object then off by 0.03 m/s) and the
-"safe segments" limits (:class:`~planners.online.segment_qp.SegmentLimits`: world box, obstacle faces,
-other robots).
-
-The Hermite cubic from rest to a fast contact velocity backs away first (its second control point is the
-start, its third lies behind the contact); near a wall that is what hit the wall. Whether the velocity and
-acceleration bounds can be met at all, and the least acceleration bound that can, have closed forms
-(:mod:`planners.online.segment_feasibility`): the QPs they prove infeasible are not solved.
-
-``SegmentLimits``, ``bounded_segment`` and ``hermite`` live in :mod:`planners.online.segment_qp` and are
-importable from here too.
+each minimising the integral of |r''|^2 with the contact state imposed exactly. Without bounds the minimiser
+is the cubic Hermite curve (closed form); when that breaks a bound, the bounded QP of
+:mod:`planners.online.segment_qp` (``SegmentLimits``, ``bounded_segment`` and ``hermite``, importable from
+here too) is solved, unless the closed forms of :mod:`planners.online.segment_feasibility` prove it
+infeasible. Why the bounds, with the measurements: ``docs/expert_design.md#replanner``.
 """
 
 from __future__ import annotations

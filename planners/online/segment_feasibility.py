@@ -1,53 +1,16 @@
 """Closed-form feasibility of the replanner's bounded segment (its QP without the safe-segment limits).
 
 The replanner (:mod:`planners.online.replanner`) asks for a degree-d Bezier curve over ``[t0, t0 + T]`` with
-fixed end positions and velocities (the first two and last two control points, Eq. 8 at s = 0 and 1) whose
-velocity control points stay within a per-axis velocity bound (Eq. 25) and whose acceleration control points
-stay within the thrust limit. Without the safe-segment limits (box, obstacle faces, other robots) the two axes
-are independent, and whether such a curve exists has a closed form, :func:`bounds_feasible`.
+fixed end positions and velocities, whose velocity control points stay within a per-axis bound V (Eq. 25)
+and whose acceleration control points stay within the thrust limit A. Without the safe-segment limits the
+axes are independent and whether such a curve exists has a closed form, :func:`bounds_feasible`: per axis,
+with ``m = d - 1``, ``h = A T / (d - 1)``, ``u_i = min(v0 + i h, v1 + (m - i) h, V)`` and
+``l_i = max(v0 - i h, v1 - (m - i) h, -V)``, a curve exists if and only if ``|v0|, |v1| <= V`` and
+``sum l <= d (p1 - p0) / T <= sum u``. :func:`least_acceleration_bound` inverts it: the least acceleration
+bound that joins the end states in the time left.
 
-**The test (one axis).** Write the velocity control points ``w_i = d (P_{i+1} - P_i) / T``, i = 0..d-1, and
-``m = d - 1``. The acceleration control points are ``(d - 1) (w_{i+1} - w_i) / T``, so the QP's constraints
-are exactly:
-
-- ``w_0 = v0`` and ``w_m = v1`` (the fixed second and second-to-last control points, given the end positions);
-- ``sum_i w_i = S := d (p1 - p0) / T`` (the curve ends at p1, given that it starts at p0);
-- ``|w_i| <= V`` (the velocity bound) and ``|w_{i+1} - w_i| <= h := A T / (d - 1)`` (the acceleration bound A).
-
-The map from the control points (P_0 fixed) to w is one to one, so the QP is feasible if and only if such a w
-exists. Let ``u_i = min(v0 + i h, v1 + (m - i) h, V)`` and ``l_i = max(v0 - i h, v1 - (m - i) h, -V)``.
-
-*Claim:* a w exists if and only if (a) ``|v0| <= V`` and ``|v1| <= V``, (b) ``|v1 - v0| <= m h``, and
-(c) ``sum_i l_i <= S <= sum_i u_i``; and (c) implies (b), so the test checks (a) and (c).
-
-*Necessary:* (a) and (b) are constraints themselves (b: m steps of at most h each lead from v0 to v1). Any
-feasible w has ``w_i <= v0 + i h`` (i steps from w_0), ``w_i <= v1 + (m - i) h`` (m - i steps to w_m) and
-``w_i <= V``, so ``w_i <= u_i`` and ``sum w <= sum u``; likewise ``sum w >= sum l``. (c) implies (b): if
-``v1 - v0 > m h``, then at every interior i (there is one, as d >= 3) ``u_i <= v0 + i h < v1 - (m - i) h
-<= l_i``, so ``sum l > sum u`` (the ends add v0 + v1 to both); likewise if ``v0 - v1 > m h``.
-
-*Sufficient:* u is itself feasible under (a) and (b): ``u_0 = min(v0, v1 + m h, V) = v0`` and ``u_m = v1``;
-each of the three sequences changes by at most h per step and so does their pointwise minimum; ``u_i <= V``
-by construction and ``u_i >= -V`` because each term is (``v0 + i h >= v0 >= -V``, the same for v1). So is l.
-The constraints are convex, so ``(1 - c) l + c u`` is feasible for every c in [0, 1]; its sum moves
-continuously from ``sum l`` to ``sum u`` and takes every value S in between. Without a velocity bound V is
-infinite, without an acceleration bound h is (then u is v0, V, ..., V, v1).
-
-**Use.** The QP with the limits has more constraints, so this test is necessary for it too: a False verdict
-proves every QP with these end states and bounds infeasible (limits or not), a True one proves the QP without
-limits feasible. ``tol`` loosens the test (bounds and S) by the tolerance the replanner accepts an answer with,
-so it never rules out a segment the replanner would accept, whatever the rounding.
-
-**The least acceleration bound** (:func:`least_acceleration_bound`). When the thrust cannot join the end
-states in the time left, the replanner raises the acceleration bound of the axes that need it to the least
-value that can. Each term of ``u_i`` is nondecreasing in h and each of ``l_i`` nonincreasing, so ``sum u`` is
-nondecreasing and ``sum l`` nonincreasing in h, and the h that pass (c) form a ray ``[h*, inf)`` (or none: with
-a velocity bound, ``sum u`` stops growing once every u_i is V). Both sums are piecewise linear in h, with
-kinks only where two terms of a min (max) are equal: ``h = (V - v0) / i`` and ``(V - v1) / (m - i)`` for
-u, ``(V + v0) / i`` and ``(V + v1) / (m - i)`` for l, and where the two slopes cross,
-``(v1 - v0) / (2 i - m)``, for both. Evaluated at those kinks, each sum is inverted exactly by linear
-interpolation between the two kinks that bracket S; past the last kink every term is on its final piece (V,
-or without a velocity bound the one of slope ``min(i, m - i)``), so the sums continue with a known slope.
+A False verdict proves every QP with these end states and bounds infeasible (limits or not); ``tol`` loosens
+the test by the replanner's own tolerance. The proofs: ``docs/expert_design.md#segment-feasibility``.
 """
 
 from __future__ import annotations

@@ -2,21 +2,15 @@
 
 A segment joins two fixed end states, ``(p0, v0)`` at ``t0`` and ``(p1, v1)`` at ``t1``, and minimises the
 integral of |r''|^2 (Eq. 29's acceleration cost). Without bounds the minimiser is the cubic Hermite curve
-(:func:`hermite`, closed form). With bounds it is a convex QP over degree-10 Bezier control points (a high
-degree because bounding control points is conservative: the hull tightens with it):
-
-- velocity bounds (Eq. 25) on the velocity control points, per axis;
-- acceleration bounds (the thrust limits, as in the offline planner) on the acceleration control points;
-- the :class:`SegmentLimits` ("safe segments"): every control point inside the world box shrunk by the
-  robot's radius (the convex hull property then keeps the whole curve inside), every control point on the
-  free side of given half-planes (an obstacle face, shifted out by the radius), and, at sample times, the
-  robot's centre on the far side of the half-plane tangent to another robot's disc (:func:`separation_rows`;
-  the other robot's planned position at that time; the planner's separation, Eq. 26, made time-local).
+(:func:`hermite`, closed form). With bounds it is a convex QP over degree-10 Bezier control points (bounding
+control points is conservative; the hull tightens with the degree): velocity bounds (Eq. 25), acceleration
+bounds (the thrust limits) and the :class:`SegmentLimits` ("safe segments": the world box, obstacle faces,
+and at sample times the half-plane off another robot's disc, :func:`separation_rows`).
 
 The QP is built ONCE per degree as a CasADi ``conic`` (DAQP, dense) with a fixed sparsity; each call only
-fills numbers (the matrix rows, bounds) with numpy, so nothing is rebuilt from Python expressions per
-control step. DAQP's "solved" is checked, not trusted: an answer that moves the fixed end states (DAQP's
-answer to some infeasible QPs) is no answer (:meth:`_SegmentQP.answer_holds`).
+fills numbers with numpy. DAQP's "solved" is checked, not trusted: an answer that moves the fixed end states
+(DAQP's answer to some infeasible QPs) is no answer (:meth:`_SegmentQP.answer_holds`). More:
+``docs/expert_design.md#segment-qp``.
 """
 
 from __future__ import annotations

@@ -1,22 +1,17 @@
 """The region graph and the hybrid automaton of the thesis (Sec. 4.3, Eq. 1, 5-7).
 
-The map is the cargo centre's free space (:func:`~planners.tether.geometry.free_space_polygon`: the thesis's
-cargo is a point; shrinking the station by the disc's radius first makes its plans keep the whole disc inside),
-decomposed by MP3 and extended (:mod:`~planners.tether.decomposition`, :mod:`~planners.tether.extension`):
+The map is the cargo centre's free space (:func:`~planners.tether.geometry.free_space_polygon`), decomposed by
+MP3 and extended (:mod:`~planners.tether.decomposition`, :mod:`~planners.tether.extension`):
 
 - the **region graph** (networkx): a node per extended region, an edge between regions whose pieces share a
   border, carrying their overlap (the jump zone);
-- the **hybrid automaton** ``H = <X, Q, init, inv, flow, jump>`` (Eq. 1): ``X`` the cargo position ``(x, y)``;
-  a mode per region and set of at most ``k`` anchors of that region; invariant: stay in the region (its edges'
-  half-planes, Eq. 6); flow: Eq. 5 (``w`` times the sum of the unit vectors toward the mode's anchors); jumps:
-  between the modes of one region without a guard (the region is convex), between modes of neighbouring regions
-  when the cargo is in their overlap (Eq. 7), identity reset of ``(x, y)``; an initial mode (the start, zero
-  flow) that jumps to the modes of the regions containing the start and a final mode (the goal box, zero flow).
+- the **hybrid automaton** (Eq. 1): a mode per region and set of at most ``k`` of its anchors, the region as
+  invariant (Eq. 6), Eq. 5 as flow, jumps within a region and into a neighbour through the overlap (Eq. 7),
+  and an initial and a final mode.
 
-Which anchors a mode may use (``rule``): ``"region"`` is the thesis's ("the anchor points inside of each
-region": here, on a wall that bounds the region, i.e. at most the cargo radius plus clearance from it);
-``"line_of_sight"`` is any anchor that some point of the region sees. The thesis's rule makes some feasible
-maps infeasible: a dead-end arm may have no anchor of its own that pulls the cargo out.
+``rule`` picks the anchors a mode may use: the thesis's ``"region"`` (on a wall that bounds the region) or
+``"line_of_sight"`` (any anchor some point of the region sees); the thesis's rule makes some feasible maps
+infeasible. The automaton in full: ``docs/planner_design.md#region-graph-and-hybrid-automaton``.
 """
 
 from __future__ import annotations

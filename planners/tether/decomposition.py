@@ -1,33 +1,12 @@
 """The thesis's convex decomposition of the station map: MP3 (Sec. 4.1, Algorithms 1 and 2).
 
 MP3 (Fernandez, Toth, Canovas and Pelegrin, the thesis's reference [10]) cuts a simple polygon into convex
-pieces by diagonals. One call of :func:`mp3_step` (Algorithm 1) takes the polygon ``P`` as a clockwise vertex
-list (the thesis's orientation) and a start index ``s`` and extracts one convex piece ``L``:
-
-1. forward growth: ``L = [v_s, v_{s+1}]``, then ``v_{s+2}, v_{s+3}, ...`` are appended while the three angles
-   they create (at the new vertex, at ``l_1`` and at ``l_k``) stay convex;
-2. ``Check_L`` (Algorithm 2) until ``L`` is unchanged: if a notch of ``P \\ L`` lies in the bounding box of
-   ``L`` and in ``L`` itself, ``L`` is cut (see :func:`check_l`);
-3. backward growth: ``v_{s-1}, v_{s-2}, ...`` are prepended under the same three-angle test, and ``Check_L``
-   again;
-4. acceptance: ``L`` is a piece when it has more than two vertices and its first or last vertex is a notch of
-   ``P``. The last ``if`` of Algorithm 1 is garbled in the text (its branches are empty and inverted); this is
-   the prose's rule ("Finally, if L is composed of more than two vertices and if either its first or last vertex
-   is a notch of P, then L is accepted").
-
-:func:`mp3_decompose` iterates it on the remainder ``P \\ L`` (Algorithm 1's third result is the index of
-``L``'s last vertex in the remainder, where the next call starts) until the remainder is convex. Two readings
-the text leaves open, and what is done here (both keep every piece convex and free of notches, which is what
-makes the diagonal valid):
-
-- Algorithm 2's cut removes "the last vertex and the vertices in the half-plane created by the first and last
-  vertices of L which also contains the notch". Taken literally this half-plane holds every vertex of a convex
-  ``L``; the cut used is MP1's: the line through ``l_1`` and the notch, removing the vertices on the side of the
-  growing end. In the backward phase the growing end is the front, so the mirror cut (line through ``l_k`` and
-  the notch, removing the front's side) is used: "another verification is done in the same conditions".
-- When no piece is accepted from start ``s`` (the thesis would return ``L = []``, which its loop reads as "the
-  remainder is convex" and stops too early), the next start index is tried; if no start gives an accepted
-  piece, the first convex piece with more than two vertices is taken without the notch condition.
+pieces by diagonals. :func:`mp3_step` (Algorithm 1) takes the polygon as a clockwise vertex list and a start
+index and extracts one convex piece: forward growth under a three-angle convexity test, ``Check_L``
+(Algorithm 2, :func:`check_l`) cutting the piece where a notch lies in it, backward growth, and acceptance
+when the piece's first or last vertex is a notch. :func:`mp3_decompose` iterates it on the remainder until
+the remainder is convex. Where the text is garbled or leaves a reading open (the acceptance test, Algorithm
+2's cut, a start that gives no piece), the choices made: ``docs/planner_design.md#convex-decomposition``.
 
 The result is verified: the pieces must tile the polygon (areas add up, no overlap) and be convex, else
 :class:`DecompositionError` (it would be a bug, and the test sweep over random orthogonal polygons looks for it).

@@ -1,24 +1,13 @@
 """The thesis's automaton in dReach's input language (``.drh``), for users who have dReach (dReal3).
 
-A ``.drh`` file declares the variables with their ranges (``[lo, hi] x;``, ``time`` last), then one block per
-mode::
-
-    { mode 3;
-      invt: (x >= 0.3); (x <= 4.7);
-      flow: d/dt[x] = ...; d/dt[y] = ...;
-      jump: (and (x >= 0.3) (y >= 10.3)) ==> @4 (and (x' = x) (y' = y));
-    }
-
-and ``init: @1 (and ...);`` and ``goal: @2 (and ...);``. Formulas are prefix ``(and ...)``, ``(or ...)``,
-comparisons infix with numbers and ``x``, ``y``; flows are infix expressions with ``+ - * /``, ``^`` and
-``sqrt``. Modes are numbered from 1: ``1`` is the initial mode, ``2`` the final one, then the region modes in the
-automaton's order. Each flow is Eq. 5; jumps keep ``(x, y)`` (``x' = x``, ``y' = y``); the within-region jumps,
-which have no guard in the thesis, get the region's invariant as their guard (always true there).
-
-dReach itself is not needed to write or check the file: :func:`parse_drh` reads it back with the grammar above
-and the tests check every export against it. The full automaton is large (every ordered pair of a region's modes
-is a jump): :func:`export_drh` refuses more than ``max_jumps`` jumps unless told otherwise, and
-:func:`subproblem_drh` writes one divide-and-conquer sub-problem (Sec. 4.4), which is what the thesis ran.
+A ``.drh`` file declares the variables with their ranges, then one block per mode (invariant, flow, jumps),
+and the initial and the goal condition. Modes are numbered from 1: ``1`` is the initial mode, ``2`` the final
+one, then the region modes in the automaton's order; each flow is Eq. 5 and every jump keeps ``(x, y)``.
+dReach itself is not needed to write or check a file: :func:`parse_drh` reads it back and the tests check
+every export against it. The full automaton is large (every ordered pair of a region's modes is a jump):
+:func:`export_drh` refuses more than ``max_jumps`` jumps unless told otherwise, and :func:`subproblem_drh`
+writes one divide-and-conquer sub-problem (Sec. 4.4), which is what the thesis ran. The grammar:
+``docs/planner_design.md#drh-export``.
 """
 
 from __future__ import annotations

@@ -4,25 +4,12 @@
     obs, info = env.reset(seed=0); expert.reset(env)
     action = expert.act(obs, info)       # one command per robot (TetherEnv's MultiDiscrete action)
 
-Each control step the expert reads the cargo position and velocity, which robot holds which anchor (and whether
-its tether pulls yet) from the observation, and the tether events from ``info``, and then:
-
-1. it follows the current pull until the cargo reaches the pull's switch point (measured along the pull, so a
-   slower or faster winch than planned only shifts the time), then changes anchor: with ``k >= 2`` the next robot
-   attaches ``t_switch`` before the switch point while the current one still pulls, and the current one lets go
-   when the new tether pulls ("make before break"); with ``k = 1``, or when the next anchor is not yet in sight,
-   the robot lets go and re-attaches;
-2. closed loop: every step it asks the planner whether the current pull, from where the cargo really is, still
-   lands in the level it was meant for, and where it should end there; when it does not (inertia under ``reel``
-   and ``force``, a wall contact), and when a tether snags, is blocked or arrives early, it replans from the
-   current state (the exact planner's levels are kept, so this costs a forward read);
-3. under ``reel`` and ``force`` a released cargo keeps moving, and a new tether keeps the velocity across it
-   (the cargo swings around the new anchor). So at a switch the expert first brakes: a tether toward an anchor
-   opposite the cargo's motion pulls until the velocity along the motion is gone, and the next pull starts from
-   (nearly) rest.
-
-It reads the fidelity level from the environment at :meth:`reset` (to know whether a released cargo stops) but
-not the winches' real speed: a mismatch in ``w`` is what it must absorb.
+Each control step it reads the cargo's state, the robots' anchors and the tether events, follows the current
+pull to its switch point (measured along the pull) and changes anchor ("make before break" when ``k >= 2``);
+it asks the planner whether the pull still lands in the level it was meant for, and replans from the current
+state when it does not (or when a tether snags, is blocked or arrives early); under ``reel`` and ``force`` it
+brakes a moving cargo at each switch. It reads the fidelity level at :meth:`reset` but not the winches' real
+speed: a mismatch in ``w`` is what it must absorb. The steps in full: ``docs/planner_design.md#tether-expert``.
 """
 
 from __future__ import annotations

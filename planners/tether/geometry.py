@@ -1,24 +1,15 @@
 """Geometry the tether planners share, on top of shapely: the conservative free space, an anchor's visibility
 polygon, its radial cells, and shadows (:func:`shadow_pieces`).
 
-Free space. The cargo centre may be where the whole disc is inside the station: the polygon eroded by the radius
-``rho`` (plus a clearance). Here the erosion is taken with mitred joins: along walls and at convex corners this
-is the exact erosion; at a notch (reflex corner) the exact free space is bounded by an arc of radius ``rho``
-around the notch, and the mitred one by the two offset walls meeting at a corner ``rho * sqrt(2)`` from it
-(right-angle notch), which lies outside that arc. So the mitred free space is INSIDE the exact one (every plan
-keeps the disc in the station) and has as many vertices as the station, which keeps the planners fast; it gives
-up ``rho^2 (1 - pi / 4)`` (0.02 m^2 for the 0.3 m cargo) at each right-angle notch.
+- Free space: the station eroded by the cargo radius (plus a clearance) with mitred joins, INSIDE the exact
+  erosion (every plan keeps the disc in the station) and with as many vertices as the station; it gives up
+  ``rho^2 (1 - pi / 4)`` at each right-angle notch.
+- Visibility: the station polygon minus the shadows its walls cast from the anchor.
+- Radial cells: the rays from the anchor through every vertex of the free space it sees cut that space into
+  cells which every ray crosses in one interval, so the points one pull brings into a set are computed
+  exactly, cell by cell (:mod:`~planners.tether.reachability`).
 
-Visibility. A tether from ``x`` reaches anchor ``a`` when the segment ``[x, a]`` lies in the station polygon
-``P``. ``P`` minus the shadows that its walls cast from ``a`` (a light at ``a``) is the visibility polygon:
-the segment from ``a`` to a point of ``P`` leaves ``P`` exactly when it crosses a wall.
-
-Radial cells. A pull toward ``a`` moves the cargo along the ray to ``a``. The rays from ``a`` through every
-vertex of ``F_a`` (the free space seen from ``a``) cut it into cells that every ray crosses in one interval with
-both ends on the boundary of ``F_a`` (no vertex of ``F_a`` lies strictly inside a wedge, so each wall piece in it
-runs from one side ray to the other). Inside a cell the cargo may therefore move from any point toward ``a`` up
-to the cell's near boundary, which is why :mod:`~planners.tether.reachability` can compute the points that one
-pull brings into a set exactly, cell by cell.
+Why each construction holds: ``docs/planner_design.md#tether-geometry``.
 """
 
 from __future__ import annotations

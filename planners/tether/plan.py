@@ -23,7 +23,7 @@ import numpy as np
 
 from impact_env.station import Station
 from planners.errors import PlannerError
-from planners.plan_files import read_plan_json, write_plan_json
+from planners.plan.files import read_plan_json, write_plan_json
 from planners.tether.errors import TetherPlanCheckError
 
 FORMAT = "impact_env.tether_plan/1"

@@ -1,29 +1,17 @@
 """The exact planner: backward reachability over the anchors' visibility polygons, fewest pulls first.
 
-What the thesis did not use (its Sec. 4.3 flow, Eq. 5): with one active anchor the cargo moves in a straight
-line toward it at ``w``; more robots on other anchors add speed and bend the path, but never reach a point that
-single pulls cannot (a multi-anchor flow stays inside the region the cargo could cross by single pulls). So
-whether the goal can be reached, and with how few pulls, is decided over single-anchor pulls:
-
-- ``R_0`` is the goal box intersected with the free space (the cargo centre in the box, the disc inside);
-- ``R_{n+1} = R_n  U  (union over anchors a of Pre_a(R_n))``, where ``Pre_a(S)`` are the free-space points
-  from which a pull toward ``a`` (in line of sight, outside its stop radius) carries the cargo into ``S``
-  without leaving the free space. In each radial cell ``C`` of ``a`` (see :mod:`~planners.tether.geometry`)
-  that is exactly ``C`` intersected with the shadow of ``S ∩ C`` cast from ``a``;
-- the start in ``R_n`` and not in ``R_{n-1}``: ``n`` pulls is the fewest; a plan is read forward by choosing,
-  from the current point, a pull that lands in ``R_{n-1}`` (deep inside it, for robustness), and so on;
-- ``R_{n+1} = R_n`` (no area added) and the start not in it: no sequence of pulls, however long, reaches the
-  goal. That is the proof of infeasibility (:class:`TetherInfeasibleError` carries it).
-
-Exact up to the polygons shapely computes with (double precision) and the free space's mitred corners (see
-:mod:`~planners.tether.geometry`), which make every plan safe and may lose plans that need to graze a notch
-closer than the mitre. The levels do not depend on the start: a :class:`ReachabilityPlanner` keeps them, so
-replanning from another point (the expert does it when the cargo deviates) costs only the forward read.
+With one active anchor the cargo moves in a straight line toward it at ``w``; more robots on other anchors add
+speed but never reach a point that single pulls cannot, so reachability is decided over single pulls:
+``R_0`` is the goal box in the free space and ``R_{n+1} = R_n U (union over anchors a of Pre_a(R_n))``,
+computed exactly per radial cell (:mod:`~planners.tether.geometry`). The start in ``R_n`` and not in
+``R_{n-1}``: ``n`` pulls is the fewest, and a plan is read forward level by level. ``R_{n+1} = R_n`` without
+the start is the proof that no plan exists (:class:`TetherInfeasibleError` carries it). The levels do not
+depend on the start, so a :class:`ReachabilityPlanner` replans from another point with a forward read only.
+Why single pulls suffice, and how exact it is: ``docs/planner_design.md#exact-tether-planner``.
 """
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -33,6 +21,7 @@ import shapely.ops
 from shapely.geometry import Point
 from shapely.geometry.base import BaseGeometry
 
+from impact_env.config_checks import check_integer, check_number
 from impact_env.station import Station
 from planners.errors import PlannerError
 from planners.tether.errors import TetherInfeasibleError
@@ -54,30 +43,24 @@ COVER_TOL_M = 1e-6  # a point this close to a level is in it (the rays between r
 
 @dataclass(frozen=True)
 class ReachabilityConfig:
-    """Options of the exact planner.
-
-    Attributes:
-        clearance_m: extra distance (m) kept between the cargo disc and the walls, on top of its radius.
-        stop_margin_m: a pull ends at least this far (m) outside its anchor's stop radius, so that the
-            environment does not release the tether before the planned switch point.
-        goal_margin_m: the last pull must end this far (m) inside the goal box (if the box allows it).
-        max_pulls: give up (with a PlannerError, not a proof) if the reachable set still grows after this many.
-        depth_cap_m: a switch point is chosen as deep as this inside the next level's set, then shortest path.
-    """
+    """Options of the exact planner."""
 
     clearance_m: float = 0.02
+    """Extra distance (m) kept between the cargo disc and the walls, on top of its radius."""
     stop_margin_m: float = 0.1
+    """A pull ends at least this far (m) outside its anchor's stop radius, so that the environment does not
+    release the tether before the planned switch point."""
     goal_margin_m: float = 0.15
+    """The last pull must end this far (m) inside the goal box (if the box allows it)."""
     max_pulls: int = 40
+    """Give up (with a PlannerError, not a proof) if the reachable set still grows after this many pulls."""
     depth_cap_m: float = 0.5
+    """A switch point is chosen as deep as this (m) inside the next level's set, then by shortest path."""
 
     def __post_init__(self) -> None:
         for name in ("clearance_m", "stop_margin_m", "goal_margin_m", "depth_cap_m"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise PlannerError(f"ReachabilityConfig.{name} must be a finite number >= 0, got {v!r}")
-        if self.max_pulls < 1:
-            raise PlannerError(f"ReachabilityConfig.max_pulls must be >= 1, got {self.max_pulls}")
+            check_number(self, name, PlannerError, low=0)
+        check_integer(self, "max_pulls", PlannerError, low=1)
 
 
 class ReachabilityPlanner:

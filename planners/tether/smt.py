@@ -1,27 +1,13 @@
 """The thesis's planner (Sec. 4.4) with an SMT solver that installs from the package index: z3.
 
-The thesis hands its hybrid automaton to dReach / dReal, which cannot be installed today. With one active anchor
-the flow of Eq. 5 is a straight line toward the anchor at speed ``w``, so a mode's trajectory needs no ODE: a pull
-from ``p`` ends at a point ``q`` of the segment from ``p`` toward the anchor ``a``, ``cross(q - p, a - p) = 0``,
-``0 <= (q - p) . (a - p) <= |a - p|^2``, outside the stop radius ``|q - a| >= s``: polynomial constraints, which
-z3 decides exactly over the reals (nlsat). Only single-anchor modes are encoded: extra robots add speed, not
-reach (see :mod:`~planners.tether.reachability`); the multi-anchor modes are in the ``.drh`` export.
-
-- :func:`plan_smt` is the thesis's divide and conquer: paths of the region graph from the start's region to a
-  goal region, shortest first (networkx); along a path one sub-problem per region, "take the cargo from the
-  current point into the overlap with the next region" (the goal box in the last), solved with 0, 1, 2, ...
-  pulls up to a bound; its end point starts the next sub-problem; a sub-problem without a solution rejects the
-  path and the next path is tried. Like the thesis's, it is incomplete: an early sub-problem may pick an end
-  point from which the rest fails, and the bound limits the pulls per region.
-- :func:`bounded_search` is the whole automaton as one bounded model check: ``n`` pulls, each a straight pull
-  toward one anchor that may cross several regions (split where it crosses), for ``n = 0, 1, 2, ...``. Its
-  smallest satisfiable ``n`` is the fewest pulls, to compare with the exact planner; ``unsat`` up to the bound
-  is a bounded answer, not a proof for longer plans.
-
-Both enforce line of sight from the start of each pull to its anchor (a disjunction over the triangles of the
-anchor's visibility polygon in the region; the thesis assumed that an anchor of the region is visible from all
-of it, which is not true near notches). ``rule`` picks the anchors a region's modes may use (see
-:mod:`~planners.tether.automaton`): the thesis's ``"region"`` or ``"line_of_sight"``.
+The thesis hands its hybrid automaton to dReach / dReal, which cannot be installed today. With one active
+anchor the flow of Eq. 5 is a straight line toward the anchor, so a pull from ``p`` toward ``a`` ends at a
+point of that segment outside the stop radius: polynomial constraints, which z3 decides exactly over the
+reals. :func:`plan_smt` is the thesis's divide and conquer over paths of the region graph (incomplete, like
+the thesis's); :func:`bounded_search` is the whole automaton as one bounded model check, whose smallest
+satisfiable number of pulls compares with the exact planner. Both enforce line of sight from the start of
+each pull to its anchor; ``rule`` picks the anchors a region's modes may use (:mod:`~planners.tether.automaton`).
+The encodings in detail: ``docs/planner_design.md#smt-planner``.
 """
 
 from __future__ import annotations
@@ -35,6 +21,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Point, Polygon
 
+from impact_env.config_checks import check_choice, check_integer, check_number
 from impact_env.station import Station
 from planners.errors import PlannerError, SmtNoPlanError
 from planners.tether.automaton import RULES, ThesisMap, build_thesis_map, half_planes
@@ -55,34 +42,33 @@ def _z3():
 
 @dataclass(frozen=True)
 class SmtConfig:
-    """Options of the z3 pipeline.
-
-    Attributes:
-        rule: ``"region"`` (the thesis's anchors of a region) or ``"line_of_sight"``.
-        max_pulls_per_region: the sub-problems' bound (divide and conquer).
-        max_paths: region-graph paths tried before giving up.
-        timeout_s: z3's limit per check; a check that hits it counts as "no plan" and is reported.
-        clearance_m, stop_margin_m, goal_margin_m: as the exact planner's, so that both solve the same problem.
-        target_margin_m: shrinks each sub-problem's transition zone, so that the next sub-problem starts inside
-            its region rather than on its border.
-    """
+    """Options of the z3 pipeline (the margins as the exact planner's, so that both solve the same problem)."""
 
     rule: str = "region"
+    """The anchors a region's modes may use: ``"region"`` (the thesis's) or ``"line_of_sight"``."""
     max_pulls_per_region: int = 3
+    """The sub-problems' bound on pulls (divide and conquer)."""
     max_paths: int = 8
+    """Region-graph paths tried before giving up."""
     timeout_s: float = 60.0
+    """z3's limit per check (s); a check that hits it counts as "no plan" and is reported."""
     clearance_m: float = 0.02
+    """Extra distance (m) between the cargo disc and the walls, as the exact planner's."""
     stop_margin_m: float = 0.1
+    """A pull ends at least this far (m) outside its anchor's stop radius, as the exact planner's."""
     target_margin_m: float = 0.05
+    """Shrinks each sub-problem's transition zone (m), so that the next sub-problem starts inside its region
+    rather than on its border."""
     goal_margin_m: float = 0.15
+    """The last pull ends this far (m) inside the goal box, as the exact planner's."""
 
     def __post_init__(self) -> None:
-        if self.rule not in RULES:
-            raise PlannerError(f"SmtConfig.rule must be one of {RULES}, got {self.rule!r}")
-        if self.max_pulls_per_region < 1 or self.max_paths < 1:
-            raise PlannerError("SmtConfig.max_pulls_per_region and max_paths must be >= 1")
-        if not self.timeout_s > 0:
-            raise PlannerError(f"SmtConfig.timeout_s must be > 0, got {self.timeout_s}")
+        check_choice(self, "rule", PlannerError, RULES)
+        for name in ("max_pulls_per_region", "max_paths"):
+            check_integer(self, name, PlannerError, low=1)
+        check_number(self, "timeout_s", PlannerError, low=0, low_open=True)
+        for name in ("clearance_m", "stop_margin_m", "target_margin_m", "goal_margin_m"):
+            check_number(self, name, PlannerError, low=0)
 
 
 @dataclass

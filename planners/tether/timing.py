@@ -1,26 +1,13 @@
 """Time-optimal refinement along a plan's route with ``k`` robots (CasADi, IPOPT).
 
-The exact planner's pulls use one robot at a time. With ``k`` robots the cargo can be pulled toward several
-anchors at once (Eq. 5 sums their unit vectors), which is faster. Along the plan's route this module solves
-
-    minimise  T_1 + ... + T_n
-    over      the phase durations T_j and activations u_{j,i}(t) in [0, 1] of the anchors i of phase j
-    subject to  x' = w * sum_i u_{j,i} (a_i - x) / |a_i - x|           (Eq. 5, relaxed: u in [0, 1])
-                sum_i u_{j,i} <= k                                       (at most k robots pull)
-                x(t) in the corridor C_j of phase j, ends of phase j in C_j and C_{j+1}, the last in the goal box
-
-with ``C_j`` a rectangle around the plan's pull ``j`` (half-width up to ``width_m``) inside the free space,
-seen whole by every anchor of the phase and outside their stop radii (so every activation is physically
-possible: the tethers have line of sight and the cargo stays inside). Multiple shooting, ``N`` intervals per
-phase, one RK4 step each.
-
-A robot either pulls or not: ``u`` is really 0 or 1. The relaxation to ``[0, 1]`` is what makes the problem a
-smooth NLP; :attr:`TimingResult.bang_bang_fraction` reports how much of the optimal control is at 0 or 1
-anyway (within 0.05), i.e. how close the relaxation comes to a schedule real robots can fly. With ``k = 1``
-the optimum is the plan itself at full speed (a mix of directions is slower than ``w``; the corridors let it cut
-a corner slightly), which the tests check. The speed-up with ``k >= 2`` is Eq. 5's: two robots on neighbouring
-anchors of one wall pull at nearly ``2 w``. Under the ``reel`` fidelity two taut tethers each shrink at ``w``
-instead (see ``impact_env/tether_physics.py``), so these times are the kinematic model's.
+The exact planner's pulls use one robot at a time; with ``k`` robots the cargo can be pulled toward several
+anchors at once (Eq. 5 sums their unit vectors), which is faster. Along the plan's route this module
+minimises the sum of the phase durations over the activations ``u_{j,i}(t)`` in [0, 1] of each phase's
+anchors, at most ``k`` at once, with the cargo inside a corridor around each pull that every anchor of the
+phase sees whole (multiple shooting, one RK4 step per interval). Relaxing ``u`` to [0, 1] makes it a smooth
+NLP; :attr:`TimingResult.bang_bang_fraction` reports how close the optimum comes to a schedule real robots
+can fly. With ``k = 1`` the optimum is the plan itself at full speed; the times are the kinematic model's.
+The problem in full: ``docs/planner_design.md#time-optimal-refinement``.
 """
 
 from __future__ import annotations

@@ -1,30 +1,15 @@
 """The object's uncertain state on the time grid (paper Eq. 17-19): a zonotope per axis, its box, and delta.
 
-Everything in the planner's point-mass model is separable per axis (the robots' Bezier curves, per-axis
-velocity bounds and thrust limits, the impact law (Eq. 5), free flight), so the object's state set is a
-product of one set per axis in the (position, velocity) plane. After every impact that set is
+The planner's point-mass model is separable per axis, so the object's state set is a product of one set per
+axis in the (position, velocity) plane. After every impact it is
 
     (p, v) = (c_p, c_v) + xi_1 (h_p, A) + xi_2 (0, B) + xi_3 (0, delta),      xi in [-1, 1]^3
 
-- generator 1: the position spread h_p the object had when it was hit (its box half-width), with the
-  velocity A the robot's copies give it per unit of that spread (A < 0 steers the spread back in: a
-  funnel that narrows, the paper's Fig. 5c after its third impact);
-- generator 2: the robot's answer B to the object's pre-impact velocity spread;
-- generator 3: the new post-impact velocity error, |error| <= delta per axis (Eq. 18).
-
-Free flight over one grid interval maps every generator (g_p, g_v) to (g_p + dt g_v, g_v) (Eq. 19 with
-e^(A dt) = I + A dt): linear, because the grid is fixed. The box (interval hull, Eq. 3) at knot k has
-half-widths h_p >= sum |g_p|, h_v >= sum |g_v| (exact bounds of a zonotope; the epigraph rows may only make
-them larger, which is conservative). Before any impact the state is known: every generator is zero.
-
-Which impact was last is decided by binaries, so the generators at knot k are variables switched by the
-impact binaries z with big-M rows: no impact at k -> the free-flight values; an impact by robot R -> the
-reset above with R's A, B. Each big-M is the range of the difference it relaxes, from bounds the model
-implies: |g_p| <= h_p <= L (the box lies in the allowed region of half-extent L), |g_v| <= h_v <= V (the
-box's velocities obey the object's velocity bound V), and the noise generator's velocity, 0 or delta, in
-[0, delta_max] with delta_max the final box's velocity half-width (an impacted object keeps a velocity
-spread of at least delta to the end). No term is bilinear: delta, h_p, A and B enter the
-reset linearly and z only through big-M.
+(the position spread with the copies' feedback A, their answer B to the velocity spread, and the new error of
+at most delta, Eq. 18). Free flight maps every generator (g_p, g_v) to (g_p + dt g_v, g_v) (Eq. 19), linear
+on the fixed grid; the box at knot k has half-widths h_p >= sum |g_p|, h_v >= sum |g_v|. Which impact was
+last is decided by the impact binaries through big-M rows, each big-M a range the model implies; no term is
+bilinear. The derivation: ``docs/planner_design.md#object-boxes``.
 """
 
 from __future__ import annotations

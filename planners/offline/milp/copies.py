@@ -1,45 +1,21 @@
 """Lemma 1 as constraints: each robot as four copies that reach every vertex of the object's state box.
 
 The paper's Lemma 1: if for every vertex of the object's (interval-hull) state box some robot trajectory
-meets it at the impact with the pre-impact velocity that gives the wanted post-impact velocity, then every
-state in the box is met by one (the interpolated one). With the state [p_x, p_y, v_x, v_y] that is 2^4 = 16
-copies of every robot. Four suffice, exactly:
-
-- Separability. Every constraint on a robot's curve is per axis (Bezier control points, per-axis velocity
-  bounds and thrust limits, Eq. 5 per axis), except region faces and separation boxes. A robot's x copy need
-  only depend on the object's x vertex (s_p, s_v) in {-1, +1}^2, and its y copy on the y vertex: 4 + 4 per
-  axis, not 16. Copy j pairs the x copy and the y copy of the same signs ``SIGNS[j]``; the 16 combinations
-  are the products, which region predicates and obstacle faces get as :class:`PointProduct` sets (the
-  extreme of n . p over a product is the sum of per-axis extremes: exact), and the separation boxes bound
-  per axis anyway.
-- Copies are shared away from impacts. All copies pass through the same position and velocity at every
-  knot outside the windows of the robot's impacts; they differ only on the ``window`` intervals before an
-  impact (to reach the vertex) and after it (to rejoin). The flown curve is their multilinear blend by the
-  object's state, which is the mean (the nominal curve) when the object is where it was planned to be. Two
-  impacts of one robot are therefore at least 2 ``window`` intervals apart (windows do not overlap), and,
-  since the robot commits to its copy blend when the window opens, the object must not be hit inside the
-  window before the impact (its state at the impact is then already decided: causality).
-- Affine feedback. Copy (s_p, s_v) hits the vertex (c_p + s_p h_p, c_v + s_v h_v) and sends it off with
-  t(s) = m3 v_R(s) + m4 (c_v + s_v h_v) (Eq. 5). A blend of the copies by the object's normalised state
-  (xi_p, xi_v) gives the object the multilinear blend of t; the rows below require it affine (the cross
-  term sum_s s_p s_v v_R(s) = 0), t = t_c + A xi_p + B xi_v, so the post-impact state is again a zonotope
-  (``planners/offline/milp/boxes.py``) with A = sum_s s_p t(s) / 4 and B = sum_s s_v t(s) / 4.
-
-Interpolation keeps every linear constraint (velocity bounds, thrust limits, the law) because copies and
-blends are convex combinations; regions and obstacles keep it because all copies share the face binaries.
+meets it with the pre-impact velocity that gives the wanted post-impact velocity, every state in the box is
+met by one (the interpolated one). That is 2^4 = 16 copies of every robot; four suffice, exactly, because
+every constraint on a robot's curve is per axis (copy j pairs the x and the y copy of signs ``SIGNS[j]``;
+region predicates and obstacle faces see the 16 combinations as :class:`PointProduct` sets). The copies are
+shared away from impacts and differ only on ``window`` intervals around one, and the rows require their
+feedback to be affine, t = t_c + A xi_p + B xi_v, so that the post-impact state is again a zonotope
+(``planners/offline/milp/boxes.py``). The argument in full: ``docs/planner_design.md#robot-copies``.
 """
 
 from __future__ import annotations
 
 from impact_env.scenario import Body
+from planners.impact_law import mass_fractions, point_mass_law
 from planners.offline.milp.boxes import ObjectBox
-from planners.offline.milp.impacts import (
-    ImpactVars,
-    add_robot_smoothness,
-    equal_unless,
-    law_big_m,
-    mass_fractions,
-)
+from planners.offline.milp.impacts import ImpactVars, add_robot_smoothness, equal_unless, law_big_m
 from planners.offline.milp.model import LinExpr, Model
 from planners.offline.milp.stl_encoding import PointProduct
 from planners.offline.milp.trajectories import Grid, Point, RobotTrajectory, velocity_bound
@@ -116,7 +92,7 @@ def add_copy_impacts(model: Model, robots: list[RobotCopies], boxes: list[Object
             o = box.centre
             vo = velocity_bound(o.spec)
             fractions = mass_fractions(r.spec.mass_kg, o.spec.mass_kg, restitution)
-            m1, m2, m3, m4 = fractions
+            _, _, m3, m4 = fractions
             m_rob, m_obj = law_big_m(fractions, vr, vo)
             for k in range(1, n):
                 miss = 1 - impacts.z[(name, o.spec.name, k)]
@@ -125,11 +101,11 @@ def add_copy_impacts(model: Model, robots: list[RobotCopies], boxes: list[Object
                     vertex = tuple(box.vertex_position(k, s_p, a) for a in range(2))
                     vo_in = tuple(box.vertex_velocity_before(k, s_v, a) for a in range(2))
                     equal_unless(model, c.position_at_knot(k), vertex, miss, extent, "impact contact")
-                    vr_law = tuple(vr_in[a] * m1 + vo_in[a] * m2 for a in range(2))
+                    vr_law, _ = point_mass_law(fractions, vr_in, vo_in)
                     equal_unless(model, c.velocity_start(k), vr_law, miss, m_rob, "impact law")
                 # the box centre obeys Eq. (5) with the nominal robot (the mean of the copies)
                 nominal_in = r.nominal.velocity_end(k - 1)
-                vo_law = tuple(nominal_in[a] * m3 + o.velocity(k - 1)[a] * m4 for a in range(2))
+                _, vo_law = point_mass_law(fractions, nominal_in, o.velocity(k - 1))
                 equal_unless(model, o.velocity(k), vo_law, miss, m_obj, "impact law")
                 cross = tuple(sum((v[a] * float(s_p * s_v) for v, (s_p, s_v) in zip(v_in, SIGNS)), LinExpr())
                               for a in range(2))

@@ -1,12 +1,8 @@
-"""Impact assignment, the point-mass impact law and conditional smoothness (paper Eq. 5, 10, 13-14, 23-24).
+"""Impact assignment, the impact law's encoding and conditional smoothness (paper Eq. 5, 10, 13-14, 23-24).
 
 A binary z[R, O, k] says that robot R hits object O at knot k (interior knots only). Where z = 1 the
 positions coincide (Assumption 1: point masses) and the post-impact velocities follow Eq. (5) in REAL
-velocities, which on the common time grid are linear in the control points:
-
-    v_O+ = m3 v_R- + m4 v_O-,     v_R+ = m1 v_R- + m2 v_O-
-    m1 = (m_R - e m_O) / (m_R + m_O),  m2 = (1 + e) m_O / (m_R + m_O),
-    m3 = (1 + e) m_R / (m_R + m_O),    m4 = (m_O - e m_R) / (m_R + m_O).
+velocities (:mod:`planners.impact_law`), which on the common time grid are linear in the control points.
 
 Where no impact involves a body at a knot its velocity is continuous (Eq. 13-14, 23). Every big-M is the
 range of the expression it relaxes, from the world box and the velocity bounds.
@@ -19,8 +15,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from planners.impact_law import Fractions, mass_fractions, point_mass_law
 from planners.offline.milp.model import LinExpr, Model
-from planners.offline.milp.trajectories import ObjectTrajectory, Point, RobotTrajectory, velocity_bound
+from planners.offline.milp.trajectories import ObjectTrajectory, RobotTrajectory, velocity_bound
+
+__all__ = ["ImpactVars", "add_impacts", "add_object_smoothness", "add_robot_smoothness", "equal_unless",
+           "impact_binaries", "law_big_m", "mass_fractions", "point_mass_law"]
 
 
 @dataclass
@@ -32,12 +32,6 @@ class ImpactVars:
     def at(self, robot: str | None = None, obj: str | None = None, knot: int | None = None) -> list[LinExpr]:
         return [v for (r, o, k), v in self.z.items()
                 if (robot is None or r == robot) and (obj is None or o == obj) and (knot is None or k == knot)]
-
-
-def mass_fractions(m_r: float, m_o: float, e: float) -> tuple[float, float, float, float]:
-    """(m1, m2, m3, m4) of Eq. (5)."""
-    s = m_r + m_o
-    return (m_r - e * m_o) / s, (1 + e) * m_o / s, (1 + e) * m_r / s, (m_o - e * m_r) / s
 
 
 def impact_binaries(model: Model, robots: list[RobotTrajectory], objects: list[ObjectTrajectory]) -> ImpactVars:
@@ -81,15 +75,7 @@ def add_object_smoothness(model: Model, o: ObjectTrajectory, iv: ImpactVars) -> 
         equal_unless(model, o.velocity(k), o.velocity(k - 1), hit, [2 * vo[0], 2 * vo[1]], "object smoothness")
 
 
-def point_mass_law(fractions: tuple[float, float, float, float], vr_in: Point, vo_in: Point) -> tuple[Point, Point]:
-    """Eq. (5) per axis: (robot, object) velocities after the impact from those before, in real units."""
-    m1, m2, m3, m4 = fractions
-    vr_out = tuple(vr_in[a] * m1 + vo_in[a] * m2 for a in range(2))
-    vo_out = tuple(vr_in[a] * m3 + vo_in[a] * m4 for a in range(2))
-    return vr_out, vo_out
-
-
-def law_big_m(fractions: tuple[float, float, float, float], vr: tuple[float, float],
+def law_big_m(fractions: Fractions, vr: tuple[float, float],
               vo: tuple[float, float]) -> tuple[list[float], list[float]]:
     """Per-axis ranges of (robot, object) post-impact velocity minus its law value, from the velocity
     bounds: the big-Ms of the impact-law rows."""

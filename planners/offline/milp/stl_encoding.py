@@ -1,23 +1,14 @@
 """Compile an STL syntax tree (impact_env.stl) into mixed-integer constraints (paper Eq. 21-22).
 
-The tree is first put in negation normal form (negations pushed onto predicates). Robustness is then
-encoded one-sidedly, which is exact at the optimum because the planner maximises it: ``r <= min(...)`` is a
-set of plain rows, ``r <= max(...)`` picks one child with binaries and big-M rows. Predicates are evaluated
-on a whole grid interval through the control points of the body's curve there (convex hull property):
-
-- ``in(S, R)`` on interval k:   r <= b_f - h_f . p   for every face f of R and control point p  (Eq. 21)
-- ``!in(S, R)`` on interval k:  some face f with r <= h_f . p - b_f for every control point p     (Eq. 22)
-
-so an interval's robustness never exceeds that of any point on it (sound, conservative). A body's points
-may also be given as a :class:`PointProduct`, every (x, y) with x from one list and y from another (the
-impact-robust planner's robot copies and object boxes, whose coordinates vary independently): for a face
-with normal (n_x, n_y) the extreme of n . p over the product is the sum of the extremes of n_x x and n_y y,
-so one auxiliary per axis replaces the |xs| |ys| rows exactly, and an axis-aligned face needs no auxiliary at
-all. Temporal
-operators are evaluated at t = 0 over the grid intervals that meet their window: F picks one, G takes all,
-U picks one interval for the right operand and requires the left one on it and on every earlier interval.
-On the fixed grid these time gates are known when the model is built and need no binaries. Temporal
-operators nested inside temporal operators are rejected with :class:`UnsupportedSpecError`.
+The tree is first put in negation normal form. Robustness is encoded one-sidedly, which is exact at the
+optimum because the planner maximises it: ``r <= min(...)`` is a set of plain rows, ``r <= max(...)`` picks
+one child with binaries and big-M rows. Predicates are evaluated on a whole grid interval through the control
+points of the body's curve there (convex hull property: sound, conservative), ``in(S, R)`` per face of R
+(Eq. 21) and ``!in(S, R)`` by one face chosen with binaries (Eq. 22). A body's points may be a
+:class:`PointProduct` (the impact-robust planner's copies and boxes), encoded exactly with one auxiliary per
+axis. Temporal operators are evaluated at t = 0 over the grid intervals that meet their window, with time
+gates known when the model is built; temporal operators nested inside temporal operators are rejected with
+:class:`UnsupportedSpecError`. The encoding in full: ``docs/planner_design.md#stl-encoding``.
 """
 
 from __future__ import annotations

@@ -1,18 +1,15 @@
 """Decision variables of the bodies' trajectories on the planner's time grid, and their kinematics.
 
-The planner uses ONE time grid for all bodies: N intervals of equal duration dt = tf / N, knots
-t_k = k dt. On interval k a robot is a degree-d Bezier curve (control points are variables) and an object
-a straight segment between its knot positions. Why a fixed grid: an impact law in real velocities needs
-the time-curve derivatives dh/ds of the four segments meeting at an impact to be equal
-(docs/background.md, item 2), and a free-flying object needs equal durations on both
-sides of every knot it crosses without an impact, so object segments all end up with one fixed duration
-anyway. Putting the robots on the same grid then makes every kinematic condition linear and EXACT:
+The planner uses ONE time grid for all bodies: N intervals of equal duration dt = tf / N, knots t_k = k dt.
+On interval k a robot is a degree-d Bezier curve (control points are variables) and an object a straight
+segment between its knot positions. On a fixed grid every kinematic condition is linear and EXACT:
 
 - velocity   dr/dt = r'(s) / dt          -> |d (r^(i+1) - r^(i))| <= v_max dt            (Eq. 25)
 - accel.     d2r/dt2 = r''(s) / dt^2      -> |d (d-1) (r^(i+2) - 2 r^(i+1) + r^(i))| <= a_max dt^2
 
 so plans respect the robots' thrust limits, which the paper's variable time curves cannot bound linearly.
-Impacts happen at knots; the grid resolution is a planner option.
+Impacts happen at knots; the grid resolution is a planner option. Why one fixed grid:
+``docs/planner_design.md#time-grid-and-trajectories``.
 """
 
 from __future__ import annotations

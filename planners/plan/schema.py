@@ -8,7 +8,7 @@ lists them all. A new field is one new row; a new kind of value is one new reade
 ``(value, where, problems) -> value``, appending to ``problems`` and returning :data:`INVALID` on failure).
 
 An impact-robust plan adds ``delta_mps``, ``funnels`` (per object, :data:`FUNNEL_FIELDS`) and ``copies``
-(per impact, :data:`COPIES_FIELDS`); :mod:`planners.funnels` says what they mean.
+(per impact, :data:`COPIES_FIELDS`); :mod:`planners.plan.funnels` says what they mean.
 
 Limits: times in [0, :data:`MAX_TIME_S`] s, coordinates and velocities within +-:data:`MAX_COORDINATE_M`,
 Bezier degree 1.. :data:`MAX_DEGREE` (the planner writes 1 for objects and 2..8 for robots), ``stats`` nested at
@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from impact_env.config_checks import brief
 from impact_env.geometry import MAX_COORDINATE_M
 from impact_env.limits import MAX_TF_S
 
@@ -40,14 +41,6 @@ Reader = Callable[[Any, str, list[str]], Any]
 class Field:
     read: Reader
     default: Any = INVALID  # INVALID: the field is required
-
-
-def _brief(value: Any) -> str:
-    try:
-        text = repr(value)
-    except (ValueError, RecursionError):  # an integer of thousands of digits; a list nested thousands deep
-        return f"a {type(value).__name__}"
-    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def read(data: Any, fields: dict[str, Field], where: str, problems: list[str]) -> dict[str, Any] | object:
@@ -80,14 +73,14 @@ def _at(where: str, key: str) -> str:
 
 def number(value: Any, where: str, problems: list[str], low: float = -math.inf, high: float = math.inf) -> Any:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        problems.append(f"{where} must be a number, got {_brief(value)}")
+        problems.append(f"{where} must be a number, got {brief(value)}")
         return INVALID
     try:
         x = float(value)
     except OverflowError:
         x = math.inf
     if not (math.isfinite(x) and low <= x <= high):
-        problems.append(f"{where} must be a finite number in [{low:g}, {high:g}], got {_brief(value)}")
+        problems.append(f"{where} must be a finite number in [{low:g}, {high:g}], got {brief(value)}")
         return INVALID
     return x
 
@@ -102,21 +95,21 @@ def non_negative(value: Any, where: str, problems: list[str]) -> Any:
 
 def text(value: Any, where: str, problems: list[str]) -> Any:
     if not isinstance(value, str) or len(value) > 1000:
-        problems.append(f"{where} must be a string (at most 1000 characters), got {_brief(value)}")
+        problems.append(f"{where} must be a string (at most 1000 characters), got {brief(value)}")
         return INVALID
     return value
 
 
 def name(value: Any, where: str, problems: list[str]) -> Any:
     if not isinstance(value, str) or not value.isidentifier() or len(value) > 100:
-        problems.append(f"{where} must be a name made of letters, digits and _, got {_brief(value)}")
+        problems.append(f"{where} must be a name made of letters, digits and _, got {brief(value)}")
         return INVALID
     return value
 
 
 def vec2(value: Any, where: str, problems: list[str]) -> Any:
     if not isinstance(value, (list, tuple)) or len(value) != 2:
-        problems.append(f"{where} must be a list of 2 numbers [x, y], got {_brief(value)}")
+        problems.append(f"{where} must be a list of 2 numbers [x, y], got {brief(value)}")
         return INVALID
     xy = [number(v, f"{where}[{i}]", problems, -MAX_COORDINATE_M, MAX_COORDINATE_M) for i, v in enumerate(value)]
     return INVALID if INVALID in xy else (xy[0], xy[1])
@@ -124,7 +117,7 @@ def vec2(value: Any, where: str, problems: list[str]) -> Any:
 
 def body_kind(value: Any, where: str, problems: list[str]) -> Any:
     if value not in BODY_KINDS or not isinstance(value, str):
-        problems.append(f"{where} must be one of {', '.join(map(repr, BODY_KINDS))}, got {_brief(value)}")
+        problems.append(f"{where} must be one of {', '.join(map(repr, BODY_KINDS))}, got {brief(value)}")
         return INVALID
     return value
 
@@ -132,7 +125,7 @@ def body_kind(value: Any, where: str, problems: list[str]) -> Any:
 def control_points(value: Any, where: str, problems: list[str]) -> Any:
     """(degree + 1, 2) coordinates, degree 1..MAX_DEGREE."""
     if not isinstance(value, list) or not 2 <= len(value) <= MAX_DEGREE + 1:
-        got = f"{len(value)} points" if isinstance(value, list) else _brief(value)
+        got = f"{len(value)} points" if isinstance(value, list) else brief(value)
         problems.append(f"{where} must be a list of 2 to {MAX_DEGREE + 1} points [x, y] "
                         f"(Bezier degree 1..{MAX_DEGREE}), got {got}")
         return INVALID
@@ -142,7 +135,7 @@ def control_points(value: Any, where: str, problems: list[str]) -> Any:
 
 def time_pair(value: Any, where: str, problems: list[str]) -> Any:
     if not isinstance(value, list) or len(value) != 2:
-        problems.append(f"{where} must be [t0_s, t1_s], got {_brief(value)}")
+        problems.append(f"{where} must be [t0_s, t1_s], got {brief(value)}")
         return INVALID
     pair = [time_s(v, f"{where}[{i}]", problems) for i, v in enumerate(value)]
     return INVALID if INVALID in pair else tuple(pair)
@@ -159,7 +152,7 @@ def json_data(value: Any, where: str, problems: list[str]) -> Any:
         if isinstance(item, dict):
             for k, v in item.items():
                 if not isinstance(k, str):
-                    problems.append(f"{at} has a non-string key {_brief(k)}")
+                    problems.append(f"{at} has a non-string key {brief(k)}")
                     return INVALID
                 pending.append((v, f"{at}.{k}", depth + 1))
         elif isinstance(item, list):
@@ -231,7 +224,7 @@ IMPACT_FIELDS: dict[str, Field] = {
 def positive(value: Any, where: str, problems: list[str]) -> Any:
     x = number(value, where, problems, 0.0, MAX_COORDINATE_M)
     if x is not INVALID and x <= 0.0:
-        problems.append(f"{where} must be > 0, got {_brief(value)}")
+        problems.append(f"{where} must be > 0, got {brief(value)}")
         return INVALID
     return x
 
@@ -243,7 +236,7 @@ def optional_non_negative(value: Any, where: str, problems: list[str]) -> Any:
 def positive_pair(value: Any, where: str, problems: list[str]) -> Any:
     xy = vec2(value, where, problems)
     if xy is not INVALID and min(xy) <= 0.0:
-        problems.append(f"{where} must be two numbers > 0 (half-widths), got {_brief(value)}")
+        problems.append(f"{where} must be two numbers > 0 (half-widths), got {brief(value)}")
         return INVALID
     return xy
 
@@ -251,7 +244,7 @@ def positive_pair(value: Any, where: str, problems: list[str]) -> Any:
 def halfwidths(value: Any, where: str, problems: list[str]) -> Any:
     """A non-empty list of [x, y] half-widths >= 0."""
     if not isinstance(value, list) or not value:
-        problems.append(f"{where} must be a non-empty list of [x, y] half-widths, got {_brief(value)}")
+        problems.append(f"{where} must be a non-empty list of [x, y] half-widths, got {brief(value)}")
         return INVALID
     rows = [vec2(v, f"{where}[{i}]", problems) for i, v in enumerate(value)]
     if INVALID in rows:
@@ -267,7 +260,7 @@ def sign_pairs(value: Any, where: str, problems: list[str]) -> Any:
     if not isinstance(value, list) or len(value) != 4 or any(
             not isinstance(p, list) or len(p) != 2 or any(type(v) is not int or v not in (-1, 1) for v in p)
             for p in value):
-        problems.append(f"{where} must be four pairs [s_p, s_v] of -1 or 1, got {_brief(value)}")
+        problems.append(f"{where} must be four pairs [s_p, s_v] of -1 or 1, got {brief(value)}")
         return INVALID
     return [tuple(p) for p in value]
 
@@ -275,12 +268,12 @@ def sign_pairs(value: Any, where: str, problems: list[str]) -> Any:
 def copy_curves(value: Any, where: str, problems: list[str]) -> Any:
     """Four copies, each a non-empty list of segments' control points of one shape."""
     if not isinstance(value, list) or len(value) != 4:
-        problems.append(f"{where} must be a list of 4 copies, got {_brief(value)}")
+        problems.append(f"{where} must be a list of 4 copies, got {brief(value)}")
         return INVALID
     out = []
     for j, curve in enumerate(value):
         if not isinstance(curve, list) or not curve:
-            problems.append(f"{where}[{j}] must be a non-empty list of segments, got {_brief(curve)}")
+            problems.append(f"{where}[{j}] must be a non-empty list of segments, got {brief(curve)}")
             return INVALID
         segs = [control_points(c, f"{where}[{j}][{i}]", problems) for i, c in enumerate(curve)]
         if any(s is INVALID for s in segs):
@@ -326,7 +319,7 @@ PLAN_FIELDS: dict[str, Field] = {
     "stats": Field(json_data, {}),
     "impacts": Field(table_list(IMPACT_FIELDS, non_empty=False)),
     "bodies": Field(table_map(BODY_FIELDS)),
-    # impact-robust plans only (planners.funnels)
+    # impact-robust plans only (planners.plan.funnels)
     "delta_mps": Field(optional_non_negative, None),
     "funnels": Field(table_map(FUNNEL_FIELDS), {}),
     "copies": Field(table_list(COPIES_FIELDS, non_empty=False), []),

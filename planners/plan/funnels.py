@@ -1,13 +1,11 @@
-"""What an impact-robust plan adds to a :class:`~planners.plan.Plan`: the objects' funnels and the robots' copies.
+"""The maths of an impact-robust plan's funnels and copies, and the check of its guarantee.
 
-- :class:`ObjectFunnel`: per object, the half-widths of its state box on the plan's time grid (position at
-  every knot, velocity on every interval) around its nominal trajectory, and the final box it must end in.
-- :class:`ImpactCopies`: per planned impact, Lemma 1's four copies of the impacting robot's curve on the
-  interval before the impact and the one after it. Copy j reaches the object's box vertex with signs
-  ``signs[j] = (s_p, s_v)`` on each axis (x copy and y copy paired). They are contingency plans: for an
-  object at normalised box coordinates xi = (p - p_nominal) / h_p, (v - v_nominal) / h_v (per axis, in
-  [-1, 1]) the robot flies their multilinear blend (:meth:`ImpactCopies.blend`), which meets the object and
-  sends it off with the planned feedback velocity.
+An object's funnel (:class:`~planners.plan.types.ObjectFunnel`) is its state box on the plan's time grid;
+an impact's copies (:class:`~planners.plan.types.ImpactCopies`) are Lemma 1's four curves of the impacting
+robot, copy j reaching the object's box vertex with signs ``signs[j] = (s_p, s_v)`` on each axis. For an
+object at normalised box coordinates xi = (p - p_nominal) / h_p, (v - v_nominal) / h_v (per axis, in
+[-1, 1]) the robot flies their multilinear blend, which meets the object and sends it off with the planned
+feedback velocity.
 
 :func:`check_impact_robust` re-derives the guarantee from these numbers alone (no solver): each copy's
 contact and the point-mass law (Eq. 5) at its vertex, limits, the copies' sharing with the nominal curve,
@@ -16,120 +14,19 @@ the affine feedback, and the box propagation (Eq. 17-19) that the recorded half-
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from planners import bezier
+from planners.impact_law import mass_fractions
+from planners.plan.types import BodyPlan, ImpactCopies, ObjectFunnel, PlanLike
 
 if TYPE_CHECKING:
     from impact_env.scenario import Scenario
-    from planners.plan import BodyPlan, Plan
 
-
-@dataclass
-class ObjectFunnel:
-    """The object's state box on the grid t_k = t0_s + k dt_s, k = 0..N, around its nominal plan.
-
-    position_halfwidth_m: (N + 1, 2), per knot and axis. velocity_halfwidth_mps: (N, 2), per interval and
-    axis (the velocity is constant on an interval). final_box_m / final_box_mps: the half-widths the final
-    state must stay within (the scenario's ``[final_box]``): the residual velocity the task tolerates.
-    """
-
-    object: str
-    t0_s: float
-    dt_s: float
-    position_halfwidth_m: np.ndarray
-    velocity_halfwidth_mps: np.ndarray
-    final_box_m: tuple[float, float]
-    final_box_mps: tuple[float, float]
-
-    @property
-    def intervals(self) -> int:
-        return len(self.velocity_halfwidth_mps)
-
-    @property
-    def knots_s(self) -> np.ndarray:
-        return self.t0_s + self.dt_s * np.arange(self.intervals + 1)
-
-    @property
-    def terminal_velocity_halfwidth_mps(self) -> np.ndarray:
-        """The planned final velocity spread (<= ``final_box_mps``): the residual the plan accounts for."""
-        return np.asarray(self.velocity_halfwidth_mps[-1])
-
-    def position_halfwidth(self, t: np.ndarray | float) -> np.ndarray:
-        """Position half-widths at time(s) t, linear between knots: a bound, since a zonotope's half-width
-        sum |g_p + tau g_v| is convex in the flight time tau."""
-        t = np.asarray(t, dtype=float)
-        knots = self.knots_s
-        return np.stack([np.interp(t, knots, self.position_halfwidth_m[:, a]) for a in range(2)], axis=-1)
-
-    def velocity_halfwidth(self, t: np.ndarray | float) -> np.ndarray:
-        """Velocity half-widths at time(s) t (right-continuous at knots, like the plan's velocities)."""
-        t = np.asarray(t, dtype=float)
-        k = np.clip(np.floor((t - self.t0_s) / self.dt_s + 1e-9).astype(int), 0, self.intervals - 1)
-        return np.asarray(self.velocity_halfwidth_mps)[k]
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"t0_s": self.t0_s, "dt_s": self.dt_s,
-                "position_halfwidth_m": np.asarray(self.position_halfwidth_m).tolist(),
-                "velocity_halfwidth_mps": np.asarray(self.velocity_halfwidth_mps).tolist(),
-                "final_box_m": list(self.final_box_m), "final_box_mps": list(self.final_box_mps)}
-
-    @classmethod
-    def from_dict(cls, name: str, d: dict[str, Any]) -> ObjectFunnel:
-        return cls(name, float(d["t0_s"]), float(d["dt_s"]), np.array(d["position_halfwidth_m"], dtype=float),
-                   np.array(d["velocity_halfwidth_mps"], dtype=float), tuple(map(float, d["final_box_m"])),
-                   tuple(map(float, d["final_box_mps"])))
-
-
-@dataclass
-class ImpactCopies:
-    """The four copies of ``robot``'s curve around its impact with ``object`` at ``time_s``.
-
-    The copies may differ on a window of grid intervals: ``before[j]`` (shape (W_before, degree + 1, 2)) are
-    copy j's control points on the intervals that end at the impact, from ``window_start_s``; ``after[j]``
-    (W_after, degree + 1, 2) those on the intervals that start at it, to ``window_end_s``. signs[j]:
-    (s_p, s_v), the box vertex copy j meets on each axis. Outside the window the copies are the nominal curve.
-    """
-
-    time_s: float
-    robot: str
-    object: str
-    window_start_s: float
-    window_end_s: float
-    signs: list[tuple[int, int]]
-    before: list[np.ndarray]
-    after: list[np.ndarray]
-
-    def weights(self, xi: np.ndarray) -> np.ndarray:
-        """Blend weights (4, 2) per copy and axis for the object's normalised pre-impact box coordinates
-        ``xi`` = [[xi_p_x, xi_v_x], [xi_p_y, xi_v_y]] (multilinear; clipped to [-1, 1])."""
-        xi = np.clip(np.asarray(xi, dtype=float).reshape(2, 2), -1.0, 1.0)
-        s = np.asarray(self.signs, dtype=float)  # (4, 2): s_p, s_v
-        return np.stack([(1 + s[:, 0] * xi[a, 0]) * (1 + s[:, 1] * xi[a, 1]) / 4.0 for a in range(2)], axis=1)
-
-    def blend(self, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Control points (before, after), shapes as one copy's, of the blend for box coordinates ``xi``."""
-        w = self.weights(xi)
-        out = []
-        for part in (np.asarray(self.before), np.asarray(self.after)):  # (4, W, d + 1, 2)
-            out.append(np.stack([np.einsum("j,jsk->sk", w[:, a], part[..., a]) for a in range(2)], axis=-1))
-        return out[0], out[1]
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"time_s": self.time_s, "robot": self.robot, "object": self.object,
-                "window_start_s": self.window_start_s, "window_end_s": self.window_end_s,
-                "signs": [list(s) for s in self.signs],
-                "before": [np.asarray(b).tolist() for b in self.before],
-                "after": [np.asarray(a).tolist() for a in self.after]}
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> ImpactCopies:
-        return cls(float(d["time_s"]), str(d["robot"]), str(d["object"]), float(d["window_start_s"]),
-                   float(d["window_end_s"]), [tuple(int(v) for v in s) for s in d["signs"]],
-                   [np.array(b, dtype=float) for b in d["before"]], [np.array(a, dtype=float) for a in d["after"]])
+__all__ = ["ImpactCopies", "ObjectFunnel", "box_coordinates", "check_impact_robust", "copy_targets", "feedback",
+           "pre_velocity_of", "propagate"]
 
 
 # ------------------------------------------------------------------------------------------------- check
@@ -145,10 +42,8 @@ def _velocity(cps: np.ndarray, duration: float, end: bool) -> np.ndarray:
     return d * (cps[-1] - cps[-2] if end else cps[1] - cps[0]) / duration
 
 
-def check_impact_robust(plan: Plan, scenario: Scenario, tol: float) -> list[str]:
+def check_impact_robust(plan: PlanLike, scenario: Scenario, tol: float) -> list[str]:
     """The violations of an impact-robust plan's guarantee (empty if none); see the module docstring."""
-    from planners.offline.milp.impacts import mass_fractions
-
     bad: list[str] = []
     delta = plan.delta_mps
     if delta is None or not np.isfinite(delta) or delta < 0:
@@ -264,7 +159,7 @@ def check_impact_robust(plan: Plan, scenario: Scenario, tol: float) -> list[str]
     return bad
 
 
-def box_coordinates(plan: Plan, c: ImpactCopies, position: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+def box_coordinates(plan: PlanLike, c: ImpactCopies, position: np.ndarray, velocity: np.ndarray) -> np.ndarray:
     """The object's normalised pre-impact box coordinates xi = [[xi_p_x, xi_v_x], [xi_p_y, xi_v_y]] at the
     impact of ``c`` for its state (position at the impact, velocity just before): 0 at the nominal, +-1 on
     the box faces (a zero half-width gives 0: that coordinate is known)."""
@@ -278,10 +173,8 @@ def box_coordinates(plan: Plan, c: ImpactCopies, position: np.ndarray, velocity:
     return np.stack([xi_p, xi_v], axis=1)
 
 
-def copy_targets(c: ImpactCopies, plan: Plan, scenario: Scenario) -> np.ndarray:
+def copy_targets(c: ImpactCopies, plan: PlanLike, scenario: Scenario) -> np.ndarray:
     """(4, 2): the velocity each copy sends its box vertex off with, by Eq. (5) (before the noise)."""
-    from planners.offline.milp.impacts import mass_fractions
-
     funnel, obj = plan.funnels[c.object], plan.bodies[c.object]
     k = int(round((c.time_s - funnel.t0_s) / funnel.dt_s))
     _, _, m3, m4 = mass_fractions(scenario.body(c.robot).mass_kg, scenario.body(c.object).mass_kg,
@@ -291,7 +184,7 @@ def copy_targets(c: ImpactCopies, plan: Plan, scenario: Scenario) -> np.ndarray:
                      for b, (_, s_v) in zip(c.before, c.signs)])
 
 
-def feedback(plan: Plan, scenario: Scenario) -> dict[str, dict[int, tuple[np.ndarray, np.ndarray]]]:
+def feedback(plan: PlanLike, scenario: Scenario) -> dict[str, dict[int, tuple[np.ndarray, np.ndarray]]]:
     """Per object and impact knot, the copies' feedback (A, B) per axis: the object leaves the impact with
     v_nominal + A xi_p + B xi_v (+ the error) for normalised pre-impact box coordinates xi."""
     out: dict[str, dict[int, tuple[np.ndarray, np.ndarray]]] = {name: {} for name in plan.funnels}
@@ -333,7 +226,7 @@ def pre_velocity_of(body: BodyPlan, t: float) -> np.ndarray:
 
 
 def _check_propagation(funnel: ObjectFunnel, spec, scenario: Scenario, delta: float,
-                       fb: dict[int, tuple[np.ndarray, np.ndarray]], plan: Plan, tol: float) -> list[str]:
+                       fb: dict[int, tuple[np.ndarray, np.ndarray]], plan: PlanLike, tol: float) -> list[str]:
     """Eq. (17-19) re-run from the copies' feedback: the recorded half-widths must contain the zonotope, and
     the box must stay in the world, within the velocity bounds and end in the final box."""
     bad = []

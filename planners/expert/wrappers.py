@@ -6,7 +6,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from planners.expert import Expert
+from planners.expert.expert import Expert
 
 
 class ExpertActionInfo(gym.Wrapper):

@@ -1,7 +1,7 @@
 """Plan files: the JSON that :class:`planners.plan.Plan` and :class:`planners.tether.plan.TetherPlan` are saved
 as, written and read the same way for both; reading, every way it can fail is a typed error with the path.
 
-Each plan type makes and checks its own fields (:mod:`planners.plan_schema`, ``TetherPlan.from_dict``); what
+Each plan type makes and checks its own fields (:mod:`planners.plan.schema`, ``TetherPlan.from_dict``); what
 they share is getting between a path and a JSON value, without a traceback from the file system or the parser.
 """
 

@@ -13,7 +13,6 @@ each constraint family.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -22,6 +21,7 @@ import numpy as np
 from impact_env.scenario import Scenario
 from planners.offline.common import DEFAULT_DEGREE, DEFAULT_INTERVALS, add_obstacle_clearance, check_common_options
 from planners.offline.common import encode_task as _encode_task
+from planners.offline.config import PlannerConfig
 from planners.offline.milp.collisions import add_robot_object_separation, add_robot_separation
 from planners.offline.milp.impacts import ImpactVars, add_impacts
 from planners.offline.milp.model import LinExpr, Model
@@ -35,68 +35,11 @@ from planners.offline.milp.trajectories import (
     allowed_box,
     value,
 )
-from planners.offline.solvers.base import Progress
 from planners.offline.stages import StagedModel, solve_to_plan
 from planners.plan import BodyPlan, Plan, PlannedImpact, Segment
 
 __all__ = ["DEFAULT_DEGREE", "DEFAULT_INTERVALS", "BuiltModel", "PlannerConfig", "build_model", "extract_plan",
            "plan_spatially_robust"]
-
-@dataclass
-class PlannerConfig:
-    """Options of the spatially robust planner.
-
-    The solve is lexicographic: (1) maximise rho; (2) with rho kept, minimise the number of impacts plus
-    the L1 acceleration (Eq. 28), warm-started, for at most ``refine_nodes`` branch-and-bound nodes (0 skips
-    it, None: no limit; ``refine_time_s`` is only a safety net); (3) with the
-    binaries fixed, an LP with the stage-2 objective, or with ``smooth`` a convex QP minimising squared
-    accelerations (Eq. 28). The QP is off by default: HiGHS's QP solver takes 1-30 s on these models, 10x
-    the MILP, and stage 2 already minimises the L1 acceleration.
-
-    Stage 2 rarely proves its optimum quickly (obstacle_avoidance: gap 0.68 after 60 s), so it must be cut
-    short. It is cut by a node count, not by time. Under the former 5 s time limit the incumbent it
-    stopped at, and so the plan the expert flies, depended on how busy the machine was: obstacle_avoidance
-    came out with a different plan with every core busy, and the corridor's stage 2 needs 4.5 s of the 5 s
-    when the machine is idle. A node limit is the same work on every machine, so the same scenario and
-    config give the same plan. On all three scenarios the incumbent after 20 nodes is as good as the best
-    one found in 60 s (``benchmarks/planner_stage2.py``).
-
-    intervals / robot_degree: the time grid and the robots' curve degree (default: the scenario's
-    ``[planner]`` hints, else 10 and 4). thrust_fraction: share of each robot's thrust limit the plan may
-    use (the rest is the controller's margin). robot_object_separation: keep robots' discs off objects'
-    discs except on the intervals next to their impacts (off by default, as in the paper: it is
-    conservative over whole intervals, can make short tasks infeasible, and costs ~10x solve time; the
-    controller keeps robots off objects instead). acceleration_weight: the L1 acceleration cost is scaled so
-    that it can move rho by at most this many metres in stage 1 (a tie-break below the MIP gap).
-    impact_weight: the same for the impact count. smooth: run the QP smoothing stage. solver,
-    time_limit_s, mip_gap, threads, verbose, seed, progress: passed to the solver. node_limit:
-    branch-and-bound nodes of the robustness stage (None: no limit; the mission replanner's budget).
-    warm_start: a previous plan on the same grid to start from. bound_propagation: give every robustness
-    variable its exact upper bound (off only to measure what it buys, see benchmarks/planner.py).
-    """
-
-    intervals: int | None = None
-    robot_degree: int | None = None
-    thrust_fraction: float = 0.5
-    acceleration_weight: float = 1e-6
-    impact_weight: float = 1e-6
-    refine_nodes: int | None = 20
-    refine_time_s: float = 60.0
-    smooth: bool = False
-    obstacle_clearance: bool = True
-    robot_object_separation: bool = False
-    solver: str = "highs"
-    time_limit_s: float | None = 60.0
-    node_limit: int | None = None
-    mip_gap: float = 1e-4
-    threads: int | None = None
-    verbose: bool = False
-    seed: int = 0
-    progress: Callable[[Progress], None] | None = None
-    warm_start: Plan | None = None
-    diagnose_infeasibility: bool = True
-    bound_propagation: bool = True
-
 
 @dataclass
 class BuiltModel:

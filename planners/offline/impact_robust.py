@@ -5,40 +5,17 @@
 
 Maximises delta, the post-impact velocity error (per axis, at every robot-object impact) that the plan
 tolerates: for every such error the task still holds and every object ends inside its final box
-(``[final_box]`` in the scenario; default :data:`DEFAULT_FINAL_BOX`). What is shared with the spatially
-robust planner is shared, not copied: the time grid (``common.py``), the robots' Bezier curves, velocity
-bounds and thrust limits (``milp/trajectories.py``), the point-mass impact law in real velocities with the
-scenario's restitution (``milp/impacts.py``), the STL and obstacle encoding (``milp/stl_encoding.py``),
-robot separation (``milp/collisions.py``), the solver backends and the lexicographic stages cut by nodes
-(``stages.py``). What is new:
-
-- the object's state is a set: a zonotope per axis, whose box grows by free flight and is reset by every
-  impact (``milp/boxes.py``, Eq. 17-19); its box, not a point, must satisfy the task's predicates (every
-  corner inside a goal, the whole box beyond an obstacle face) and end inside the final box;
-- each robot is four copies that reach the box's vertices (Lemma 1, in the exact per-axis form of
-  ``milp/copies.py``); copies keep the thrust and velocity limits, the task and the obstacle clearance;
-- the post-impact velocity may depend on where in its box the object was hit (affine feedback through the
-  copies), so an impact can steer the position spread back in: a later trimming impact narrows the funnel.
-
-Why the encoding is exact: the guarantee is a universally quantified statement over the object's states,
-and every step of its encoding is either linear (free flight on the fixed grid, the impact law, the box of
-a zonotope, the product sets of predicates) or a disjunction decided by an existing binary (which impact is
-last, which face) with a big-M equal to the range of what it relaxes. No product of variables appears:
-delta, the half-widths and the feedback gains enter linearly. The only conservatism is the interval hull
-(Eq. 3) taken at each impact, as in the paper. The guarantee is checked by sampling in
-``tests/test_ir_planner.py``.
-
-Not as the paper's code does it (docs/background.md#impact-robust): the scenario's restitution in the law (not e = 1),
-a position spread that no impact removes (an impact resets only the velocity spread; the position spread
-shrinks only through feedback and time), thrust limits, big-Ms from bounds, and no forced durations.
-
-Stages: (1) maximise delta alone (>= ``min_delta_mps``; tie-breaks in this objective halved HiGHS's node
-throughput), (2) keeping it, fewest impacts, cut at ``refine_nodes`` nodes, (3) with the binaries fixed,
-the LP that minimises the L1 acceleration of all copies (or the QP with ``smooth``).
+(``[final_box]`` in the scenario; default :data:`DEFAULT_FINAL_BOX`). It shares the spatially robust
+planner's grid, curves, impact law, STL encoding, solvers and stages. New are the object's state as a
+zonotope per axis (``milp/boxes.py``, Eq. 17-19) and each robot as four copies that reach the box's vertices
+(``milp/copies.py``, Lemma 1), with affine feedback through the copies. The encoding is exact up to the
+interval hull taken at each impact, as in the paper. Why, and how it differs from the paper's code:
+``docs/planner_design.md#impact-robust-planner``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from functools import partial
@@ -48,6 +25,7 @@ import numpy as np
 from impact_env.scenario import Scenario
 from planners.errors import PlannerError
 from planners.offline.common import add_obstacle_clearance, check_common_options, encode_task
+from planners.offline.config import DEFAULT_COPY_INTERVALS, DEFAULT_FINAL_BOX, IRPlannerConfig, PlannerConfig
 from planners.offline.milp.boxes import ObjectBox
 from planners.offline.milp.collisions import add_robot_separation
 from planners.offline.milp.copies import SIGNS, RobotCopies, add_copy_impacts
@@ -63,34 +41,8 @@ from planners.offline.milp.trajectories import (
     value,
     velocity_bound,
 )
-from planners.offline.sr_planner import PlannerConfig
 from planners.offline.stages import StagedModel, solve_to_plan
 from planners.plan import BodyPlan, ImpactCopies, ObjectFunnel, Plan, PlannedImpact, Segment
-
-DEFAULT_FINAL_BOX = (0.5, 0.05)  # position half-width (m), velocity half-width (m/s): the authors' default
-DEFAULT_COPY_INTERVALS = 2
-
-
-@dataclass
-class IRPlannerConfig(PlannerConfig):
-    """Options of the impact-robust planner: those of :class:`PlannerConfig` (grid, thrust share, stages,
-    solver) and
-
-    min_delta_mps: the smallest delta worth a plan (a task that cannot tolerate it is infeasible: the
-        final box is then smaller than the grid can trim to). default_final_box: (position_m,
-        velocity_mps) half-widths for objects without a ``[final_box]`` entry. copy_intervals: grid
-        intervals before and after an impact on which the robot's copies may differ (room to reach the box
-        vertices within the thrust limits; default: the scenario's ``[planner] copy_intervals``, else 2).
-        disjunctive_resets: the box resets in Balas' convex-hull form (False: big-M switching, the baseline
-        of ``benchmarks/planner.py``).
-    """
-
-    acceleration_weight: float = 0.0
-    impact_weight: float = 0.0
-    min_delta_mps: float = 1e-3
-    default_final_box: tuple[float, float] = DEFAULT_FINAL_BOX
-    copy_intervals: int | None = None
-    disjunctive_resets: bool = True
 
 
 @dataclass
@@ -126,11 +78,6 @@ def build_ir_model(scenario: Scenario, config: IRPlannerConfig) -> IRModel:
     """Build the MILP of the impact-robust planner (no solving)."""
     start = time.perf_counter()
     grid, degree = check_common_options(scenario, config)
-    if config.robot_object_separation:
-        raise PlannerError("robot_object_separation is not available with the impact-robust planner: the "
-                           "controller keeps robots off objects away from planned impacts")
-    if not config.min_delta_mps > 0:
-        raise PlannerError(f"min_delta_mps must be > 0, got {config.min_delta_mps}")
     n = grid.intervals
     model = Model(name=f"ir:{scenario.name}")
     allowed = {b.name: allowed_box(scenario, b) for b in scenario.bodies}
@@ -202,7 +149,7 @@ def plan_impact_robust(scenario: Scenario, config: IRPlannerConfig | None = None
     """
     config = config or IRPlannerConfig()
     if not isinstance(config, IRPlannerConfig):
-        config = IRPlannerConfig(**{k: getattr(config, k) for k in PlannerConfig.__dataclass_fields__})
+        config = IRPlannerConfig(**{f.name: getattr(config, f.name) for f in dataclasses.fields(PlannerConfig)})
     built = build_ir_model(scenario, config)
     return solve_to_plan(staged_model(built), config, scenario, partial(extract_ir_plan, scenario, built),
                          lambda plan: f"best delta {plan.delta_mps:.5f} m/s")
@@ -258,7 +205,7 @@ def extract_ir_plan(scenario: Scenario, built: IRModel, x: np.ndarray, solver: s
                 stats=stats, delta_mps=float(built.delta.value(x)), funnels=funnels, copies=copies)
     # the MILP bounds half-widths from below only: record the exact propagated spread, except for the box
     # the copies were built for at each impact (position at the impact knot, velocity on the interval before)
-    from planners.funnels import feedback, propagate
+    from planners.plan.funnels import feedback, propagate
 
     fb = feedback(plan, scenario)
     for name, funnel in funnels.items():

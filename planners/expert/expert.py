@@ -5,42 +5,35 @@ and what goes beyond the paper so that it still delivers when the world is not t
     obs, info = env.reset(seed=0); expert.reset()
     action = expert.act(obs, info)                          # the Gymnasium env's normalised action
 
-This module composes the online layer (``planners/online/``); each part has its own module:
-
-- impact bookkeeping (:mod:`~planners.online.bookkeeping`): which planned impacts the env has reported,
-  and every contact nobody planned, per pair;
-- identification (:mod:`~planners.online.identification`): each reported robot-object impact updates the
-  pair's restitution estimate, which the contact inverse uses for the next impacts;
-- mission replanning (:mod:`~planners.online.mission`): the predicted outcome of the plan's remainder is
-  monitored, and when it leaves the plan's tolerance the offline planner is re-run from the current state
-  over the remaining horizon, with the task progressed to now;
-- reference selection (:mod:`~planners.online.reference`): the replanner (Eq. 29) around each planned
-  impact, the plan elsewhere; its :class:`~planners.online.reference.ContactStrategy` is the plug-in point
-  for other plans (e.g. an impact-robust plan's robot copies);
-- safe segments (:mod:`~planners.online.keep_off`): replanned segments inside the world box, off the
-  obstacles and the other robots; MPC keep-offs for the nearest object, the other robots and the nearest
-  wall or obstacle face;
-- the MPC (:mod:`~planners.online.mpc`, Eq. 30-31) tracks the reference.
-
-Each part beyond the paper can be switched off in :class:`ExpertConfig`; ``ExpertConfig.paper()`` is the
-paper's stack (local replanning only). The expert uses only what the environment exposes: the observation
-(positions, velocities, headings, time left), the env's documented ``info["impacts"]``, and the episode's
-fixed facts from the scenario file (masses, radii, limits, the nominal restitution).
+It composes the online layer (``planners/online/``): impact bookkeeping, identification, mission
+replanning, reference selection (the replanner, Eq. 29, around each planned impact), safe segments and
+keep-offs, and the MPC (Eq. 30-31). Each part beyond the paper is an option of :class:`ExpertConfig`;
+``ExpertConfig.paper()`` is the paper's stack. The expert uses only what the environment exposes: the
+observation, the env's documented ``info["impacts"]`` and the scenario file's fixed facts (masses, radii,
+limits, the nominal restitution). What each part does: ``docs/expert_design.md``.
 """
 
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, InitVar, dataclass, field
 from typing import Any
 
 import numpy as np
 
+from impact_env.config_checks import (
+    NOT_GIVEN,
+    check_flag,
+    check_instance,
+    check_integer,
+    check_number,
+    fail,
+    warn_deprecated,
+)
 from impact_env.envs.core import ACTION_PER_ROBOT, OBS_PER_BODY
 from impact_env.scenario import Body, Scenario, load_scenario
 from planners.errors import PlannerError
-from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
+from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
 from planners.online.bookkeeping import ImpactBook
 from planners.online.identification import IdentificationConfig, ImpactIdentifier
 from planners.online.keep_off import boundary_keep_off, object_keep_off, robot_keep_off, segment_limits
@@ -50,53 +43,81 @@ from planners.online.reference import ContactStrategy, PlanContact, ReferenceSel
 from planners.plan import Plan
 
 
-@dataclass
+@dataclass(frozen=True)
 class ExpertConfig:
-    """Which parts of the expert run, and their margins.
+    """Which parts of the expert run, and their margins. An optional part is its config, or None when off.
 
-    ``identification``: estimate restitution online and use it in the contact inverse (else the scenario
-    file's value). ``mission_replanning``: monitor the plan's predicted outcome and re-plan the rest of the
-    mission when it leaves the tolerance (:class:`~planners.online.mission.MissionConfig`). ``safe_segments``:
-    replanned segments respect the world box, obstacles and other robots, and the MPC keeps off the other
-    robots and the nearest wall or obstacle face (else only the nearest object, as in the paper).
-    ``aim_final_position``: after an object's last planned impact, send it to its planned end position
-    rather than only at its planned velocity (:class:`~planners.online.reference.PlanContact`).
-    ``disc_offset``: before each approach, fly the plan shifted to where a disc (not the planner's point)
-    meets the object (:meth:`~planners.online.reference.ReferenceSelector._offset_toward`).
-    Margins (m) are added to the radii. ``replan_intervals``: the local replanner starts this many grid
-    intervals before an impact. ``contact_window_s``: from this long before a pending impact the keep-off on
-    its object is lifted. ``late_grace_s``: a planned impact not yet observed is still approached this long
-    after its time.
+    The old keywords ``identification=True/False``, ``identification_config=`` and ``mission_replanning=`` are
+    still accepted for one release, with a ``DeprecationWarning``: ``ExpertConfig(identification=False,
+    mission_replanning=False)`` is ``ExpertConfig(identification=None, mission=None)``.
     """
 
-    identification: bool = True
-    mission_replanning: bool = True
+    identification: IdentificationConfig | None = field(default_factory=IdentificationConfig)
+    """Estimate restitution online and use it in the contact inverse (:mod:`planners.online.identification`);
+    None: the scenario file's value."""
+    mission: MissionConfig | None = field(default_factory=MissionConfig)
+    """Monitor the plan's predicted outcome and re-plan the rest of the mission when it leaves the tolerance
+    (:mod:`planners.online.mission`); None: no mission replanning."""
     safe_segments: bool = True
+    """Replanned segments respect the world box, obstacles and other robots, and the MPC keeps off the other
+    robots and the nearest wall or obstacle face; False: only the nearest object, as in the paper."""
     aim_final_position: bool = True
+    """After an object's last planned impact, send it to its planned end position rather than only at its
+    planned velocity (:class:`~planners.online.reference.PlanContact`)."""
     disc_offset: bool = True
+    """Before each approach, fly the plan shifted to where a disc (not the planner's point) meets the object
+    (:meth:`~planners.online.reference.ReferenceSelector._offset_toward`)."""
     object_margin_m: float = 0.03
+    """Added to the radii in the MPC's keep-off from objects (m)."""
     robot_margin_m: float = 0.05
+    """Added to the radii in the keep-off between robots (m)."""
     wall_margin_m: float = 0.03
+    """Added to the radius in the keep-off from walls and obstacle faces (m)."""
     replan_intervals: int = 2
+    """The local replanner starts this many grid intervals before an impact."""
     contact_window_s: float = 0.5
+    """From this long before a pending impact the keep-off on its object is lifted (s)."""
     late_grace_s: float = 0.5
-    identification_config: IdentificationConfig = field(default_factory=IdentificationConfig)
-    mission: MissionConfig = field(default_factory=MissionConfig)
+    """A planned impact not yet observed is still approached this long after its time (s)."""
+    _: KW_ONLY
+    identification_config: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``identification``."""
+    mission_replanning: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``mission`` (None: off)."""
 
     @classmethod
     def paper(cls, **overrides: Any) -> ExpertConfig:
-        """The paper's stack: local replanning at planned impacts only."""
-        return cls(**{"identification": False, "mission_replanning": False, "safe_segments": False,
-                      "aim_final_position": False, "disc_offset": False, **overrides})
+        """The paper's stack: local replanning at planned impacts only; ``overrides`` switch parts on."""
+        return cls(**{"identification": None, "mission": None, "safe_segments": False, "aim_final_position": False,
+                      "disc_offset": False, **overrides})
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, identification_config: Any, mission_replanning: Any) -> None:
+        if isinstance(self.identification, bool):
+            warn_deprecated(f"ExpertConfig(identification={self.identification}) is deprecated and will be removed "
+                            "in 0.4.0: pass an IdentificationConfig, or None for off")
+            object.__setattr__(self, "identification", IdentificationConfig() if self.identification else None)
+        if identification_config is not NOT_GIVEN:
+            warn_deprecated("ExpertConfig(identification_config=...) is deprecated and will be removed in 0.4.0: "
+                            "pass ExpertConfig(identification=...)")
+            if self.identification is not None:
+                object.__setattr__(self, "identification", identification_config)
+        if mission_replanning is not NOT_GIVEN:
+            warn_deprecated(f"ExpertConfig(mission_replanning={mission_replanning!r}) is deprecated and will be "
+                            "removed in 0.4.0: pass ExpertConfig(mission=MissionConfig(...)), or None for off")
+            if not isinstance(mission_replanning, bool):
+                fail("ExpertConfig.mission_replanning", mission_replanning, "True or False", PlannerError)
+            if not mission_replanning:
+                object.__setattr__(self, "mission", None)
+            elif self.mission is None:
+                object.__setattr__(self, "mission", MissionConfig())
+        check_instance(self, "identification", PlannerError, IdentificationConfig, what="an IdentificationConfig",
+                       none="off")
+        check_instance(self, "mission", PlannerError, MissionConfig, what="a MissionConfig", none="off")
+        for name in ("safe_segments", "aim_final_position", "disc_offset"):
+            check_flag(self, name, PlannerError)
         for name in ("object_margin_m", "robot_margin_m", "wall_margin_m", "contact_window_s", "late_grace_s"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise PlannerError(f"ExpertConfig.{name} must be a finite number >= 0, got {value!r}")
-        if isinstance(self.replan_intervals, bool) or not isinstance(self.replan_intervals, int) \
-                or self.replan_intervals < 1:
-            raise PlannerError(f"ExpertConfig.replan_intervals must be an integer >= 1, got {self.replan_intervals!r}")
+            check_number(self, name, PlannerError, low=0)
+        check_integer(self, "replan_intervals", PlannerError, low=1)
 
 
 @dataclass
@@ -150,7 +171,7 @@ class Expert:
         self.book = ImpactBook(plan.impacts, tolerance_s=0.5 * self.grid_dt)
         self.identifier = ImpactIdentifier(sc.restitution, {b.name: b.mass_kg for b in sc.bodies},
                                            frozenset(self._robot_names), frozenset(self._object_names),
-                                           cfg.identification_config)
+                                           cfg.identification or IdentificationConfig())
         strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
         if plan.planner == "ir" and isinstance(strategy, PlanContact):
             from planners.online.contingency import CopyContact
@@ -160,7 +181,7 @@ class Expert:
                                           disc_offset=cfg.disc_offset, box=self._safe_box)
         self.mission = (MissionPlanner(sc, plan, cfg.mission, planner_config, cfg.aim_final_position,
                                        cfg.late_grace_s)
-                        if cfg.mission_replanning else None)
+                        if cfg.mission is not None else None)
         self.stats = ExpertStats()
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}
         self._cache: tuple[int, np.ndarray] | None = None
@@ -202,7 +223,7 @@ class Expert:
         states = np.column_stack([rows[:, 0:2], np.arctan2(rows[:, 5], rows[:, 4]), rows[:, 2:4], rows[:, 6]])
         events = (info or {}).get("impacts", [])
         completed = self.book.observe(events, self._robot_names, self._object_names)
-        if self.config.identification:
+        if self.config.identification is not None:
             self.identifier.observe(events)
         if self.mission is not None:
             new = self.mission.step(t, states, self._index, self.plan, self.book, bool(completed), self._model)
@@ -248,7 +269,7 @@ class Expert:
 
     def _model(self, robot: str, obj: str) -> tuple[float, tuple[float, float]]:
         """(restitution, (m_robot, m_object)) of the pair: identified, or the scenario file's."""
-        if self.config.identification:
+        if self.config.identification is not None:
             return self.identifier.restitution_for(robot, obj), self.identifier.masses_for(robot, obj)
         sc = self.scenario
         return sc.restitution, (sc.body(robot).mass_kg, sc.body(obj).mass_kg)
@@ -352,8 +373,8 @@ class Expert:
             "mpc_ms": {"median": float(np.median(ms)), "p99": float(np.percentile(ms, 99))},
             "act_ms": {"median": float(np.median(act)), "p99": float(np.percentile(act, 99))},
             "unplanned_contacts": dict(sorted(self.book.unplanned.items())),
-            "config": {"identification": self.config.identification,
-                       "mission_replanning": self.config.mission_replanning,
+            "config": {"identification": self.config.identification is not None,
+                       "mission_replanning": self.config.mission is not None,
                        "safe_segments": self.config.safe_segments,
                        "aim_final_position": self.config.aim_final_position,
                        "disc_offset": self.config.disc_offset},
@@ -363,7 +384,7 @@ class Expert:
             out["planned_delta_mps"] = self.offline_plan.delta_mps
             out["tolerated_final_velocity_mps"] = {name: list(f.final_box_mps)
                                                    for name, f in self.offline_plan.funnels.items()}
-        if self.config.identification:
+        if self.config.identification is not None:
             out["identification"] = self.identifier.report()
         if self.mission is not None:
             out["mission"] = self.mission.report()
@@ -375,7 +396,7 @@ class Expert:
 
     def plot_episode(self, result, path) -> None:
         """Fig. 6 of the paper for an episode run by ``impact_env.rollout.run_episode``."""
-        from planners.plotting import plot_execution
+        from planners.plan.plotting import plot_execution
 
         plot_execution(self.scenario, self.plan, result.times_s, result.positions, result.impacts,
                        result.robustness, path)

@@ -1,0 +1,154 @@
+"""Options of the offline planners: :class:`PlannerConfig` (spatially robust) and :class:`IRPlannerConfig`
+(impact-robust, which extends it), with the solver budget nested as one :class:`SolverOptions`.
+
+They live apart from the planners because the lexicographic stages (:mod:`planners.offline.stages`), which
+both planners call, read them too. The solve is lexicographic: (1) maximise the primary quantity (rho or
+delta); (2) keeping it, minimise the number of impacts plus the L1 acceleration (Eq. 28), cut after
+``refine_nodes`` branch-and-bound nodes; (3) with the binaries fixed, an LP with the stage-2 objective, or
+with ``smooth`` the QP on squared accelerations. Why stage 2 is cut by nodes and not by time:
+``docs/planner_design.md#lexicographic-stages``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import KW_ONLY, InitVar, dataclass, field
+from typing import Any
+
+from impact_env.config_checks import (
+    NOT_GIVEN,
+    check_choice,
+    check_flag,
+    check_instance,
+    check_integer,
+    check_number,
+    fail,
+    is_finite_number,
+    moved_into,
+)
+from planners.errors import PlannerError
+from planners.offline.solvers import SOLVERS
+from planners.offline.solvers.base import SolverOptions
+from planners.plan import Plan
+
+__all__ = ["DEFAULT_COPY_INTERVALS", "DEFAULT_FINAL_BOX", "IRPlannerConfig", "PlannerConfig", "SolverOptions"]
+
+DEFAULT_FINAL_BOX = (0.5, 0.05)  # position half-width (m), velocity half-width (m/s): the authors' default
+DEFAULT_COPY_INTERVALS = 2
+_SOLVER_KEYWORDS = ("time_limit_s", "node_limit", "mip_gap", "threads", "verbose", "seed", "progress")
+
+
+def _planner_budget() -> SolverOptions:
+    return SolverOptions(time_limit_s=60.0)
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Options of the spatially robust planner (see the module docstring for the stages).
+
+    The solver budget's old keywords (``time_limit_s``, ``node_limit``, ``mip_gap``, ``threads``, ``verbose``,
+    ``seed``, ``progress``) are still accepted for one release, with a ``DeprecationWarning``, and set in
+    :attr:`solver_options`.
+    """
+
+    intervals: int | None = None
+    """Intervals of the time grid; None: the scenario's ``[planner]`` hint, else 10."""
+    robot_degree: int | None = None
+    """Degree of the robots' Bezier curves; None: the scenario's ``[planner]`` hint, else 4."""
+    thrust_fraction: float = 0.5
+    """Share of each robot's thrust limit the plan may use (in (0, 1]); the rest is the controller's margin."""
+    acceleration_weight: float = 1e-6
+    """The L1 acceleration cost is scaled so that it can move rho by at most this much in stage 1 (m): a
+    tie-break below the MIP gap."""
+    impact_weight: float = 1e-6
+    """The same for the number of impacts (m per impact)."""
+    refine_nodes: int | None = 20
+    """Branch-and-bound nodes of stage 2 (0 skips it; None: no limit)."""
+    refine_time_s: float = 60.0
+    """Time limit of stage 2 (s): only a safety net, ``refine_nodes`` cuts it (0 skips it)."""
+    smooth: bool = False
+    """Stage 3 as the convex QP on squared accelerations (Eq. 28) instead of the LP: off by default, HiGHS's
+    QP takes 1-30 s on these models, 10x the MILP."""
+    obstacle_clearance: bool = True
+    """Every body's whole curve at least its radius outside every solid obstacle."""
+    robot_object_separation: bool = False
+    """Keep robots' discs off objects' discs except on the intervals next to their impacts (off, as in the
+    paper: conservative over whole intervals, it can make short tasks infeasible and costs ~10x solve time)."""
+    solver: str = "highs"
+    """The MILP backend: ``highs``, ``scip`` or ``gurobi``."""
+    solver_options: SolverOptions = field(default_factory=_planner_budget)
+    """Stage 1's solver budget (time limit, MIP gap, threads, seed, node limit, progress; 60 s by default);
+    its time limit also bounds stage 3, and stage 2 takes its threads, seed and log."""
+    warm_start: Plan | None = field(default=None, compare=False)
+    """A previous plan on the same grid to start from; None: a cold start."""
+    diagnose_infeasibility: bool = True
+    """On an infeasible task, name the conflicting constraint groups (re-solving once per group)."""
+    bound_propagation: bool = True
+    """Give every robustness variable its exact upper bound (off only to measure what it buys)."""
+    _: KW_ONLY
+    time_limit_s: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.time_limit_s``."""
+    node_limit: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.node_limit``."""
+    mip_gap: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.mip_gap``."""
+    threads: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.threads``."""
+    verbose: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.verbose``."""
+    seed: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.seed``."""
+    progress: InitVar[Any] = NOT_GIVEN
+    """Deprecated: ``solver_options.progress``."""
+
+    def __post_init__(self, *solver_keywords: Any) -> None:
+        check_instance(self, "solver_options", PlannerError, SolverOptions, what="a SolverOptions")
+        moved_into(self, "solver_options", dict(zip(_SOLVER_KEYWORDS, solver_keywords)), PlannerError)
+        check_integer(self, "intervals", PlannerError, low=2, none="the scenario's hint, else 10")
+        check_integer(self, "robot_degree", PlannerError, low=2, none="the scenario's hint, else 4")
+        check_number(self, "thrust_fraction", PlannerError, low=0, high=1, low_open=True)
+        check_number(self, "acceleration_weight", PlannerError, low=0)
+        check_number(self, "impact_weight", PlannerError, low=0)
+        check_integer(self, "refine_nodes", PlannerError, low=0, none="no limit")
+        check_number(self, "refine_time_s", PlannerError, low=0)
+        for name in ("smooth", "obstacle_clearance", "robot_object_separation", "diagnose_infeasibility",
+                     "bound_propagation"):
+            check_flag(self, name, PlannerError)
+        check_choice(self, "solver", PlannerError, SOLVERS)
+        check_instance(self, "warm_start", PlannerError, Plan, what="a Plan", none="a cold start")
+
+
+@dataclass(frozen=True)
+class IRPlannerConfig(PlannerConfig):
+    """Options of the impact-robust planner: those of :class:`PlannerConfig` (grid, thrust share, stages,
+    solver) and the ones below. Stage 1 maximises delta alone (>= ``min_delta_mps``), stage 2 minimises the
+    number of impacts only, and stage 3 the L1 acceleration of all copies."""
+
+    acceleration_weight: float = 0.0
+    """As :class:`PlannerConfig`'s, in m/s of delta; 0: none (tie-breaks in stage 1 halved HiGHS's node
+    throughput)."""
+    impact_weight: float = 0.0
+    """As :class:`PlannerConfig`'s, in m/s of delta per impact; 0: none."""
+    min_delta_mps: float = 1e-3
+    """The smallest delta worth a plan (m/s): a task that cannot tolerate it is infeasible (the final box is
+    then smaller than the grid can trim to)."""
+    default_final_box: tuple[float, float] = DEFAULT_FINAL_BOX
+    """(position, velocity) half-widths (m, m/s) of the final box of objects without a ``[final_box]``."""
+    copy_intervals: int | None = None
+    """Grid intervals before and after an impact on which the robot's copies may differ (room to reach the
+    box vertices within the thrust limits); None: the scenario's ``[planner] copy_intervals``, else 2."""
+    disjunctive_resets: bool = True
+    """The box resets in Balas' convex-hull form (False: big-M switching, the baseline of
+    ``benchmarks/planner.py``)."""
+
+    def __post_init__(self, *solver_keywords: Any) -> None:
+        super().__post_init__(*solver_keywords)
+        check_number(self, "min_delta_mps", PlannerError, low=0, low_open=True)
+        box = self.default_final_box
+        if not (isinstance(box, tuple) and len(box) == 2 and all(is_finite_number(v) and v > 0 for v in box)):
+            fail("IRPlannerConfig.default_final_box", box, "a tuple (position_m, velocity_mps) of two finite "
+                 "numbers > 0", PlannerError)
+        check_integer(self, "copy_intervals", PlannerError, low=1, none="the scenario's hint, else 2")
+        check_flag(self, "disjunctive_resets", PlannerError)
+        if self.robot_object_separation:
+            fail("IRPlannerConfig.robot_object_separation", True, "False: with the impact-robust planner the "
+                 "controller keeps robots off objects away from planned impacts", PlannerError)
