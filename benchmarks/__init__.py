@@ -17,15 +17,19 @@ if TYPE_CHECKING:
 
 def open_engine(config: EngineConfig, n_jobs: int | None = None) -> Engine:
     """:func:`impact_env.sweep.open_engine` for a benchmark's sweep. On Ray, this package's job functions
-    travel to the workers by value, as a script's own functions do: the nodes of a cluster have the installed
-    (or shipped) packages, not ``benchmarks/``, which is no part of them."""
+    travel to the workers by value, as a script's own functions do (:func:`send_by_value`)."""
     from impact_env.sweep import open_engine as open_sweep_engine
 
     if config.name == "ray":
-        try:
-            from ray import cloudpickle
-        except ImportError:  # open_engine says what to install
-            pass
-        else:
-            cloudpickle.register_pickle_by_value(sys.modules[__name__])
+        send_by_value()
     return open_sweep_engine(config, n_jobs)
+
+
+def send_by_value() -> None:
+    """Have Ray pickle this package's functions by value: the nodes of a cluster have the installed (or
+    shipped) packages, but not ``benchmarks/``, which is no part of them. A no-op without Ray."""
+    try:
+        from ray import cloudpickle
+    except ImportError:  # open_engine says what to install
+        return
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
