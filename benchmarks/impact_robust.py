@@ -133,6 +133,7 @@ def cell_key(name: str, planner: str, stack: str, axis: str, level: float) -> tu
 
 
 def key_of(cell: dict) -> tuple[str, str, str, str, str]:
+    """A cell's key in cells.jsonl (:func:`cell_key` of its fields)."""
     return cell_key(cell["scenario"], cell["planner"], cell["stack"], cell["axis"], cell["level"])
 
 

@@ -189,6 +189,7 @@ def cell_key(scenario: str, stack: str, axis: str, level: float) -> tuple[str, s
 
 
 def key_of(cell: dict) -> tuple[str, str, str, str]:
+    """A cell's key in cells.jsonl (:func:`cell_key` of its fields)."""
     return cell_key(cell["scenario"], cell["stack"], cell["axis"], cell["level"])
 
 
@@ -216,13 +217,16 @@ def load_cell(out: Path, scenario: str, stack: str, axis: str, level: float) -> 
 
 
 def plan_for(scenario_name: str, out: Path) -> dict:
-    """The offline plan of a scenario, computed once and cached beside the cells (deterministic planner)."""
+    """The offline plan of a scenario, computed once and cached beside the cells (deterministic planner). A
+    folder of the layout before cells.jsonl (``<scenario>__plan.json`` beside the cells) is read as it is."""
     from impact_env.scenario import load_scenario
     from planners.offline.sr_planner import plan_spatially_robust
 
     path = plan_path(out, scenario_name)
-    if path.exists():
-        return json.loads(path.read_text())
+    old = out / f"{scenario_name}__plan.json"
+    for cached in (path, old):
+        if cached.exists():
+            return json.loads(cached.read_text())
     plan = plan_spatially_robust(load_scenario(scenario_name))
     with atomic_path(path) as tmp:  # a kill while saving leaves no half plan to resume from
         plan.save(tmp)

@@ -74,6 +74,9 @@ def test_a_benchmark_refuses_an_old_folder_with_the_command_that_converts_it(tmp
     folder = old_folder(tmp_path, "robustness")
     with pytest.raises(SystemExit, match=f"python -m benchmarks.convert_cells robustness {folder} --out {folder}"):
         robustness.cell_store(folder)
+    # a plan cached there the old way is still read (no planning)
+    shutil.copy(DATA / "plans" / "robustness" / "relay.json", folder / "relay__plan.json")
+    assert robustness.plan_for("relay", folder) == json.loads((folder / "relay__plan.json").read_text())
 
 
 class FakeEngine:
