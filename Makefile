@@ -7,6 +7,8 @@
 #   site, warnings as errors), make docs-check (its links and a headless-Chromium look at an environment page),
 #   make docs-media (re-make the GIFs and figures the site shows),
 #   make results (retrain the RL baselines and rerun the expert-vs-learned benchmark: ~3 h).
+# Benchmarks run as modules from the repository root (python -m benchmarks.X); the ones that keep cells
+# write them to results/ (results/README.md).
 
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
@@ -61,24 +63,24 @@ fuzz: $(VENV)/.dev-installed
 		$(BIN)/python -m pytest -q -n 2 -m slow tests/fuzz --timeout 3600
 
 bench-expert: $(VENV)/.base-installed
-	$(BIN)/python benchmarks/expert.py --episodes 50
+	$(BIN)/python -m benchmarks.expert --episodes 50
 
 # the expert flying spatially robust against impact-robust plans under impact noise and restitution offsets
-# (benchmarks/results/impact_robust: cached cells, resumable; about 1.5 h with 2 workers on an idle machine)
+# (results/impact_robust: cells.jsonl, resumable, and table.md; about 1.5 h with 2 workers on an idle machine)
 bench-ir: $(VENV)/.base-installed
-	$(BIN)/python benchmarks/impact_robust.py --workers 2
+	$(BIN)/python -m benchmarks.impact_robust --workers 2
 
 # the same bench on local processes and on Ray, and RLlib's sampling against SB3's SubprocVecEnv (docs/ray.md)
 bench-ray: $(VENV)/.dev-installed
-	$(BIN)/python benchmarks/ray_overhead.py
+	$(BIN)/python -m benchmarks.ray_overhead
 
 bench: $(VENV)/.base-installed
-	$(BIN)/python benchmarks/env_throughput.py
-	$(BIN)/python benchmarks/planner.py
-	$(BIN)/python benchmarks/planner_stage2.py
-	$(BIN)/python benchmarks/mpc.py
+	$(BIN)/python -m benchmarks.env_throughput
+	$(BIN)/python -m benchmarks.planner
+	$(BIN)/python -m benchmarks.planner_stage2
+	$(BIN)/python -m benchmarks.mpc
 
-# baselines/results/: PPO, SAC and behaviour cloning against the expert on all three scenarios
+# results/baselines/: PPO, SAC and behaviour cloning against the expert on all three scenarios
 results: $(VENV)/.dev-installed
 	bash baselines/reproduce.sh
 

@@ -18,6 +18,10 @@ tar -tzf "$SDIST" > "$WORK/sdist.txt"
 for f in LICENSE CHANGELOG.md CITATION.cff; do
     grep -q "/$f\$" "$WORK/sdist.txt" || { echo "sdist lacks $f"; exit 1; }
 done
+# what must not: the results (results/, and the folder baselines/results/ had before)
+if grep -E "(^|/)results/|(^|/)benchmarks/" "$WORK/wheel.txt" "$WORK/sdist.txt"; then
+    echo "the sdist or the wheel ships results or benchmarks (above)"; exit 1
+fi
 for f in impact_env/scenarios/corridor.toml impact_env/stations/L.toml baselines/hyperparams/ppo.yml planners/expert.py; do
     grep -q "^$f\$" "$WORK/wheel.txt" || { echo "wheel lacks $f"; exit 1; }
 done

@@ -14,10 +14,11 @@ controller's time per step, a wall-clock measurement. The nominal environment is
 would replay the same episode: pass noise options (thrust noise, initial position noise, restitution) to make
 the seeds differ.
 
-Writes ``episodes.csv`` (one row per episode), ``summary.csv`` and
-``summary.md`` (per scenario and controller: success rate, mean and std of the final STL robustness, fuel,
-impacts, controller time per step) and ``bench.png`` (bars per scenario, and the first seed's trajectories
-side by side).
+Writes into ``--out``, each file atomically (:mod:`impact_env.results_store`): ``episodes.csv`` (one row
+per episode), ``summary.csv`` and ``summary.md`` (per scenario and controller: success rate, mean and std of
+the final STL robustness, fuel, impacts, controller time per step), ``bench.png`` (bars per scenario, and the
+first seed's trajectories side by side) and the expert's ``plans/``. The published run is
+``results/baselines/`` (``baselines/reproduce.sh bench``).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from impact_env.errors import ImpactEnvError
+from impact_env.results_store import atomic_path, write_atomic
 from impact_env.scenario import load_scenario
 from impact_env.sweep import EngineConfig, local_path, open_engine
 
@@ -179,9 +181,7 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
         planned = [s for s in scenarios if any(c.name == "expert" for c in controllers)]
         plan_files: dict[str, Path] = {}
         for name, plan in zip(planned, pool.map(plan_expert, planned)):
-            plan_files[name] = out / "plans" / f"{name}.json"
-            plan_files[name].parent.mkdir(parents=True, exist_ok=True)
-            plan_files[name].write_text(json.dumps(plan, indent=1))
+            plan_files[name] = write_atomic(out / "plans" / f"{name}.json", json.dumps(plan, indent=1))
         shared: dict[tuple[str, str], Any] = {}
         for s in scenarios:
             for c in controllers:
@@ -202,19 +202,21 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
             print(f"  [{k}/{len(jobs)}] {r['scenario']} {r['controller']} seed {r['seed']}: "
                   f"rho {r['robustness']:+.3f} {'ok' if r['success'] else 'fail'}", flush=True)
         print(f"  {pool.describe()}: {pool.placement_summary()}", flush=True)
-    with open(out / "episodes.csv", "w", newline="") as f:
+    # every output is written atomically (impact_env.results_store): a kill leaves the old file or the new one
+    with atomic_path(out / "episodes.csv") as tmp, open(tmp, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=[k for k in results[0] if k != "positions"])
         writer.writeheader()
         writer.writerows({k: v for k, v in r.items() if k != "positions"} for r in results)
     summary = _summarise(results, scenarios, controllers)
-    with open(out / "summary.csv", "w", newline="") as f:
+    with atomic_path(out / "summary.csv") as tmp, open(tmp, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(summary[0]))
         writer.writeheader()
         writer.writerows(summary)
     options = ", ".join(f"{k}={v}" for k, v in env_options.items()) or "nominal (no noise)"
-    (out / "summary.md").write_text(f"{episodes} seeded episodes per controller; environment options: {options}\n\n"
-                                    + markdown_table(summary) + "\n")
-    _figure(results, summary, scenarios, controllers, out / "bench.png")
+    write_atomic(out / "summary.md", f"{episodes} seeded episodes per controller; environment options: {options}\n\n"
+                 + markdown_table(summary) + "\n")
+    with atomic_path(out / "bench.png") as tmp:
+        _figure(results, summary, scenarios, controllers, tmp)
     return summary
 
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reproduces baselines/results/ (the expert-vs-learned benchmark) from scratch: about 3.3 h on the project's
+# Reproduces results/baselines/ (the expert-vs-learned benchmark) from scratch: about 3.3 h on the project's
 # 2-core machine. Run from the repository root after `make test` (which installs the [rl] extra):
 #     bash baselines/reproduce.sh            # all stages, in order
 #     bash baselines/reproduce.sh bench      # one stage: corridor | others | record | bc | publish | reward | bench | rllib | rllib_publish
@@ -7,7 +7,7 @@
 # seed 0 and the hyperparameters in baselines/hyperparams/. Training runs are bounded both by --timesteps
 # and by a wall-clock budget (--max-minutes), two side by side (one per core); each run's train.json
 # records the steps it reached. QUICK=1 rehearses the chain in ~10 minutes with a few thousand steps, writing to
-# runs-quick/ instead of baselines/results/ (its numbers are meaningless).
+# runs-quick/ instead of results/baselines/ (its numbers are meaningless).
 set -euo pipefail
 BIN=${BIN:-.venv/bin}
 NOISE="--thrust-noise 0.05 --initial-position-noise-m 0.05"
@@ -18,7 +18,7 @@ if [[ "${QUICK:-0}" == 1 ]]; then
     RUNS=runs-quick; RESULTS=runs-quick/results; DATASETS=runs-quick/datasets
 else
     PPO_LONG=2000000; PPO_SHORT=1000000; SAC_STEPS=300000; LONG=58; SHORT=14; EPISODES=20; DEMOS=30
-    EVAL_PPO=50000; EVAL_SAC=20000; PPO_REWARD=600000; RUNS=runs; RESULTS=baselines/results; DATASETS=datasets
+    EVAL_PPO=50000; EVAL_SAC=20000; PPO_REWARD=600000; RUNS=runs; RESULTS=results/baselines; DATASETS=datasets
 fi
 train() { "$BIN/impact-env" train --runs-dir "$RUNS" "$@" $NOISE --no-progress; }  # --out names the run folder
 side_by_side() {  # the two training commands given as strings, one per core; fails if either fails

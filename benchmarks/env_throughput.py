@@ -8,7 +8,7 @@ the bare loop there is the cargo disc, the wall segments and two slide joints re
 tethers the same way (two attaches, then keeps), and every loop starts a fresh world every 60 steps.
 Usage:
 
-    python benchmarks/env_throughput.py [--scenario corridor] [--station L] [--steps 20000] [--repeats 3]
+    python -m benchmarks.env_throughput [--scenario corridor] [--station L] [--steps 20000] [--repeats 3]
 """
 
 from __future__ import annotations

@@ -13,17 +13,19 @@ time (simulated seconds per wall second). Episodes run on the sweep engine (:mod
 worker processes, or Ray tasks with ``--engine ray [--address ADDR]``; the table's columns are the same either
 way except the timings (MPC ms, speed vs real time). Usage:
 
-    python benchmarks/expert.py [--scenarios corridor,throw_and_catch_exp] [--episodes 50] [--workers 2]
-    python benchmarks/expert.py --engine ray --address auto --episodes 200
+    python -m benchmarks.expert [--scenarios corridor,throw_and_catch_exp] [--episodes 50] [--workers 2]
+    python -m benchmarks.expert --engine ray --address auto --episodes 200
 
 ``--timing`` instead measures the time of one ``Expert.act`` (both robots) against the stack before this
 package's online layer was reworked (``--baseline-ref``, a git commit: its ``impact_env`` and ``planners``
-are exported to a temporary folder and imported by the baseline's workers). The stacks' episodes are
+are exported to a temporary folder, and each baseline episode runs in a Python of its own that imports them,
+:func:`benchmarks.git_tree.run_in_tree`; this module imports the packages only inside its functions, so that
+it loads under that tree too). The stacks' episodes are
 interleaved in one pool, so machine load hits all of them alike; the load average is printed with the
 table. Mission replan steps are reported apart (a replan is a MILP solve inside one act). It runs on local
 processes only (each baseline job needs a fresh process of its own).
 
-    python benchmarks/expert.py --timing [--scenarios throw_and_catch_exp] [--episodes 10]
+    python -m benchmarks.expert --timing [--scenarios throw_and_catch_exp] [--episodes 10]
 """
 
 from __future__ import annotations
@@ -33,25 +35,26 @@ import multiprocessing
 import os
 import shutil
 import statistics
-import sys
 from concurrent.futures import ProcessPoolExecutor
+from typing import TYPE_CHECKING
 
 import numpy as np
-from git_tree import export_tree
 
-from impact_env.envs.transport import TransportEnv
-from impact_env.rollout import robot_object_impacts, run_episode
-from impact_env.scenario import load_scenario, scenario_names
-from impact_env.sweep import Engine, add_engine_arguments, engine_config, open_engine
-from planners.offline.sr_planner import plan_spatially_robust
-from planners.plan import Plan
+from benchmarks.git_tree import export_tree, run_in_tree
+
+if TYPE_CHECKING:
+    from impact_env.sweep import Engine
 
 _WORKER: dict = {}
 
 
 def _episode(args: tuple[str, dict, int, bool]) -> dict:
     scenario_name, plan_dict, seed, mismatch = args
+    from impact_env.envs.transport import TransportEnv
+    from impact_env.rollout import robot_object_impacts, run_episode
+    from impact_env.scenario import load_scenario
     from planners.expert import Expert
+    from planners.plan import Plan
 
     if scenario_name not in _WORKER:  # one expert (and its compiled MPCs) per worker process and scenario
         _WORKER[scenario_name] = Expert(load_scenario(scenario_name), plan=Plan.from_dict(plan_dict))
@@ -70,6 +73,9 @@ def _episode(args: tuple[str, dict, int, bool]) -> dict:
 
 
 def rows(scenario_name: str, episodes: int, engine: Engine) -> list[str]:
+    from impact_env.scenario import load_scenario
+    from planners.offline.sr_planner import plan_spatially_robust
+
     scenario = load_scenario(scenario_name)
     plan = plan_spatially_robust(scenario)
     out = []
@@ -91,20 +97,18 @@ def rows(scenario_name: str, episodes: int, engine: Engine) -> list[str]:
 
 
 BASELINE_REF = "c30bf61"  # main before the online layer was split and sped up (issue 9)
-_BASELINE_PATH: list[str] = []
-
-
-def _baseline_init(path: str) -> None:
-    _BASELINE_PATH.append(path)
 
 
 def _timed_episode(args: tuple) -> dict:
     scenario_name, plan_dict, stack, seed, mismatch, baseline_dir = args
-    if stack == "baseline":
-        # a separate process per stack kind: the baseline's packages shadow the current ones
-        sys.path.insert(0, baseline_dir)
-        for name in [m for m in sys.modules if m.split(".")[0] in ("planners", "impact_env")]:
-            del sys.modules[name]
+    if stack == "baseline":  # in a Python of its own that imports the baseline's packages
+        return run_in_tree(baseline_dir, "benchmarks.expert:timed_act", scenario_name, plan_dict, stack, seed,
+                           mismatch)
+    return timed_act(scenario_name, plan_dict, stack, seed, mismatch)
+
+
+def timed_act(scenario_name: str, plan_dict: dict, stack: str, seed: int, mismatch: bool) -> dict:
+    """One episode of ``stack`` (``baseline``: the tree's default expert), the time of every ``Expert.act``."""
     from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
     from impact_env.scenario import load_scenario
@@ -134,6 +138,9 @@ def _timed_episode(args: tuple) -> dict:
 
 
 def timing(scenarios: list[str], episodes: int, workers: int, ref: str) -> None:
+    from impact_env.scenario import load_scenario
+    from planners.offline.sr_planner import plan_spatially_robust
+
     baseline_dir = export_tree(ref, prefix="impact_env_baseline_")
     stacks = ("baseline", "paper", "all")
     print(f"Expert.act wall time per step (ms), two robots; baseline = {ref}; {episodes} episodes per stack and "
@@ -176,6 +183,10 @@ def timing(scenarios: list[str], episodes: int, workers: int, ref: str) -> None:
 
 
 def main() -> None:
+    from benchmarks import open_engine
+    from impact_env.scenario import scenario_names
+    from impact_env.sweep import add_engine_arguments, engine_config
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scenarios", default=",".join(scenario_names()))
     parser.add_argument("--episodes", type=int, default=50)

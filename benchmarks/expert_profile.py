@@ -2,13 +2,14 @@
 
 Each part is the exclusive time (its own, without the parts it calls) of the functions below, summed over
 the episodes' steps and divided by their number; the steps of a mission replan (one MILP solve inside an
-``act``) are left out, as in ``benchmarks/expert.py --timing``. The wrappers cost about 1 us per call (some
+``act``) are left out, as in ``benchmarks.expert --timing``. The wrappers cost about 1 us per call (some
 40 calls a step), so the wrapped act is a few percent slower than an unwrapped one. ``--ref`` profiles
 another commit's ``impact_env`` and ``planners`` in the same run (its episodes interleaved with the current
-tree's, one process per episode), for a before/after table. Usage:
+tree's, one process per episode: :func:`benchmarks.git_tree.run_in_tree`), for a before/after table. From the
+repository root:
 
-    python benchmarks/expert_profile.py [--scenario throw_and_catch_exp] [--episodes 4] [--ref 0859ce7]
-    python benchmarks/expert_profile.py --ablation    # act time with each ExpertConfig part switched off
+    python -m benchmarks.expert_profile [--scenario throw_and_catch_exp] [--episodes 4] [--ref 0859ce7]
+    python -m benchmarks.expert_profile --ablation    # act time with each ExpertConfig part switched off
 
 Measured with ``--episodes 4 --ref 0859ce7`` (main before the act-time work of issue 9) on the 2-core
 machine, one worker, throw_and_catch_exp, default ``ExpertConfig()``, half the episodes nominal and half with
@@ -67,12 +68,11 @@ import argparse
 import multiprocessing
 import os
 import shutil
-import sys
 import time
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 
-from git_tree import export_tree, segment_qp_module
+from benchmarks.git_tree import export_tree, run_in_tree, segment_qp_module
 
 PARTS = ("MPC solver (CasADi sqpmethod + qrqp)", "MPC setup and readout (Python, numpy<->CasADi)",
          "replanner QP solver (DAQP)", "replanner QP setup (Python)", "replanner closed form and checks",
@@ -185,9 +185,15 @@ def _config(variant: str):
 
 
 def _episode(args: tuple) -> dict:
+    tree = args[0]
+    if tree is not None:  # in a Python of its own that imports the reference commit's packages
+        return run_in_tree(tree, "benchmarks.expert_profile:profiled_episode", args)
+    return profiled_episode(args)
+
+
+def profiled_episode(args: tuple) -> dict:
+    """One episode with the parts timed, in this process's packages."""
     tree, scenario_name, plan_dict, seed, mismatch, variant = args
-    if tree is not None:
-        sys.path.insert(0, tree)  # a fresh process: the reference commit's packages come first
     import numpy as np
 
     from impact_env.envs.transport import TransportEnv

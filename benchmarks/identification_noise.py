@@ -9,10 +9,11 @@ measurement noise is 1 mm/s). This script flies the same seeds with the paper's 
 measurement noise given and with each significance k given (an estimate replaces the file's restitution
 only when the data differ from it by more than k standard errors, the error seen between the object's and the
 robot's reading of each impact included; :mod:`planners.online.identification`), and prints success and
-robustness per row (the offline plan is the robustness benchmark's cached one, or planned and cached there).
-Episodes run on the sweep engine (:mod:`impact_env.sweep`: ``--workers`` local processes, or ``--engine ray``).
+robustness per row (the offline plan is the robustness benchmark's cached one in results/robustness/plans/,
+or planned and cached there). Episodes run on the sweep engine (:mod:`impact_env.sweep`: ``--workers`` local
+processes, or ``--engine ray``). From the repository root:
 
-    python benchmarks/identification_noise.py [--scenario two_objects] [--level 0.02] [--seeds 10]
+    python -m benchmarks.identification_noise [--scenario two_objects] [--level 0.02] [--seeds 10]
                                               [--noise 0.001,0.02] [--significance 2,3]
                                               [--workers 2 | --engine ray]
 """
@@ -21,17 +22,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from robustness import RESULTS, plan_for  # noqa: E402  (the robustness benchmark's cached plans)
-
-from impact_env.sweep import add_engine_arguments, engine_config, open_engine  # noqa: E402
-from planners.online.identification import IdentificationConfig  # noqa: E402
+from benchmarks import open_engine
+from benchmarks.robustness import RESULTS, plan_for  # the robustness benchmark's cached plans
+from impact_env.sweep import add_engine_arguments, engine_config
+from planners.online.identification import IdentificationConfig
 
 
 def _episode(job: tuple) -> tuple:

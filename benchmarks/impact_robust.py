@@ -1,7 +1,7 @@
 """Closed-loop benchmark: the expert flying the spatially robust (SR) plan against the impact-robust (IR) plan.
 
-For each scenario both plans are made once (cached beside the results) and flown by the expert in the
-Gymnasium env under:
+For each scenario both plans are made once (cached in ``--out``/plans/sr/ and plans/ir/) and flown by the
+expert in the Gymnasium env under:
 
 - post-impact velocity noise (``impact_velocity_noise_mps``) of 0, delta, 2 delta and 5 delta m/s, delta being
   the IR plan's delta on that scenario (the same noise in m/s for both plans): 50 seeds per cell (the
@@ -16,12 +16,13 @@ with its copies as contingency plans (:mod:`planners.online.contingency`).
 Reported per cell: success rate (final STL robustness > 0), mean and min robustness, the object's final
 speed (mean and max, m/s), the share of episodes whose object ends inside the final box around its plan's
 final state (the scenario's ``[final_box]``, default 0.5 m / 0.05 m/s: the residual the IR plan tolerates),
-and mission re-plans per episode. Every cell is cached as JSON in ``--out`` when done (a rerun resumes);
-episodes run in ``--workers`` spawned processes.
+and mission re-plans per episode. Every cell is a line of ``--out``/cells.jsonl, written atomically when the
+cell is done (a rerun resumes; :mod:`impact_env.results_store`), and the table of every cell goes to
+``--out``/table.md; episodes run in ``--workers`` spawned processes. From the repository root:
 
-    python benchmarks/impact_robust.py --estimate
-    python benchmarks/impact_robust.py [--scenarios a,b] [--stacks all,paper] [--seeds 50] [--workers 2]
-    python benchmarks/impact_robust.py --table-only
+    python -m benchmarks.impact_robust --estimate
+    python -m benchmarks.impact_robust [--scenarios a,b] [--stacks all,paper] [--seeds 50] [--workers 2]
+    python -m benchmarks.impact_robust --table-only
 """
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
+from impact_env.results_store import CellStore, atomic_path, write_atomic
+
+RESULTS = Path(__file__).resolve().parents[1] / "results" / "impact_robust"  # cells.jsonl, table.md, plans/
 SHIPPED = ("corridor", "obstacle_avoidance", "throw_and_catch_exp")
 PLANNERS = ("sr", "ir")
 STACKS = ("all", "paper")
@@ -48,6 +52,11 @@ def expert_config(stack: str):
     from planners.expert import ExpertConfig
 
     return {"all": ExpertConfig(), "paper": ExpertConfig.paper()}[stack]
+
+
+def plan_path(out: Path, name: str, planner: str) -> Path:
+    """Where a scenario's SR or IR plan is cached (a plan file: ``Plan.load`` reads it)."""
+    return out / "plans" / planner / f"{name}.json"
 
 
 def conditions(delta: float, seeds: int) -> list[tuple[str, float, int]]:
@@ -66,12 +75,13 @@ def plans_for(name: str, out: Path) -> dict[str, dict]:
 
     plans = {}
     for planner in PLANNERS:
-        path = out / f"{name}__{planner}_plan.json"
+        path = plan_path(out, name, planner)
         if not path.exists():
             scenario = load_scenario(name)
             plan = (plan_impact_robust(scenario, IRPlannerConfig(time_limit_s=600)) if planner == "ir"
                     else plan_spatially_robust(scenario))
-            plan.save(path)
+            with atomic_path(path) as tmp:  # a kill while saving leaves no half plan to resume from
+                plan.save(tmp)
         plans[planner] = json.loads(path.read_text())
     return plans
 
@@ -117,12 +127,29 @@ def _episode(args: tuple) -> dict:
             "mission_replans": report.get("mission", {}).get("replans", 0), "wall_s": res.wall_time_s}
 
 
-def cell_path(out: Path, name: str, planner: str, stack: str, axis: str, level: float) -> Path:
-    return out / f"{name}__{planner}__{stack}__{axis}_{level:+.4f}.json"
+def cell_key(name: str, planner: str, stack: str, axis: str, level: float) -> tuple[str, str, str, str, str]:
+    """What names a cell: the level to 4 decimals (the name of the per-cell file a cell had before)."""
+    return name, planner, stack, axis, f"{level:+.4f}"
+
+
+def key_of(cell: dict) -> tuple[str, str, str, str, str]:
+    """A cell's key in cells.jsonl (:func:`cell_key` of its fields)."""
+    return cell_key(cell["scenario"], cell["planner"], cell["stack"], cell["axis"], cell["level"])
+
+
+def cell_store(out: Path) -> CellStore:
+    """The benchmark's cells in ``out``/cells.jsonl. Per-cell JSON files of an older version in ``out`` are
+    refused with the command that converts them."""
+    path = out / "cells.jsonl"
+    if not path.exists() and any(out.glob("*__*__*__*.json")):
+        raise SystemExit(f"{out} holds per-cell JSON files (the format before cells.jsonl): convert them "
+                         f"first with python -m benchmarks.convert_cells impact_robust {out} --out {out}")
+    return CellStore(path, key=key_of)
 
 
 def run(scenarios, stacks, seeds: int, out: Path, workers: int) -> None:
     out.mkdir(parents=True, exist_ok=True)
+    store = cell_store(out)
     ctx = multiprocessing.get_context("spawn")  # the parent has run HiGHS threads: never fork after that
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         for name in scenarios:
@@ -131,8 +158,8 @@ def run(scenarios, stacks, seeds: int, out: Path, workers: int) -> None:
             for axis, level, n in conditions(delta, seeds):
                 for stack in stacks:
                     for planner in PLANNERS:
-                        path = cell_path(out, name, planner, stack, axis, level)
-                        if path.exists() and json.loads(path.read_text())["episodes_requested"] >= n:
+                        done = store.get(cell_key(name, planner, stack, axis, level))
+                        if done is not None and done["episodes_requested"] >= n:
                             continue
                         start = time.perf_counter()
                         jobs = [(name, planner, stack, plans[planner], axis, level, s) for s in range(n)]
@@ -140,8 +167,9 @@ def run(scenarios, stacks, seeds: int, out: Path, workers: int) -> None:
                         cell = {"scenario": name, "planner": planner, "stack": stack, "axis": axis, "level": level,
                                 "delta": delta, "episodes_requested": n, "episodes": episodes,
                                 "wall_s": time.perf_counter() - start}
-                        path.write_text(json.dumps(cell))
+                        store.put(cell)
                         print(row(cell), flush=True)
+                        write_table(out, store.cells())
 
 
 def label(cell: dict) -> str:
@@ -162,15 +190,30 @@ def row(cell: dict) -> str:
             f"{np.mean([e['mission_replans'] for e in eps]):.2f} |")
 
 
-def table(cells: list[dict], scenarios) -> str:
+def sort_cells(cells: list[dict], scenarios) -> list[dict]:
+    """The cells of ``scenarios`` in the table's order: scenario (as listed), condition, level, stack, plan."""
     axes = ["nominal", "noise", "e"]
     cells = [c for c in cells if c["scenario"] in scenarios]
-    cells.sort(key=lambda c: (list(scenarios).index(c["scenario"]), axes.index(c["axis"]), c["level"],
-                              STACKS.index(c["stack"]), PLANNERS.index(c["planner"])))
+    return sorted(cells, key=lambda c: (list(scenarios).index(c["scenario"]), axes.index(c["axis"]), c["level"],
+                                        STACKS.index(c["stack"]), PLANNERS.index(c["planner"])))
+
+
+def all_scenarios(cells: list[dict]) -> list[str]:
+    """The shipped scenarios, then any other scenario of the cells (in the order first seen)."""
+    return list(SHIPPED) + [n for n in dict.fromkeys(c["scenario"] for c in cells) if n not in SHIPPED]
+
+
+def table(cells: list[dict], scenarios) -> str:
+    cells = sort_cells(cells, scenarios)
     lines = ["| scenario | simulator | stack | plan | episodes | success | robustness mean (min) | "
              "final speed m/s mean (max) | in final box | mission replans / ep |",
              "|---|---|---|---|---:|---:|---:|---:|---:|---:|"]
     return "\n".join(lines + [row(c) for c in cells])
+
+
+def write_table(out: Path, cells: list[dict]) -> Path:
+    """``out``/table.md: the table of every cell (atomically, as the cells)."""
+    return write_atomic(out / "table.md", table(cells, all_scenarios(cells)) + "\n")
 
 
 def estimate(scenarios, stacks, seeds: int) -> float:
@@ -193,10 +236,12 @@ def main() -> None:
     parser.add_argument("--stacks", default=",".join(STACKS))
     parser.add_argument("--seeds", type=int, default=50, help="seeds per noisy cell")
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
-    parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "impact_robust"),
-                        help="the cached cells (default: %(default)s)")
+    parser.add_argument("--out", default=str(RESULTS),
+                        help="the cells (cells.jsonl), their table (table.md) and the cached plans (plans/) "
+                             "(default: %(default)s)")
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
-    parser.add_argument("--table-only", action="store_true", help="print the table of the cached cells")
+    parser.add_argument("--table-only", action="store_true",
+                        help="print the table of the cells done (and rewrite table.md); fly nothing")
     args = parser.parse_args()
     scenarios, stacks = args.scenarios.split(","), args.stacks.split(",")
     if any(s not in STACKS for s in stacks):
@@ -209,7 +254,9 @@ def main() -> None:
         return
     if not args.table_only:
         run(scenarios, stacks, args.seeds, out, args.workers)
-    cells = [json.loads(p.read_text()) for p in sorted(out.glob("*__*__*__*.json"))]
+    cells = cell_store(out).cells()
+    if cells:
+        write_table(out, cells)
     print(table(cells, scenarios))
 
 

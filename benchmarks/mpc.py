@@ -21,7 +21,7 @@ ipopt rows are the baseline (the paper's solver; it reports a 6 ms median). Time
 whole ``solve()`` call, Python included. Fallback solvers are off (failures are the solver's own) except
 in the ``sqp+ipopt`` rows, the default ``MPCConfig`` (sqp, ipopt when sqp fails). Usage:
 
-    python benchmarks/mpc.py [--solves 2000] [--solvers sqp,fatrop,ipopt,sqp+ipopt] [--horizons 10,20]
+    python -m benchmarks.mpc [--solves 2000] [--solvers sqp,fatrop,ipopt,sqp+ipopt] [--horizons 10,20]
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ same model with the box resets switched by big-M rows instead of their convex hu
 Rows are appended to ``--cache`` (JSON lines) as they finish, and a rerun with the same cache prints cached
 rows instead of solving again (delete the file to measure afresh). Prints markdown tables. Usage:
 
-    python benchmarks/planner.py [--planners sr,ir] [--scenarios a,b] [--solvers highs,scip] [--repeats 3]
+    python -m benchmarks.planner [--planners sr,ir] [--scenarios a,b] [--solvers highs,scip] [--repeats 3]
                                  [--time-limit 60] [--cache planner_bench.jsonl]
 """
 

@@ -8,7 +8,7 @@ scaled acceleration term: lower is better) and the plan's fingerprint (``Plan.fi
 the same curves bit for bit). A cut that is deterministic gives the same fingerprint idle and loaded.
 Prints a markdown table. Usage:
 
-    python benchmarks/planner_stage2.py [--scenarios a,b,c] [--cuts nodes,time5,time60]
+    python -m benchmarks.planner_stage2 [--scenarios a,b,c] [--cuts nodes,time5,time60]
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ stable-baselines3's PPO on the central Gymnasium env with SubprocVecEnv of 1 and
 rate of each env is the ceiling. The load average is printed: the machine is shared, so compare rows of one
 run. Usage:
 
-    python benchmarks/ray_overhead.py [--episodes 100] [--expert-episodes 20] [--workers 2] [--steps 4096]
+    python -m benchmarks.ray_overhead [--episodes 100] [--expert-episodes 20] [--workers 2] [--steps 4096]
                                       [--skip-sweeps | --skip-sampling]
 """
 

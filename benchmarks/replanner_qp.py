@@ -6,12 +6,15 @@ solved (DAQP calls), the answers DAQP reports as solved, those of them that move
 points (more than 1e-9 m: DAQP's answer to an infeasible QP, darnstrom/daqp#82), and the segments
 ``bounded_segment`` handed on that miss the end state they were asked for (by more than 1e-6 m), with the
 largest miss. With ``--ref`` it flies the same episodes with a git commit's ``impact_env`` and ``planners``
-(exported to a temporary folder) in the same run, for a before/after table. One process per episode, one
-worker by default. Usage:
+(exported to a temporary folder; its episodes run in a Python of their own that imports them,
+:func:`benchmarks.git_tree.run_in_tree`) in the same run, for a before/after table. One process per episode,
+one worker by default. From the repository root:
 
-    python benchmarks/replanner_qp.py [--scenarios relay,two_objects] [--seeds 10] [--ref 07f8b8c]
+    python -m benchmarks.replanner_qp [--scenarios relay,two_objects] [--seeds 10] [--ref 07f8b8c]
 
-The plans are the robustness benchmark's (cached in ``--plans``, computed there if missing).
+The plans are the robustness benchmark's (cached in ``--plans``/plans/, computed there if missing). This
+module imports the packages (and :mod:`benchmarks.robustness`, which does) only inside its functions, so that
+it loads under the reference tree too.
 """
 
 from __future__ import annotations
@@ -20,13 +23,12 @@ import argparse
 import multiprocessing
 import os
 import shutil
-import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from git_tree import export_tree, segment_qp_module
-from robustness import RESULTS, env_options, plan_for
+
+from benchmarks.git_tree import ROOT, export_tree, run_in_tree, segment_qp_module
 
 COUNTS = ("qp", "daqp_solved", "ends_moved", "segments_off")
 
@@ -68,9 +70,16 @@ def _instrument(counts: dict) -> None:
 
 
 def _episode(args: tuple) -> dict:
-    tree, scenario_name, plan_dict, seed = args
-    if tree is not None:
-        sys.path.insert(0, tree)  # a fresh process: the reference commit's packages come first
+    tree = args[0]
+    if tree is not None:  # in a Python of its own that imports the reference commit's packages
+        return run_in_tree(tree, "benchmarks.replanner_qp:counted_episode", args)
+    return counted_episode(args)
+
+
+def counted_episode(args: tuple) -> dict:
+    """One episode with the replanner's QPs counted, in this process's packages (the env options come with
+    the job: the robustness benchmark's combined condition for its seed)."""
+    tree, scenario_name, plan_dict, seed, options = args
     from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
     from impact_env.scenario import load_scenario
@@ -80,7 +89,7 @@ def _episode(args: tuple) -> dict:
     counts = dict.fromkeys(COUNTS, 0) | {"largest_miss_m": 0.0}
     _instrument(counts)
     expert = Expert(load_scenario(scenario_name), plan=Plan.from_dict(plan_dict), config=ExpertConfig())
-    env = TransportEnv(expert.scenario, **env_options(expert.scenario, "combined", 0.0, seed))
+    env = TransportEnv(expert.scenario, **options)
     res = run_episode(env, expert, seed=seed)
     unplanned = sum(expert.report()["unplanned_contacts"].values())
     return {"tree": tree, "scenario": scenario_name, "seed": seed, "success": bool(res.success),
@@ -93,13 +102,19 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--ref", default=None, help="also fly this git commit (before/after table)")
     parser.add_argument("--workers", type=int, default=1)
-    parser.add_argument("--plans", default=str(RESULTS), help="the robustness benchmark's cached plans")
+    parser.add_argument("--plans", default=str(ROOT / "results" / "robustness"),
+                        help="the robustness benchmark's --out, whose plans/ are used (default: %(default)s)")
     args = parser.parse_args()
+    from benchmarks.robustness import env_options, plan_for
+    from impact_env.scenario import load_scenario
+
     names = args.scenarios.split(",")
     plans = {name: plan_for(name, Path(args.plans)) for name in names}
     ref_dir = export_tree(args.ref, prefix="impact_env_qp_") if args.ref else None
     trees = ([ref_dir] if ref_dir else []) + [None]
-    jobs = [(tree, name, plans[name], seed) for name in names for seed in range(args.seeds) for tree in trees]
+    scenarios = {name: load_scenario(name) for name in names}
+    jobs = [(tree, name, plans[name], seed, env_options(scenarios[name], "combined", 0.0, seed))
+            for name in names for seed in range(args.seeds) for tree in trees]
     print(f"{args.seeds} seeds per scenario and tree, combined condition, ExpertConfig(); load average before: "
           f"{' '.join(f'{x:.1f}' for x in os.getloadavg())}\n")
     with ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn"),

@@ -14,17 +14,18 @@ Perturbations, one axis at a time around nominal, plus the combined condition:
   ``impact_velocity_noise_mps``;
 - ``combined``: e +-0.2, 10 cm, 10 % thrust noise.
 
-Every cell (scenario, stack, condition) is cached as JSON in ``--out`` when done, so an interrupted run
-resumes where it stopped; episodes run on the sweep engine (:mod:`impact_env.sweep`): ``--workers`` spawned
-processes, or Ray tasks with ``--engine ray [--address ADDR]`` (the cells are the same either way, timings
-aside). Prints the markdown table
-(success rate, mean and min robustness, unplanned contacts per episode, mission replans per episode and
-their solve time) and draws success against perturbation size.
+Every cell (scenario, stack, condition) is a line of ``--out``/cells.jsonl, written atomically when the
+cell is done, so an interrupted run resumes where it stopped (:mod:`impact_env.results_store`); the offline
+plans are cached in ``--out``/plans/. Episodes run on the sweep engine (:mod:`impact_env.sweep`):
+``--workers`` spawned processes, or Ray tasks with ``--engine ray [--address ADDR]`` (the cells are the same
+either way, timings aside). Prints the markdown table (success rate, mean and min robustness, unplanned
+contacts per episode, mission replans per episode and their solve time), writes the table of every cell to
+``--out``/table.md, and draws success against perturbation size. From the repository root:
 
-    python benchmarks/robustness.py --estimate                # how long the selected grid would take
-    python benchmarks/robustness.py [--scenarios a,b] [--stacks paper,all] [--axes combined,e] [--seeds 50]
-    python benchmarks/robustness.py --axes e,offset --levels e=0.4,0.5 --levels offset=0.2,0.25   # beyond
-    python benchmarks/robustness.py --table-only --plot docs/img/robustness.png
+    python -m benchmarks.robustness --estimate                # how long the selected grid would take
+    python -m benchmarks.robustness [--scenarios a,b] [--stacks paper,all] [--axes combined,e] [--seeds 50]
+    python -m benchmarks.robustness --axes e,offset --levels e=0.4,0.5 --levels offset=0.2,0.25   # beyond
+    python -m benchmarks.robustness --table-only --plot docs/img/robustness.png
 """
 
 from __future__ import annotations
@@ -38,7 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
-from impact_env.sweep import EngineConfig, add_engine_arguments, engine_config, open_engine
+from benchmarks import open_engine
+from impact_env.results_store import CellStore, atomic_path, write_atomic
+from impact_env.sweep import EngineConfig, add_engine_arguments, engine_config
 from planners.expert.stacks import STACKS
 from planners.expert.stacks import stack_config as expert_config
 
@@ -47,7 +50,7 @@ NEW = ("ping_pong_stop", "relay", "two_objects")
 AXES = {"e": (0.1, 0.2, 0.3), "offset": (0.05, 0.10, 0.15), "thrust": (0.05, 0.10, 0.20),
         "impact": (0.005, 0.01, 0.02)}
 COMBINED = {"e": 0.2, "offset": 0.10, "thrust": 0.10}
-RESULTS = Path(__file__).resolve().parent / "results" / "robustness"  # the cached cells and plans
+RESULTS = Path(__file__).resolve().parents[1] / "results" / "robustness"  # cells.jsonl, table.md, plans/
 _WORKER: dict = {}
 
 
@@ -62,8 +65,8 @@ def _stack_name(text: str) -> str:
 
 def add_cell_arguments(parser: argparse.ArgumentParser, seed: bool = False) -> None:
     """The arguments that name one cell (SCENARIO STACK AXIS LEVEL, and with ``seed`` one of its episodes,
-    SEED) and ``--allow-side-switches``, for the scripts that re-fly cells (``robustness_episode.py``,
-    ``robustness_reproduce.py``). ``args.stack`` comes normalised (``plus_id`` -> ``+id``)."""
+    SEED) and ``--allow-side-switches``, for the scripts that re-fly cells (:mod:`benchmarks.robustness_episode`,
+    :mod:`benchmarks.robustness_reproduce`). ``args.stack`` comes normalised (``plus_id`` -> ``+id``)."""
     parser.add_argument("scenario")
     parser.add_argument("stack", type=_stack_name, help="paper, +id, +mission or all (plus_id / plus_mission "
                                                         "accepted)")
@@ -168,43 +171,77 @@ def _episode(args: tuple) -> dict:
             "replan_solve_s": solves, "wall_s": res.wall_time_s}
 
 
-def cell_path(out: Path, scenario: str, stack: str, axis: str, level: float) -> Path:
-    return out / f"{scenario}__{stack.replace('+', 'plus_')}__{axis}_{level:g}.json"
+def cell_key(scenario: str, stack: str, axis: str, level: float) -> tuple[str, str, str, str]:
+    """What names a cell: the level as ``:g`` prints it (the name of the per-cell file a cell had before)."""
+    return scenario, stack, axis, f"{level:g}"
+
+
+def key_of(cell: dict) -> tuple[str, str, str, str]:
+    """A cell's key in cells.jsonl (:func:`cell_key` of its fields)."""
+    return cell_key(cell["scenario"], cell["stack"], cell["axis"], cell["level"])
+
+
+def cell_store(out: Path) -> CellStore:
+    """The benchmark's cells in ``out``/cells.jsonl. Per-cell JSON files of an older version in ``out`` are
+    refused with the command that converts them."""
+    path = out / "cells.jsonl"
+    if not path.exists() and any(out.glob("*__*__*.json")):
+        raise SystemExit(f"{out} holds per-cell JSON files (the format before cells.jsonl): convert them "
+                         f"first with python -m benchmarks.convert_cells robustness {out} --out {out}")
+    return CellStore(path, key=key_of)
+
+
+def plan_path(out: Path, scenario_name: str) -> Path:
+    """Where the benchmark caches a scenario's offline plan (a plan file: ``Plan.load`` reads it)."""
+    return out / "plans" / f"{scenario_name}.json"
+
+
+def load_cell(out: Path, scenario: str, stack: str, axis: str, level: float) -> dict:
+    """One cell of ``out``/cells.jsonl; SystemExit naming the cell if it was not run."""
+    cell = cell_store(out).get(cell_key(scenario, stack, axis, level))
+    if cell is None:
+        raise SystemExit(f"{out / 'cells.jsonl'} has no cell {scenario} / {stack} / {axis} {level:g}")
+    return cell
 
 
 def plan_for(scenario_name: str, out: Path) -> dict:
-    """The offline plan of a scenario, computed once and cached beside the cells (deterministic planner)."""
+    """The offline plan of a scenario, computed once and cached beside the cells (deterministic planner). A
+    folder of the layout before cells.jsonl (``<scenario>__plan.json`` beside the cells) is read as it is."""
     from impact_env.scenario import load_scenario
     from planners.offline.sr_planner import plan_spatially_robust
 
-    path = out / f"{scenario_name}__plan.json"
-    if path.exists():
-        return json.loads(path.read_text())
+    path = plan_path(out, scenario_name)
+    old = out / f"{scenario_name}__plan.json"
+    for cached in (path, old):
+        if cached.exists():
+            return json.loads(cached.read_text())
     plan = plan_spatially_robust(load_scenario(scenario_name))
-    plan.save(path)
+    with atomic_path(path) as tmp:  # a kill while saving leaves no half plan to resume from
+        plan.save(tmp)
     return plan.to_dict()
 
 
 def run(scenarios, stacks, axes, seeds_shipped, seeds_new, out: Path, engine: EngineConfig,
         levels: dict[str, tuple[float, ...]] | None = None) -> None:
     out.mkdir(parents=True, exist_ok=True)
+    store = cell_store(out)
     with open_engine(engine) as pool:
         for name in scenarios:
             plan = plan_for(name, out)
             seeds = seeds_shipped if name in SHIPPED else seeds_new
             for axis, level in conditions(axes, levels):
                 for stack in stacks:
-                    path = cell_path(out, name, stack, axis, level)
                     n = cell_seeds(axis, seeds)
-                    if path.exists() and json.loads(path.read_text())["episodes_requested"] >= n:
+                    done = store.get(cell_key(name, stack, axis, level))
+                    if done is not None and done["episodes_requested"] >= n:
                         continue
                     start = time.perf_counter()
                     jobs = [(name, stack, plan, axis, level, s) for s in range(n)]
                     episodes = list(pool.map(_episode, jobs))
-                    path.write_text(json.dumps({"scenario": name, "stack": stack, "axis": axis, "level": level,
-                                                "episodes_requested": n, "episodes": episodes,
-                                                "wall_s": time.perf_counter() - start}))
-                    print(row(json.loads(path.read_text())), flush=True)
+                    store.put({"scenario": name, "stack": stack, "axis": axis, "level": level,
+                               "episodes_requested": n, "episodes": episodes, "wall_s": time.perf_counter() - start})
+                    print(row(store.get(cell_key(name, stack, axis, level))), flush=True)
+                    write_table(out, store.cells())
 
 
 def row(cell: dict) -> str:
@@ -226,17 +263,32 @@ def condition_label(axis: str, level: float) -> str:
 
 
 def load_cells(out: Path) -> list[dict]:
-    return [json.loads(p.read_text()) for p in sorted(out.glob("*__*__*.json"))]
+    return cell_store(out).cells()
+
+
+def sort_cells(cells: list[dict], scenarios) -> list[dict]:
+    """The table's order: scenario (as listed, others after), condition, level, stack."""
+    order = {s: i for i, s in enumerate(STACKS)}
+    axes = ["nominal", "combined", "e", "offset", "thrust", "impact"]
+    return sorted(cells, key=lambda c: (list(scenarios).index(c["scenario"]) if c["scenario"] in scenarios else 99,
+                                        axes.index(c["axis"]), c["level"], order[c["stack"]]))
 
 
 def table(cells: list[dict], scenarios) -> str:
-    order = {s: i for i, s in enumerate(STACKS)}
-    axes = ["nominal", "combined", "e", "offset", "thrust", "impact"]
-    cells = sorted(cells, key=lambda c: (list(scenarios).index(c["scenario"]) if c["scenario"] in scenarios else 99,
-                                          axes.index(c["axis"]), c["level"], order[c["stack"]]))
     lines = ["| scenario | simulator | stack | episodes | success | robustness mean (min) | robot contacts / ep | "
              "mission replans / ep | replan solve s median / max |", "|---|---|---|---:|---:|---:|---:|---:|---:|"]
-    return "\n".join(lines + [row(c) for c in cells if c["scenario"] in scenarios])
+    return "\n".join(lines + [row(c) for c in sort_cells(cells, scenarios) if c["scenario"] in scenarios])
+
+
+def all_scenarios(cells: list[dict]) -> list[str]:
+    """The shipped and new scenarios, then any other scenario of the cells (in the order first seen)."""
+    names = list(SHIPPED + NEW)
+    return names + [n for n in dict.fromkeys(c["scenario"] for c in cells) if n not in names]
+
+
+def write_table(out: Path, cells: list[dict]) -> Path:
+    """``out``/table.md: the table of every cell (atomically, as the cells)."""
+    return write_atomic(out / "table.md", table(cells, all_scenarios(cells)) + "\n")
 
 
 def plot(cells: list[dict], scenarios, path: str) -> None:
@@ -321,9 +373,12 @@ def main() -> None:
     add_engine_arguments(parser, default_workers=min(2, os.cpu_count() or 1))
     parser.add_argument("--levels", action="append", default=[], metavar="AXIS=L1,L2",
                         help="levels of a swept axis instead of the default ones, e.g. e=0.4,0.5 (repeatable)")
-    parser.add_argument("--out", default=str(RESULTS), help="the cached cells and plans (default: %(default)s)")
+    parser.add_argument("--out", default=str(RESULTS),
+                        help="the cells (cells.jsonl), their table (table.md) and the cached plans (plans/) "
+                             "(default: %(default)s)")
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
-    parser.add_argument("--table-only", action="store_true", help="print the table of the cached cells")
+    parser.add_argument("--table-only", action="store_true",
+                        help="print the table of the cells done (and rewrite table.md); fly nothing")
     parser.add_argument("--plot", help="draw success against perturbation size to this PNG")
     args = parser.parse_args()
     scenarios, stacks, axes = args.scenarios.split(","), args.stacks.split(","), args.axes.split(",")
@@ -339,6 +394,8 @@ def main() -> None:
             print("the simulator has no impact_velocity_noise_mps option yet: the impact axis is left out")
         run(scenarios, stacks, axes, args.seeds, args.seeds_new, out, engine_config(args), levels)
     cells = load_cells(out)
+    if cells:
+        write_table(out, cells)
     print(table(cells, scenarios))
     if args.plot:
         plot(cells, scenarios, args.plot)

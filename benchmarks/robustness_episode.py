@@ -1,13 +1,13 @@
 """Re-fly one episode of a robustness-benchmark cell and tell its story impact by impact.
 
-    python benchmarks/robustness_episode.py SCENARIO STACK AXIS LEVEL SEED [--plot out.png] [--json out.json]
-    python benchmarks/robustness_episode.py two_objects all e 0.3 0 --allow-side-switches \
+    python -m benchmarks.robustness_episode SCENARIO STACK AXIS LEVEL SEED [--plot out.png] [--plan PLAN]
+    python -m benchmarks.robustness_episode two_objects all e 0.3 0 --allow-side-switches \
         --plot docs/img/two_objects_e03_seed0.png
-    python benchmarks/robustness_episode.py two_objects all impact 0.02 4 --significance 3
+    python -m benchmarks.robustness_episode two_objects all impact 0.02 4 --significance 3
 
 SCENARIO, STACK (``paper``, ``+id``, ``+mission``, ``all``; ``plus_id`` / ``plus_mission`` as in the cell
 file names), AXIS and LEVEL (``nominal 0``, ``combined 0``, ``e 0.3``, ``offset 0.1``, ``thrust 0.2``, ...)
-and SEED name one episode of :mod:`benchmarks/robustness.py` (the same plan file, env options and stack);
+and SEED name one episode of :mod:`benchmarks.robustness` (the same plan file, env options and stack);
 the episode is flown in this process, deterministically, so it has the cell's robustness.
 
 The story, in time order:
@@ -39,18 +39,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from robustness import RESULTS, add_cell_arguments, env_options, expert_config  # noqa: E402  (the cell's own)
-
-from planners.online.side_switch import side_switches, unflyable_side_switches  # noqa: E402
+from benchmarks.robustness import RESULTS, add_cell_arguments, env_options, expert_config, plan_path
+from planners.online.side_switch import side_switches, unflyable_side_switches
 
 
 # ------------------------------------------------------------------------------------------- recording
@@ -405,7 +400,7 @@ def plot(scenario, record: EpisodeRecord, expert, result, path: str, title: str 
 
 
 # ---------------------------------------------------------------------------------------------- main
-def fly(scenario_name: str, stack: str, axis: str, level: float, seed: int, plan_path: Path | None = None,
+def fly(scenario_name: str, stack: str, axis: str, level: float, seed: int, plan_file: Path | None = None,
         config=None):
     """Fly one cell's episode with recording; returns (scenario, expert, record, result, env options)."""
     from impact_env.envs.transport import TransportEnv
@@ -417,8 +412,7 @@ def fly(scenario_name: str, stack: str, axis: str, level: float, seed: int, plan
     from planners.plan import Plan
 
     scenario = load_scenario(scenario_name)
-    plan_path = plan_path or RESULTS / f"{scenario.name}__plan.json"
-    plan = Plan.from_dict(json.loads(Path(plan_path).read_text()))
+    plan = Plan.load(plan_file or plan_path(RESULTS, scenario.name))
     config = config or expert_config(stack)
     strategy = RecordingStrategy(PlanContact(aim_final_position=config.aim_final_position))
     expert = Expert(scenario, plan=plan, config=config, strategy=strategy)

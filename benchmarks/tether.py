@@ -17,7 +17,7 @@ in this process, one at a time; the flown episodes (the last two tables) run on 
 (:mod:`impact_env.sweep`): local worker processes, or Ray tasks with ``--engine ray [--address ADDR]``, with the
 same results either way. Usage:
 
-    python benchmarks/tether.py [--stations L,T,...] [--repeats 3] [--z3-timeout 20] [--no-smt] [--episodes 50]
+    python -m benchmarks.tether [--stations L,T,...] [--repeats 3] [--z3-timeout 20] [--no-smt] [--episodes 50]
                                 [--engine ray] [--workers 2]
 
 The last table is the expert's success rate over ``--episodes`` seeded episodes per station under ``reel`` with
@@ -33,10 +33,11 @@ import time
 
 import numpy as np
 
+from benchmarks import open_engine
 from impact_env.envs.tether import TetherEnv
 from impact_env.rollout import run_episode
 from impact_env.station import load_station, station_names
-from impact_env.sweep import add_engine_arguments, engine_config, open_engine
+from impact_env.sweep import add_engine_arguments, engine_config
 from planners.errors import PlannerError
 from planners.tether.automaton import build_thesis_map
 from planners.tether.expert import TetherExpert

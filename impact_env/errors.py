@@ -84,7 +84,13 @@ class EngineError(ImpactEnvError, RuntimeError):
     option is out of range. The message says which, and what to install or start."""
 
 
+class ResultsFileError(ImpactEnvError, ValueError):
+    """A results file (a benchmark's ``cells.jsonl``, :mod:`impact_env.results_store`) has a line that is not
+    a complete cell: names the file and line, and what to do (usually: delete the line, rerun its cell)."""
+
+
 TYPED_ERRORS: tuple[type[ImpactEnvError], ...] = (
     ImpactEnvError, ScenarioError, STLError, STLSyntaxError, STLBindingError, ActionError, EnvConfigError,
     ControllerError, TetherError, HyperparameterError, ModelFileError, UntrustedFileError, EngineError,
+    ResultsFileError,
 )

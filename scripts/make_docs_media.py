@@ -4,7 +4,8 @@
     python scripts/make_docs_media.py --only throw_and_catch_exp,L --max-steps 30 --out /tmp/media
 
 - ``img/envs/<name>.gif``: one episode per registered environment. Impact scenarios are flown by the expert
-  (the committed plan of ``baselines/results/plans/``, or a fresh MILP plan, then the replanner and the MPC).
+  (the committed plan of ``results/baselines/plans/`` or ``--plans``, or a fresh MILP plan, then the replanner
+  and the MPC).
   Tether stations are flown by a scripted anchor sequence (:class:`ScriptedAnchors`, below), not by a planner:
   the tether planners and their expert are not in the package yet.
 - ``img/planners/<scenario>_plan.png`` (the paper's Fig. 4: the plan, its positions and velocities) and
@@ -153,7 +154,7 @@ def _episode_frames(env, controller, seed: int, max_steps: int | None):
     return frames, np.array(positions), impacts, info
 
 
-def impact_media(name: str, out: Path, max_steps: int | None) -> None:
+def impact_media(name: str, out: Path, max_steps: int | None, plans: Path) -> None:
     import gymnasium as gym
 
     from impact_env import GYM_IDS
@@ -163,7 +164,7 @@ def impact_media(name: str, out: Path, max_steps: int | None) -> None:
 
     env_id = next(i for i, s in GYM_IDS.items() if s == name)
     env = gym.make(env_id, render_mode="rgb_array", render_width_px=GIF_WIDTH_PX)
-    committed = ROOT / "baselines" / "results" / "plans" / f"{name}.json"
+    committed = plans / f"{name}.json"
     plan = Plan.load(committed) if committed.is_file() else None
     expert = Expert(name, plan=plan)
     frames, positions, impacts, info = _episode_frames(env, expert, 0, max_steps)
@@ -211,12 +212,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=str(ROOT / "docs" / "img"), help="output folder (default docs/img)")
     parser.add_argument("--only", default=None, help="comma-separated scenario and station names (default all)")
     parser.add_argument("--max-steps", type=int, default=None, help="cut episodes short (for a quick check)")
+    parser.add_argument("--plans", default=str(ROOT / "results" / "baselines" / "plans"),
+                        help="the expert's plans, <scenario>.json (default results/baselines/plans)")
     args = parser.parse_args(argv)
     out = Path(args.out)
     names = args.only.split(",") if args.only else [*GYM_IDS.values(), *TETHER_GYM_IDS.values()]
     for name in names:
         if name in GYM_IDS.values():
-            impact_media(name, out, args.max_steps)
+            impact_media(name, out, args.max_steps, Path(args.plans))
         elif name in TETHER_GYM_IDS.values():
             tether_media(name, out, args.max_steps)
         else:

@@ -17,7 +17,7 @@ from baselines import hyperparams  # noqa: E402
 from baselines.train import TrainConfig, train  # noqa: E402
 from impact_env.cli import main  # noqa: E402
 
-RESULTS = Path(__file__).resolve().parents[1] / "baselines" / "results"
+MODELS = Path(__file__).parent / "data" / "models"  # copies of published folders of results/baselines/models/
 
 
 def test_hyperparameter_files_parse_without_eval():
@@ -167,7 +167,7 @@ def test_behaviour_cloning_unpickles_nothing_and_writes_no_pickle(demonstrations
     run_dir.mkdir(parents=True)
     for folder in (demonstrations, run_dir):
         (folder / "vecnormalize.pkl").write_bytes(pickle.dumps(Payload(marker)))
-    shutil.copy(RESULTS / "models" / "bc_throw_and_catch_exp" / "model.zip", demonstrations / "model.zip")
+    shutil.copy(MODELS / "bc_throw_and_catch_exp" / "model.zip", demonstrations / "model.zip")
     with_malicious_zip_entry(demonstrations, marker, "evil")
     try:
         assert main(["bc", "throw_and_catch_exp", "--dataset", str(demonstrations), "--epochs", "2",
@@ -189,7 +189,7 @@ def test_behaviour_cloning_without_a_dataset_is_a_clear_error(tmp_path, capsys):
 def test_bench_rllib_specs_take_any_label_even_rllib():
     from baselines.bench import parse_controllers
 
-    path = RESULTS / "models" / "rllib_ppo_{scenario}"  # the published RLlib export
+    path = MODELS / "rllib_ppo_{scenario}"  # the published RLlib export
     specs = parse_controllers(f"rllib:{path},rl:rllib:{path},rllib:rllib:{path}", ["throw_and_catch_exp"])
     assert [(s.label, s.name, s.kind) for s in specs] == [("rllib", f"rllib:{path}", "rllib"),
                                                           ("rl", f"rllib:{path}", "rllib"),
@@ -200,7 +200,7 @@ def test_bench_model_template_must_exist_for_every_scenario(tmp_path):
     from baselines.bench import parse_controllers
     from impact_env.errors import ImpactEnvError
 
-    shutil.copytree(RESULTS / "models" / "ppo_corridor", tmp_path / "corridor")
+    shutil.copytree(MODELS / "ppo_corridor", tmp_path / "corridor")
     spec, = parse_controllers(f"ppo:{tmp_path}/{{scenario}}/model.zip", ["corridor"])
     assert spec.label == "ppo"
     with pytest.raises(ImpactEnvError, match="obstacle_avoidance/model.zip"):

@@ -176,8 +176,9 @@ def test_contacts_that_end_in_one_substep_take_their_noise_in_the_scenario_order
 
 
 # ------------------------------------------------- one Plan object, new or reused experts, impact noise
-# the robustness benchmark's cached plan (plan_spatially_robust's, fingerprint c5fd64727b18)
-TWO_OBJECTS_PLAN = Path(__file__).resolve().parents[1] / "benchmarks/results/robustness/two_objects__plan.json"
+# the robustness benchmark's cached plan (plan_spatially_robust's, fingerprint c5fd64727b18; a copy of
+# results/robustness/plans/two_objects.json)
+TWO_OBJECTS_PLAN = Path(__file__).parent / "data" / "plans" / "robustness" / "two_objects.json"
 IMPACT_NOISE = {"impact_velocity_noise_mps": 0.02}
 
 

@@ -85,7 +85,7 @@ def test_every_page_is_in_the_navigation():
 
 
 def test_links_outside_the_docs_become_code():
-    text = hooks.repository_links("see [results](baselines/results/README.md), [format](scenario_format.md), "
+    text = hooks.repository_links("see [results](results/README.md), [format](scenario_format.md), "
                                   '[web](https://example.org) and <img src="docs/img/corridor.png">')
     assert "`results`" in text and "[format](scenario_format.md)" in text and "(https://example.org)" in text
     assert 'src="img/corridor.png"' in text
@@ -95,7 +95,9 @@ def test_media_script_makes_gifs_and_figures(tmp_path):
     import imageio.v3 as iio
 
     media = _load(ROOT / "scripts" / "make_docs_media.py", "impact_env_docs_media")
-    assert media.main(["--only", "throw_and_catch_exp,L", "--max-steps", "12", "--out", str(tmp_path)]) == 0
+    plans = ROOT / "tests" / "data" / "plans" / "bench"  # copies of results/baselines/plans/
+    assert media.main(["--only", "throw_and_catch_exp,L", "--max-steps", "12", "--out", str(tmp_path),
+                       "--plans", str(plans)]) == 0
     for name in ("throw_and_catch_exp", "L"):
         frames = iio.imread(tmp_path / "envs" / f"{name}.gif", index=None)
         assert frames.shape[0] > 5 and frames.shape[2] == media.GIF_WIDTH_PX

@@ -11,7 +11,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +28,7 @@ from planners.online.segment_feasibility import bounds_feasible
 from planners.online.segment_qp import DEGREE
 from planners.plan import Plan
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
-RELAY_PLAN = BENCHMARKS / "results" / "robustness" / "relay__plan.json"
+RELAY_PLAN = Path(__file__).parent / "data" / "plans" / "robustness" / "relay.json"  # the benchmark's plan
 A = 2.8 / 16.8  # the relay robots' full thrust over their mass (m/s^2 per axis)
 
 
@@ -229,9 +227,7 @@ def test_an_unreachable_impact_makes_the_monitor_replan_earlier(relay):
 # ------------------------------------------------------------------------------------ the episode
 def fly_relay_cell(predict_reachability: bool):
     """The benchmark cell's episode: relay, all parts, simulator restitution 0.75 - 0.6 = 0.15, seed 0."""
-    sys.path.insert(0, str(BENCHMARKS))
-    from robustness import env_options, expert_config
-
+    from benchmarks.robustness import env_options, expert_config
     from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
     from planners.expert import Expert

@@ -92,9 +92,9 @@ def test_no_side_switch(impacts):
 def test_the_shipped_plans_side_switches_leave_time_to_get_round():
     """The benchmark's offline plans of relay and obstacle_avoidance have side switches that the expert
     flies (every stack delivers both): a stop and a push back of an object at rest, a redirection after 40 s."""
-    root = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "robustness"
+    root = Path(__file__).parent / "data" / "plans" / "robustness"  # copies of results/robustness/plans/
     for name, count in (("relay", 1), ("obstacle_avoidance", 1), ("two_objects", 0)):
-        plan = Plan.from_dict(json.loads((root / f"{name}__plan.json").read_text()))
+        plan = Plan.from_dict(json.loads((root / f"{name}.json").read_text()))
         assert len(side_switches(plan)) == count
         assert unflyable_side_switches(plan, load_scenario(name)) == []
 

@@ -21,7 +21,7 @@ from baselines import model_files  # noqa: E402
 from impact_env.cli import main  # noqa: E402
 from impact_env.errors import ModelFileError, UntrustedFileError  # noqa: E402
 
-MODELS = Path(__file__).resolve().parents[1] / "baselines" / "results" / "models"
+MODELS = Path(__file__).parent / "data" / "models"  # copies of published folders of results/baselines/models/
 
 
 class Payload:

@@ -15,7 +15,7 @@ from impact_env.scenario import load_scenario
 from planners.errors import PlanCheckError
 from planners.plan import Plan
 
-PLAN_FILE = Path(__file__).resolve().parents[1] / "baselines" / "results" / "plans" / "corridor.json"
+PLAN_FILE = Path(__file__).parent / "data" / "plans" / "bench" / "corridor.json"  # results/baselines/plans/
 PLAN = json.loads(PLAN_FILE.read_text())
 CORRIDOR = load_scenario("corridor")
 

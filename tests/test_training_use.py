@@ -23,7 +23,7 @@ from baselines.train import TrainConfig, train  # noqa: E402
 from impact_env.cli import main  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "baselines" / "results"
+MODELS = ROOT / "tests" / "data" / "models"  # copies of published folders of results/baselines/models/
 TINY = """\
 impact_env/ThrowAndCatchExp-v0:
   n_envs: 1
@@ -193,9 +193,9 @@ def _with_entry(src: Path, dst: Path, key: str, pickle_bytes: bytes) -> None:
 def test_rl_zoo3_models_get_a_clear_message(tmp_path, capsys):
     folder = tmp_path / "zoo"
     folder.mkdir()
-    shutil.copy(RESULTS / "models" / "ppo_throw_and_catch_exp" / "vecnormalize.json", folder)
+    shutil.copy(MODELS / "ppo_throw_and_catch_exp" / "vecnormalize.json", folder)
     # rl_zoo3 pickles its learning-rate schedule, a function of rl_zoo3.utils (protocol-0 pickle of that global)
-    _with_entry(RESULTS / "models" / "ppo_throw_and_catch_exp" / "model.zip", folder / "model.zip", "learning_rate",
+    _with_entry(MODELS / "ppo_throw_and_catch_exp" / "model.zip", folder / "model.zip", "learning_rate",
                 b"crl_zoo3.utils\nlinear_schedule\n.")
     model = str(folder / "model.zip")
     # the safe loader rebuilds the schedule itself: rl_zoo3 is not needed to fly it
@@ -208,7 +208,7 @@ def test_rl_zoo3_models_get_a_clear_message(tmp_path, capsys):
     # rl_zoo3's layout: <env>.zip beside <env>/vecnormalize.pkl; flying it without the statistics is refused
     zoo = tmp_path / "logs"
     (zoo / "ThrowAndCatchExp-v0").mkdir(parents=True)
-    shutil.copy(RESULTS / "models" / "ppo_throw_and_catch_exp" / "model.zip", zoo / "ThrowAndCatchExp-v0.zip")
+    shutil.copy(MODELS / "ppo_throw_and_catch_exp" / "model.zip", zoo / "ThrowAndCatchExp-v0.zip")
     (zoo / "ThrowAndCatchExp-v0" / "vecnormalize.pkl").write_bytes(b"not read")
     assert main(["run", "throw_and_catch_exp", "--controller", str(zoo / "ThrowAndCatchExp-v0.zip")]) == 2
     err = capsys.readouterr().err

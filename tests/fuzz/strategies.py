@@ -23,11 +23,13 @@ else:  # pragma: no cover
 SCENARIOS = tuple(scenario_names())  # every shipped scenario
 TEXTS = {name: resources.files("impact_env.scenarios").joinpath(f"{name}.toml").read_text() for name in SCENARIOS}
 DICTS = {name: tomllib.loads(text) for name, text in TEXTS.items()}
-PLANS_DIR = Path(__file__).resolve().parents[2] / "baselines" / "results" / "plans"
-PLANS = {path.stem: json.loads(path.read_text()) for path in sorted(PLANS_DIR.glob("*.json"))}  # the published
-# the published impact-robust plans too (funnels and copies): key "<scenario>__ir_plan"
-IR_PLANS_DIR = Path(__file__).resolve().parents[2] / "benchmarks" / "results" / "impact_robust"
-PLANS.update({path.stem: json.loads(path.read_text()) for path in sorted(IR_PLANS_DIR.glob("*__ir_plan.json"))})
+# copies of the published plans (results/baselines/plans/): key "<scenario>"
+PLANS_DIR = Path(__file__).resolve().parents[1] / "data" / "plans" / "bench"
+PLANS = {path.stem: json.loads(path.read_text()) for path in sorted(PLANS_DIR.glob("*.json"))}
+# and of the published impact-robust plans (funnels and copies; results/impact_robust/plans/ir/): key
+# "<scenario>__ir_plan"
+IR_PLANS_DIR = Path(__file__).resolve().parents[1] / "data" / "plans" / "ir"
+PLANS.update({f"{path.stem}__ir_plan": json.loads(path.read_text()) for path in sorted(IR_PLANS_DIR.glob("*.json"))})
 
 # numbers that sit on the edges of what a float, a TOML integer or a physical quantity can be
 EXTREME_NUMBERS = [0, 0.0, -0.0, 1, -1, 2, 1e-300, 5e-324, -5e-324, 1e-9, 1e6, 1e7, 1e9, 1e300, 1e308, -1e308,
