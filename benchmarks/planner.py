@@ -20,6 +20,7 @@ rows instead of solving again (delete the file to measure afresh). Prints markdo
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import resource
@@ -33,6 +34,7 @@ from impact_env.scenario import load_scenario, scenario_names
 from planners.errors import PlanTimeoutError
 from planners.offline.ir_planner import IRPlannerConfig, build_ir_model, plan_impact_robust
 from planners.offline.solvers import available_solvers
+from planners.offline.solvers.base import SolverOptions
 from planners.offline.sr_planner import PlannerConfig, build_model, plan_spatially_robust
 
 
@@ -58,14 +60,14 @@ def _cpu_s() -> float:
 def plan_once(scenario, planner: str, solver: str, seed: int, time_limit_s: float, baseline: bool = False) -> Run:
     """Plan with ``solver`` and ``seed``; a time-out with a plan counts (flagged), without one it raises."""
     if planner == "ir":
-        config = IRPlannerConfig(solver=solver, seed=seed, time_limit_s=time_limit_s)
+        config = IRPlannerConfig(solver=solver, solver_options=SolverOptions(seed=seed, time_limit_s=time_limit_s))
         if baseline:
-            config.disjunctive_resets, config.refine_time_s = False, 0.0
+            config = dataclasses.replace(config, disjunctive_resets=False, refine_time_s=0.0)
         plan_fn = plan_impact_robust
     else:
-        config = PlannerConfig(solver=solver, seed=seed, time_limit_s=time_limit_s)
+        config = PlannerConfig(solver=solver, solver_options=SolverOptions(seed=seed, time_limit_s=time_limit_s))
         if baseline:
-            config.bound_propagation, config.refine_time_s = False, 0.0
+            config = dataclasses.replace(config, bound_propagation=False, refine_time_s=0.0)
         plan_fn = plan_spatially_robust
     start, cpu = time.perf_counter(), _cpu_s()
     timed_out = False

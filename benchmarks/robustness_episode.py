@@ -435,8 +435,8 @@ def main(argv: list[str] | None = None) -> None:
     stack = args.stack
     config = expert_config(stack, args.allow_side_switches)
     if args.significance is not None:
-        config = dataclasses.replace(config, identification_config=dataclasses.replace(
-            config.identification_config, significance=args.significance))
+        config = dataclasses.replace(config, identification=dataclasses.replace(
+            config.identification, significance=args.significance))
     scenario, expert, record, result, options = fly(args.scenario, stack, args.axis, args.level, args.seed,
                                                     args.plan, config)
     sig = "" if args.significance is None else f" / significance {args.significance:g}"
