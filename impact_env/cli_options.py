@@ -1,4 +1,4 @@
-"""What every ``impact-env`` subcommand shares: the parser class and the environment options.
+"""What every ``impact-env`` subcommand shares: the parser class, the environment options and ``run``'s outputs.
 
 :class:`Parser` prints each option's default in ``--help`` and adds "did you mean" to argparse's errors for
 a mistyped subcommand, choice or option. The environment options are named exactly as the environments'
@@ -9,10 +9,12 @@ keyword arguments, hyphenated (``--reward-mode`` is ``reward_mode=``, ``--initia
 from __future__ import annotations
 
 import argparse
+import json
 import re
+from pathlib import Path
 from typing import Any
 
-from impact_env.names import suggestion
+from impact_env.catalogue import suggestion
 
 # options renamed in 0.2.0 to match the environments' keywords
 RENAMED = {"--reward": "--reward-mode", "--init-noise": "--initial-position-noise-m"}
@@ -112,3 +114,20 @@ def transport_options(args: argparse.Namespace) -> dict[str, Any]:
     return {"reward_mode": args.reward_mode, "fuel_penalty": args.fuel_penalty, "restitution": args.restitution,
             "thrust_noise": args.thrust_noise, "initial_position_noise_m": args.initial_position_noise_m,
             "impact_velocity_noise_mps": args.impact_velocity_noise_mps}
+
+
+def save_video(path: str | None, result: Any, env: Any) -> None:
+    """The recorded frames of ``result`` (an ``EpisodeResult``) as an mp4 at the env's frame rate, if ``path``."""
+    if path:
+        from impact_env.rollout import write_video
+
+        write_video(result.frames, path, fps=env.metadata["render_fps"])
+        print(f"wrote {path}")
+
+
+def save_summary(path: str | None, summary: dict[str, Any]) -> None:
+    """``run``'s JSON summary, if ``path`` (its folder created)."""
+    if path:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(json.dumps(summary, indent=2))
+        print(f"wrote {path}")

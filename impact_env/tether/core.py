@@ -1,6 +1,6 @@
 """The episode logic shared by the tether Gymnasium and PettingZoo environments.
 
-One :class:`TetherCore` owns a station, the pymunk :class:`~impact_env.tether_physics.TetherWorld` (rebuilt on
+One :class:`TetherCore` owns a station, the pymunk :class:`~impact_env.tether.physics.TetherWorld` (rebuilt on
 every reset), the online STL monitor and the fleet's rules. The environment classes only translate its inputs
 and outputs into their APIs.
 
@@ -24,11 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from impact_env.envs.core import EnvConfigError
-from impact_env.errors import ActionError, ImpactEnvError
-from impact_env.station import CARGO, Station, load_station
+from impact_env.env_shell import check_can_step, clip_to_space, time_left
+from impact_env.errors import ActionError, EnvConfigError, ImpactEnvError
 from impact_env.stl import OnlineMonitor
-from impact_env.tether_physics import FIDELITIES, TetherWorld
+from impact_env.tether.physics import FIDELITIES, TetherWorld
+from impact_env.tether.station import CARGO, Station, load_station
 
 REWARD_MODES = ("dense", "sparse")
 KEEP, RELEASE, ATTACH0 = 0, 1, 2
@@ -39,7 +39,7 @@ class TetherCore:
 
     Args:
         station: a Station, a shipped station name or a path to a TOML file.
-        fidelity: ``"kinematic"`` (default), ``"reel"`` or ``"force"`` (see :mod:`impact_env.tether_physics`).
+        fidelity: ``"kinematic"`` (default), ``"reel"`` or ``"force"`` (see :mod:`impact_env.tether.physics`).
         reward_mode: ``"dense"`` or ``"sparse"``.
         energy_penalty: reward cost per joule of winch work (>= 0).
         pull_speed_mps: the winches' actual ``w`` (default the station's): a mismatch for a planner.
@@ -199,10 +199,7 @@ class TetherCore:
 
     def step(self, action: Any) -> tuple[float, bool, dict[str, Any]]:
         """Apply one command per robot and simulate one control period; returns (reward, terminated, info)."""
-        if self.world is None:
-            raise ImpactEnvError("call reset() before step()")
-        if self.step_count >= self.horizon_steps:
-            raise ImpactEnvError("the episode has ended (the task's horizon was reached); call reset()")
+        check_can_step(self)
         commands = self.decode(action)
         world = self.world
         rejected: list[dict] = []
@@ -229,6 +226,10 @@ class TetherCore:
             reward = estimate if terminated else 0.0
         reward -= self.energy_penalty * work
         return float(reward), terminated, self.info(step_events, rejected)
+
+    def reset_info(self) -> dict[str, Any]:
+        """``info`` of ``reset()``: the robustness of the start, no events yet."""
+        return self.info()
 
     def info(self, events: list[dict] | None = None, rejected: list[dict] | None = None) -> dict[str, Any]:
         world = self.world
@@ -264,10 +265,8 @@ class TetherCore:
                 out[base + self.n_anchors + 1] = world.tether_length_m(robot)
         los0 = 4 + self.n_robots * self.robot_block
         out[los0: los0 + self.n_anchors] = self._los
-        out[-1] = max(0.0, 1.0 - self.step_count / self.horizon_steps)
-        obs = out.astype(np.float32)
-        np.minimum(obs, self.obs_high, out=obs)
-        return np.maximum(obs, self.obs_low, out=obs)
+        out[-1] = time_left(self)
+        return clip_to_space(out.astype(np.float32), self)
 
     def line_of_sight_mask(self) -> np.ndarray:
         """Which anchors a tether from the cargo reaches now (bool, n_anchors)."""
