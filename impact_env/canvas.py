@@ -12,6 +12,7 @@ the picture that does not change once (``_draw_static``), then each frame over i
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,14 @@ REGION_TEXT = (20, 100, 35)
 ROBOT = (60, 110, 220)
 OBJECT = (245, 150, 40)
 BODY_EDGE = (30, 30, 30)
+
+
+@dataclass
+class Frame:
+    """What every picture shows in its text band; a renderer's frame adds what it draws of the world."""
+
+    time_s: float
+    robustness: float  # current STL robustness estimate (m)
 
 
 def prepare_display() -> None:

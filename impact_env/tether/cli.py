@@ -9,21 +9,21 @@ from __future__ import annotations
 
 import argparse
 
-from impact_env.cli_options import save_summary, save_video
+from impact_env.cli_options import print_catalogue, run_and_report, save_summary
 from impact_env.errors import ImpactEnvError
 
 TETHER_KEYS = ("switches", "snags", "path_length_m", "winch_work_J", "wall_contacts")
+# impact-env scenarios: (title, format, value) of each column between the name and the description
+COLUMNS = (("robots", ">7", lambda st: st.n_robots), ("k", ">3", lambda st: st.k),
+           ("anchors", ">8", lambda st: st.n_anchors), ("w_mps", ">7.2f", lambda st: st.pull_speed_mps),
+           ("tf_s", ">6.0f", lambda st: st.tf_s))
 
 
 def list_stations() -> None:
     """The table of shipped stations."""
     from impact_env.tether.station import load_station, station_names
 
-    print(f"{'station':<22}{'robots':>7}{'k':>3}{'anchors':>8}{'w_mps':>7}{'tf_s':>6}  description")
-    for name in station_names():
-        st = load_station(name)
-        print(f"{name:<22}{st.n_robots:>7}{st.k:>3}{st.n_anchors:>8}{st.pull_speed_mps:>7.2f}{st.tf_s:>6.0f}  "
-              f"{st.description}")
+    print_catalogue("station", station_names(), load_station, COLUMNS)
 
 
 def show_station(args: argparse.Namespace) -> int:
@@ -39,7 +39,7 @@ def show_station(args: argparse.Namespace) -> int:
 def run_station(args: argparse.Namespace) -> int:
     """``run`` for a tether station: the same loop, tether numbers instead of impacts and fuel."""
     from impact_env.controllers import make_controller
-    from impact_env.rollout import run_episodes, statistics
+    from impact_env.rollout import EpisodeResult, statistics
     from impact_env.tether.gym_env import TetherEnv
     from impact_env.tether.plotting import plot_tether_run
     from impact_env.tether.station import load_station
@@ -58,16 +58,15 @@ def run_station(args: argparse.Namespace) -> int:
                "initial_position_noise_m": args.initial_position_noise_m}
     env = TetherEnv(st, render_mode="rgb_array" if args.video else None, **options)
     controller = make_controller(args.controller, st, plan=args.plan)
-    results, events = [], []
-    for res in run_episodes(env, controller, args.seed, args.episodes, record_first=bool(args.video)):
-        results.append(res)
+    events = []  # each episode's tether events
+
+    def details(res: EpisodeResult) -> str:
         events.append(list(env.core.events))
         info = res.final_info
-        print(f"episode {len(results)}/{args.episodes} seed={res.seed}: robustness={res.robustness:+.4f} m "
-              f"success={res.success} switches={info['switches']} snags={info['snags']} "
-              f"path={info['path_length_m']:.2f} m ({res.steps} steps, {res.wall_time_s:.2f} s)", flush=True)
+        return f"switches={info['switches']} snags={info['snags']} path={info['path_length_m']:.2f} m"
+
+    results = run_and_report(args, env, controller, details)
     first = results[0]
-    save_video(args.video, first, env)
     if args.plot:
         print(f"wrote {plot_tether_run(st, first.positions, events[0], first.robustness, args.plot)}")
     episodes = [{**r.summary(), **{key: r.final_info[key] for key in TETHER_KEYS}} for r in results]

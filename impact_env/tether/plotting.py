@@ -14,16 +14,8 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Patch, Rectangle
 from matplotlib.patches import Polygon as PolygonPatch
 
-from impact_env.figures import (  # noqa: F401 - DPI: a name of impact_env.tether_plotting (0.2)
-    DPI,
-    OBJECT_COLOUR,
-    REGION_COLOUR,
-    legend_beside,
-    new_figure,
-    png_path,
-    save,
-    world_axes,
-)
+from impact_env import figures
+from impact_env.figures import OBJECT_COLOUR, REGION_COLOUR
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -31,7 +23,8 @@ if TYPE_CHECKING:
 
     from impact_env.tether.station import Station
 
-_png_path = png_path  # its name in impact_env.tether_plotting (0.2), which planners' tether figures import
+# names of impact_env.tether_plotting (0.2), for that path's release (planners' tether figures import them)
+DPI, _png_path = figures.DPI, figures.png_path
 
 WALL_COLOUR = "0.15"
 ANCHOR_COLOUR = "tab:blue"
@@ -49,7 +42,7 @@ def draw_station(station: Station, ax: Axes | None = None, fan: bool = True) -> 
     handles = _draw(station, ax, fan)
     ax.set_title(f"station {station.name}  (k = {station.k} of {station.n_robots} robots, "
                  f"w = {station.pull_speed_mps:g} m/s, {station.n_anchors} anchors)")
-    legend_beside(ax, handles)
+    figures.legend_beside(ax, handles)
     return ax
 
 
@@ -57,7 +50,7 @@ def save_station_figure(station: Station, path: str | Path) -> Path:
     """Draw ``station`` (see :func:`draw_station`) into a PNG; returns the written path (``.png`` added if none)."""
     fig = _figure(station)
     draw_station(station, fig.add_subplot())
-    return save(fig, path)
+    return figures.save(fig, path)
 
 
 def plot_tether_run(station: Station, positions: np.ndarray, events: Sequence[dict[str, Any]], robustness: float,
@@ -72,7 +65,7 @@ def plot_tether_run(station: Station, positions: np.ndarray, events: Sequence[di
         p = p[:, 0]
     if p.ndim != 2 or p.shape[1] != 2 or len(p) == 0:
         raise ValueError(f"positions must have shape (T, 2) or (T, 1, 2), got {np.shape(positions)}")
-    path = png_path(path)
+    path = figures.png_path(path)
     fig = _figure(station)
     ax = fig.add_subplot()
     handles = _draw(station, ax, fan=False)
@@ -85,14 +78,14 @@ def plot_tether_run(station: Station, positions: np.ndarray, events: Sequence[di
             at = np.array(at)
             handles.append(ax.scatter(at[:, 0], at[:, 1], marker=marker, color=colour, s=50, zorder=6, label=kind))
     ax.set_title(f"station {station.name}: robustness {robustness:+.3f} m")
-    legend_beside(ax, handles)
-    return save(fig, path)
+    figures.legend_beside(ax, handles)
+    return figures.save(fig, path)
 
 
 def _figure(station: Station) -> Figure:
     xmin, xmax, ymin, ymax = station.bounds
     scale = 8.0 / max(xmax - xmin, ymax - ymin)
-    return new_figure(max(2.5, (xmax - xmin) * scale) + 2.5, max(2.5, (ymax - ymin) * scale) + 0.6)
+    return figures.new_figure(max(2.5, (xmax - xmin) * scale) + 2.5, max(2.5, (ymax - ymin) * scale) + 0.6)
 
 
 def _draw(station: Station, ax: Axes, fan: bool) -> list:
@@ -125,5 +118,5 @@ def _draw(station: Station, ax: Axes, fan: bool) -> list:
         ax.annotate(str(a.index), p, fontsize=6, ha="center", va="center", color=ANCHOR_COLOUR)
     ax.add_patch(Circle(start, station.cargo.radius_m, facecolor=OBJECT_COLOUR, edgecolor="k", zorder=6))
     handles.append(Patch(facecolor=OBJECT_COLOUR, edgecolor="k", label="cargo at its start"))
-    world_axes(ax, station.bounds, pad=0.5)
+    figures.world_axes(ax, station.bounds, pad=0.5)
     return handles

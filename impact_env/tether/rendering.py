@@ -18,27 +18,26 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from impact_env.canvas import BACKGROUND, BODY_EDGE, OBJECT, REGION, REGION_EDGE, RENDER_MODES, Canvas  # noqa: F401
+from impact_env.canvas import (  # noqa: F401 - RENDER_MODES: a name of impact_env.tether_rendering (0.2)
+    BACKGROUND,
+    BODY_EDGE,
+    OBJECT,
+    REGION,
+    REGION_EDGE,
+    RENDER_MODES,
+    Canvas,
+    Frame,
+)
 
 if TYPE_CHECKING:
     from impact_env.tether.core import TetherCore
     from impact_env.tether.station import Station
 
-INTERIOR = (226, 230, 236)
-WALL = (40, 40, 40)
-ANCHOR = (90, 90, 90)
-ANCHOR_VISIBLE = (20, 120, 200)
-FAN = (150, 190, 225)
-TETHER = (200, 0, 160)
-TETHER_ATTACHING = (230, 160, 215)
-
 
 @dataclass
-class TetherFrame:
+class TetherFrame(Frame):
     """What one picture shows."""
 
-    time_s: float
-    robustness: float
     cargo_m: tuple[float, float]
     tethers: Sequence[tuple[int, bool]]  # (anchor index, pulling) of each held tether
     line_of_sight: Sequence[bool]  # per anchor
@@ -52,6 +51,15 @@ def frame_of(core: TetherCore) -> TetherFrame:
                if world.tether_anchor(r) is not None]
     return TetherFrame(time_s=core.time_s, robustness=core.robustness, cargo_m=world.position_m, tethers=tethers,
                        line_of_sight=core.line_of_sight_mask().tolist(), label=core.fidelity)
+
+
+INTERIOR = (226, 230, 236)
+WALL = (40, 40, 40)
+ANCHOR = (90, 90, 90)
+ANCHOR_VISIBLE = (20, 120, 200)
+FAN = (150, 190, 225)
+TETHER = (200, 0, 160)
+TETHER_ATTACHING = (230, 160, 215)
 
 
 class TetherRenderer(Canvas):

@@ -10,19 +10,19 @@ from __future__ import annotations
 import argparse
 import textwrap
 
-from impact_env.cli_options import save_summary, save_video, transport_options
+from impact_env.cli_options import print_catalogue, run_and_report, save_summary, transport_options
 from impact_env.errors import ImpactEnvError
+
+# impact-env scenarios: (title, format, value) of each column between the name and the description
+COLUMNS = (("robots", ">7", lambda sc: len(sc.robots)), ("objects", ">8", lambda sc: len(sc.objects)),
+           ("e", ">6.2f", lambda sc: sc.restitution), ("tf_s", ">7.0f", lambda sc: sc.tf_s))
 
 
 def list_scenarios() -> None:
     """The table of shipped scenarios."""
     from impact_env.transport.scenario import load_scenario, scenario_names
 
-    print(f"{'name':<22}{'robots':>7}{'objects':>8}{'e':>6}{'tf_s':>7}  description")
-    for name in scenario_names():
-        sc = load_scenario(name)
-        print(f"{name:<22}{len(sc.robots):>7}{len(sc.objects):>8}{sc.restitution:>6.2f}{sc.tf_s:>7.0f}  "
-              f"{sc.description}")
+    print_catalogue("name", scenario_names(), load_scenario, COLUMNS)
 
 
 def show_scenario(args: argparse.Namespace) -> int:
@@ -39,7 +39,7 @@ def show_scenario(args: argparse.Namespace) -> int:
 def run_scenario(args: argparse.Namespace) -> int:
     """``run`` for an impact scenario."""
     from impact_env.controllers import make_controller
-    from impact_env.rollout import run_episodes, statistics
+    from impact_env.rollout import EpisodeResult, statistics
     from impact_env.transport.gym_env import TransportEnv
     from impact_env.transport.plotting import count_impacts
     from impact_env.transport.scenario import load_scenario
@@ -52,15 +52,13 @@ def run_scenario(args: argparse.Namespace) -> int:
     env = TransportEnv(sc, render_mode="rgb_array" if args.video else None, **options)
     controller = make_controller(args.controller, sc, plan=args.plan, trust_pickle=True if args.trust_pickle else None,
                                  allow_other_scenario=True if args.allow_other_scenario else None)
-    results = []
-    for res in run_episodes(env, controller, args.seed, args.episodes, record_first=bool(args.video)):
-        results.append(res)
+
+    def details(res: EpisodeResult) -> str:
         hits, contacts = count_impacts(sc, res.impacts)
-        print(f"episode {len(results)}/{args.episodes} seed={res.seed}: robustness={res.robustness:+.4f} m "
-              f"success={res.success} impacts={hits} (robot-object; {contacts} contacts in all) "
-              f"fuel={res.fuel_Ns:.2f} N s ({res.steps} steps, {res.wall_time_s:.2f} s)", flush=True)
+        return f"impacts={hits} (robot-object; {contacts} contacts in all) fuel={res.fuel_Ns:.2f} N s"
+
+    results = run_and_report(args, env, controller, details)
     first = results[0]
-    save_video(args.video, first, env)
     if args.plot:
         if hasattr(controller, "plot_episode"):  # the expert draws executed against planned (Fig. 6)
             controller.plot_episode(first, args.plot)

@@ -13,19 +13,8 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, FancyArrowPatch, Patch, Polygon, Rectangle
 
-from impact_env.figures import (  # noqa: F401 - DPI and the colours: the names of impact_env.plotting (0.2)
-    DPI,
-    IMPACT_COLOUR,
-    OBJECT_COLOUR,
-    OBSTACLE_COLOUR,
-    REGION_COLOUR,
-    ROBOT_COLOUR,
-    legend_beside,
-    new_figure,
-    png_path,
-    save,
-    world_axes,
-)
+from impact_env import figures
+from impact_env.figures import IMPACT_COLOUR, OBJECT_COLOUR, OBSTACLE_COLOUR, REGION_COLOUR, ROBOT_COLOUR
 
 if TYPE_CHECKING:
     from matplotlib.artist import Artist
@@ -33,7 +22,7 @@ if TYPE_CHECKING:
 
     from impact_env.transport.scenario import Scenario
 
-_png_path = png_path  # its name in impact_env.plotting (0.2), kept for that path's release
+DPI, _png_path = figures.DPI, figures.png_path  # names of impact_env.plotting (0.2), for that path's release
 # trajectory colours per body: blues for robots, oranges/browns for objects, cycled
 ROBOT_TRACE_COLOURS = ("tab:blue", "tab:cyan", "tab:purple", "navy", "steelblue")
 OBJECT_TRACE_COLOURS = ("tab:orange", "tab:brown", "goldenrod", "tab:red", "chocolate")
@@ -47,10 +36,10 @@ def draw_scenario(scenario: Scenario, ax: Axes | None = None) -> Axes:
     is None (reach it through ``ax.figure``).
     """
     if ax is None:
-        ax = new_figure(*_xy_figsize(scenario)).add_subplot()
+        ax = figures.new_figure(*_xy_figsize(scenario)).add_subplot()
     handles = _draw_scenario(scenario, ax)
     ax.set_title(f"{scenario.name}  (restitution e = {scenario.restitution:g}, tf = {scenario.tf_s:g} s)")
-    legend_beside(ax, handles)
+    figures.legend_beside(ax, handles)
     return ax
 
 
@@ -59,9 +48,9 @@ def save_scenario_figure(scenario: Scenario, path: str | Path) -> Path:
 
     A path without a suffix gets ``.png``; missing parent folders are created. Returns the written path.
     """
-    fig = new_figure(*_xy_figsize(scenario))
+    fig = figures.new_figure(*_xy_figsize(scenario))
     draw_scenario(scenario, fig.add_subplot())
-    return save(fig, path)
+    return figures.save(fig, path)
 
 
 def count_impacts(scenario: Scenario, impacts: Sequence[dict[str, Any]]) -> tuple[int, int]:
@@ -113,14 +102,14 @@ def plot_run(scenario: Scenario, times_s: np.ndarray, positions: np.ndarray, imp
         missing = [key for key in ("time", "a", "b", "impulse") if key not in impact]
         if missing:
             raise ValueError(f"impacts[{k}] lacks key(s) {missing}; each impact needs 'time', 'a', 'b', 'impulse'")
-    path = png_path(path)
+    path = figures.png_path(path)
     index = {b.name: i for i, b in enumerate(bodies)}
     colours = _trace_colours(scenario)
     objects = {b.name for b in scenario.objects}
     robots = {b.name for b in scenario.robots}
 
     w, h = _xy_figsize(scenario)
-    fig = new_figure(w + 7.5, max(h, 5.5))
+    fig = figures.new_figure(w + 7.5, max(h, 5.5))
     grid = fig.add_gridspec(2, 2, width_ratios=[w, 7.5])
     ax_xy = fig.add_subplot(grid[:, 0])
     ax_p = fig.add_subplot(grid[0, 1])
@@ -140,7 +129,7 @@ def plot_run(scenario: Scenario, times_s: np.ndarray, positions: np.ndarray, imp
         handles.append(ax_xy.scatter(stars[:, 0], stars[:, 1], marker="*", s=160, color=IMPACT_COLOUR,
                                      edgecolor="k", linewidth=0.5, zorder=9, label="robot-object impact"))
     ax_xy.set_title("xy view")
-    legend_beside(ax_xy, handles)
+    figures.legend_beside(ax_xy, handles)
 
     velocities = np.gradient(positions, times_s, axis=0) if times_s.size > 1 else np.zeros_like(positions)
     for i, body in enumerate(bodies):
@@ -166,9 +155,9 @@ def plot_run(scenario: Scenario, times_s: np.ndarray, positions: np.ndarray, imp
     ax_v.set_ylabel("velocity (m/s)")
     ax_v.set_xlabel("time (s)")
     ax_v.set_title("velocities (vx solid, vy dashed); impacts dotted")
-    legend_beside(ax_p, time_handles)
+    figures.legend_beside(ax_p, time_handles)
     fig.suptitle(f"{scenario.name}: robustness rho = {robustness:.3f} m  ({impacts_text(scenario, impacts)})")
-    return save(fig, path, tight=False)
+    return figures.save(fig, path, tight=False)
 
 
 # --------------------------------------------------------------------------------------------- helpers
@@ -221,7 +210,7 @@ def _draw_scenario(scenario: Scenario, ax: Axes) -> list[Artist]:
         if body.name in robot_names and np.hypot(fx - x, fy - y) > 1e-9:
             ax.add_patch(FancyArrowPatch((x, y), (fx, fy), arrowstyle="-|>", mutation_scale=12, color=colour,
                                          lw=1.0, alpha=0.7, shrinkA=0, shrinkB=0, zorder=3))
-    world_axes(ax, scenario.world_box, pad=0.03 * max(xmax - xmin, ymax - ymin))
+    figures.world_axes(ax, scenario.world_box, pad=0.03 * max(xmax - xmin, ymax - ymin))
 
     handles: list[Artist] = []
     if scenario.robots:

@@ -35,6 +35,7 @@ from impact_env.canvas import (  # noqa: F401 - the colours and layout of impact
     ROBOT,
     TEXT,
     Canvas,
+    Frame,
     prepare_display,
 )
 
@@ -50,17 +51,15 @@ FLASH_S = IMPACT_FLASH_S  # how long an impact is reported to the renderer
 OBSTACLE = (110, 72, 72)
 OBSTACLE_EDGE = (60, 38, 38)
 OBSTACLE_TEXT = (250, 250, 250)
-HEADING = (20, 20, 20)
+HEADING = TEXT  # the line from a disc's centre along its heading
 THRUST = (200, 0, 160)
 IMPACT = (230, 30, 30)
 
 
 @dataclass
-class RenderFrame:
+class RenderFrame(Frame):
     """What one picture shows. Per-body sequences follow ``scenario.bodies`` (robots first, then objects)."""
 
-    time_s: float
-    robustness: float  # current STL robustness estimate (m)
     positions: Sequence[tuple[float, float]]  # per body, world frame (m)
     headings: Sequence[float]  # per body (rad, counter-clockwise from +x)
     robot_forces_world: Sequence[tuple[float, float]]  # per robot, applied force in the world frame (N)
