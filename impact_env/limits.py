@@ -58,7 +58,7 @@ def check_timing(tf_s: float, control_period_s: float, substeps: int) -> None:
 
 
 def check_body(body: Any, where: str, tf_s: float) -> None:
-    """Mass, inertia and reachable yaw rate of one body (a :class:`impact_env.scenario.Body`)."""
+    """Mass, inertia and reachable yaw rate of one body (a :class:`impact_env.transport.scenario.Body`)."""
     if not MIN_MASS_KG <= body.mass_kg <= MAX_MASS_KG:
         raise ScenarioError(f"{where}.mass_kg must be in [{MIN_MASS_KG:g}, {MAX_MASS_KG:g}] kg, got {body.mass_kg:g}")
     rim = body.mass_kg * body.radius_m * body.radius_m

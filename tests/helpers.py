@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import copy
 
-from impact_env.scenario import Scenario, scenario_from_dict
+from impact_env.transport.scenario import Scenario, scenario_from_dict
 
 FREEFLYER = {"mass_kg": 16.8, "radius_m": 0.2, "inertia_kgm2": 0.1594}
 

@@ -42,7 +42,7 @@ def test_run_writes_summary_video_and_plot(tmp_path):
 def test_run_zero_controller_on_a_user_file(tmp_path):
     from importlib.resources import files
 
-    text = files("impact_env.scenarios").joinpath("throw_and_catch_exp.toml").read_text()
+    text = files("impact_env.transport.scenarios").joinpath("throw_and_catch_exp.toml").read_text()
     path = tmp_path / "lab.toml"
     path.write_text(text)
     out = tmp_path / "zero.json"

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from impact_env.scenario import load_scenario
+from impact_env.transport.scenario import load_scenario
 from planners.errors import PlannerError, ReplanInputError
 from planners.online.bookkeeping import ImpactBook
 from planners.online.impact_model import required_contact
@@ -232,8 +232,8 @@ def fly_relay_cell(predict_reachability: bool):
     sys.path.insert(0, str(BENCHMARKS))
     from robustness import env_options, expert_config
 
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
+    from impact_env.transport.gym_env import TransportEnv
     from planners.expert import Expert
 
     scenario = load_scenario("relay")

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from shapely.geometry import LineString, Point, Polygon
 
 from impact_env.errors import ScenarioError
-from impact_env.station import load_station, station_from_dict, station_names
+from impact_env.tether.station import load_station, station_from_dict, station_names
 from tests.helpers import DELETE, modified
 from tests.station_helpers import L_POLYGON, make_station, station_dict
 
@@ -191,7 +191,7 @@ def test_load_by_name_and_path(tmp_path):
         load_station(path)
     from importlib.resources import files
 
-    path.write_text(files("impact_env.stations").joinpath("T.toml").read_text())
+    path.write_text(files("impact_env.tether.stations").joinpath("T.toml").read_text())
     assert load_station(path) == load_station("T")
 
 
