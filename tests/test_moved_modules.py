@@ -26,6 +26,7 @@ from __future__ import annotations
 import importlib
 import json
 import pickle
+import re
 import sys
 from pathlib import Path
 
@@ -47,32 +48,16 @@ from impact_env.transport.scenario import Scenario, load_scenario
 DATA = Path(__file__).parent / "data"
 ROOT = Path(__file__).resolve().parents[1]
 
-# every module path of 0.2 that moved, with its new home
-OLD_PATHS = {
-    "impact_env.names": "impact_env.catalogue",
-    "impact_env.scenario": "impact_env.transport.scenario",
-    "impact_env.scenarios": "impact_env.transport.scenarios",
-    "impact_env.physics": "impact_env.transport.physics",
-    "impact_env.rendering": "impact_env.transport.rendering",
-    "impact_env.plotting": "impact_env.transport.plotting",
-    "impact_env.envs.actions": "impact_env.transport.actions",
-    "impact_env.envs.clock": "impact_env.env_shell",
-    "impact_env.envs.core": "impact_env.transport.core",
-    "impact_env.envs.docstrings": "impact_env.env_docstrings",
-    "impact_env.envs.render_support": "impact_env.transport.rendering",
-    "impact_env.envs.starts": "impact_env.transport.starts",
-    "impact_env.envs.transport": "impact_env.transport.gym_env",
-    "impact_env.envs.transport_parallel": "impact_env.transport.pettingzoo_env",
-    "impact_env.station": "impact_env.tether.station",
-    "impact_env.stations": "impact_env.tether.stations",
-    "impact_env.tether_physics": "impact_env.tether.physics",
-    "impact_env.tether_rendering": "impact_env.tether.rendering",
-    "impact_env.tether_plotting": "impact_env.tether.plotting",
-    "impact_env.tether_cli": "impact_env.tether.cli",
-    "impact_env.envs.tether": "impact_env.tether.gym_env",
-    "impact_env.envs.tether_core": "impact_env.tether.core",
-    "impact_env.envs.tether_parallel": "impact_env.tether.pettingzoo_env",
-}
+
+
+def changelog_moves() -> dict[str, str]:
+    """The table of moves in the CHANGELOG's "Unreleased" section: ``| `old.path` | `new.path` |`` rows."""
+    text = (ROOT / "CHANGELOG.md").read_text()
+    unreleased = text[text.index("## Unreleased"):text.index("\n## ", text.index("## Unreleased") + 1)]
+    return dict(re.findall(r"^\| `(impact_env[\w.]*)` \| `(impact_env[\w.]*)` \|", unreleased, flags=re.M))
+
+
+OLD_PATHS = changelog_moves()
 
 # names that 0.2 code imported from the old paths (planners, baselines, benchmarks, tests, the docs), private
 # ones among them: each must still be there
@@ -111,7 +96,8 @@ def import_afresh(name: str):
     return sys.modules[name], record
 
 
-def test_every_old_path_is_registered():
+def test_every_old_path_is_registered_and_listed_in_the_changelog():
+    assert len(OLD_PATHS) == 23 and "impact_env.envs.transport" in OLD_PATHS  # the table was found
     assert moved_modules.moves() == OLD_PATHS
 
 

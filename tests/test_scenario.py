@@ -102,17 +102,6 @@ def test_substep_check_suggests_a_number():
         scenario_from_dict(data)
 
 
-def test_unknown_name_missing_file_and_bad_toml(tmp_path):
-    with pytest.raises(ScenarioError, match="unknown scenario 'corrid'.*corridor"):
-        load_scenario("corrid")
-    with pytest.raises(ScenarioError, match="does not exist"):
-        load_scenario(tmp_path / "nope.toml")
-    bad = tmp_path / "bad.toml"
-    bad.write_text("name = \n")
-    with pytest.raises(ScenarioError, match="not valid TOML"):
-        load_scenario(bad)
-
-
 def test_final_box_table():
     data = two_body_dict()
     sc = scenario_from_dict({**data, "final_box": {"O1": {"position_m": 0.5, "velocity_mps": [0.05, 0.1]}}})

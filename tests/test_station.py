@@ -180,21 +180,6 @@ def test_bad_fields_raise_scenario_error_naming_them(path, value, message):
     assert message in str(info.value) and str(info.value).startswith("bad.toml: ")
 
 
-def test_load_by_name_and_path(tmp_path):
-    with pytest.raises(ScenarioError, match="unknown station 'nowhere'; shipped stations: .*L"):
-        load_station("nowhere")
-    with pytest.raises(ScenarioError, match="does not exist"):
-        load_station(tmp_path / "missing.toml")
-    path = tmp_path / "bad.toml"
-    path.write_text("name = [")
-    with pytest.raises(ScenarioError, match="not valid TOML"):
-        load_station(path)
-    from importlib.resources import files
-
-    path.write_text(files("impact_env.tether.stations").joinpath("T.toml").read_text())
-    assert load_station(path) == load_station("T")
-
-
 def test_narrow_passage_gives_a_free_space_in_pieces():
     # two rooms joined by a 0.5 m slot: the 0.3 m cargo cannot pass, the free space has two parts
     polygon = [[0, 0], [4, 0], [4, 1.75], [6, 1.75], [6, 0], [10, 0], [10, 4], [6, 4], [6, 2.25], [4, 2.25], [4, 4],

@@ -338,16 +338,3 @@ def test_cli_lists_shows_and_runs_stations(tmp_path, capsys):
     result = json.loads(zero.read_text())
     # nobody pulls: the cargo stays at its start, 16 m left and 11 m below the goal box's near corner
     assert result["path_length_m"] == 0.0 and result["robustness"] == pytest.approx(-math.hypot(15.5, 10.5))
-
-
-@pytest.mark.parametrize("argv,message", [
-    (["run", "L", "--restitution", "0.5"], "--restitution applies to impact scenarios, not to station 'L'"),
-    (["run", "corridor", "--fidelity", "reel"], "--energy-penalty, --pull-speed-mps and --max-active apply to tether"),
-    (["run", "L", "--reward-mode", "conjuncts"], "--reward-mode conjuncts applies to impact scenarios"),
-])
-def test_cli_station_errors_are_one_line(argv, message, capsys):
-    from impact_env.cli import main
-
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert message in err and "Traceback" not in err

@@ -10,11 +10,7 @@ is REJECTED, the robot keeping what it had and ``info["rejected"]`` saying why, 
 sight of the cargo centre, the cargo is already inside the anchor's stop radius, another robot holds the anchor,
 or ``k`` other robots already hold anchors (pulling or attaching). Attaching to the anchor a robot already holds
 is a keep. A command that is not an integer in ``0 .. n_anchors + 1`` (or NaN, or the wrong number of commands)
-raises :class:`~impact_env.errors.ActionError`: no rule can make sense of it.
-
-Reward: ``"dense"`` (default) the per-step increment of the online robustness estimate of the station's task
-(the trace so far with its last sample held), so an episode's rewards sum to its final robustness; ``"sparse"``
-the final robustness on the last step. Both subtract ``energy_penalty`` times the step's winch work (J).
+raises :class:`~impact_env.errors.ActionError`: no rule can make sense of it. The rewards: see :class:`TetherCore`.
 """
 
 from __future__ import annotations
@@ -36,6 +32,11 @@ KEEP, RELEASE, ATTACH0 = 0, 1, 2
 
 class TetherCore:
     """Station + tether physics + STL monitor + fleet rules: reset, apply commands, observe.
+
+    Reward: ``"dense"`` (default) the per-step increment of the online robustness estimate of the station's task
+    (the trace so far with its last sample held), so an episode's rewards sum to its final robustness;
+    ``"sparse"`` the final robustness on the last step. Both subtract ``energy_penalty`` times the step's winch
+    work (J).
 
     Args:
         station: a Station, a shipped station name or a path to a TOML file.
