@@ -18,7 +18,7 @@ tar -tzf "$SDIST" > "$WORK/sdist.txt"
 for f in LICENSE CHANGELOG.md CITATION.cff; do
     grep -q "/$f\$" "$WORK/sdist.txt" || { echo "sdist lacks $f"; exit 1; }
 done
-for f in impact_env/scenarios/corridor.toml impact_env/stations/L.toml baselines/hyperparams/ppo.yml planners/expert.py; do
+for f in impact_env/transport/scenarios/corridor.toml impact_env/tether/stations/L.toml baselines/hyperparams/ppo.yml planners/expert.py; do
     grep -q "^$f\$" "$WORK/wheel.txt" || { echo "wheel lacks $f"; exit 1; }
 done
 "$BASE" -m venv "$WORK/venv"
