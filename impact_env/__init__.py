@@ -17,9 +17,45 @@ from __future__ import annotations
 
 import gymnasium
 
-from impact_env.errors import ActionError, ImpactEnvError, ScenarioError, STLBindingError, STLError, STLSyntaxError
-from impact_env.scenario import Scenario, load_scenario, scenario_names
-from impact_env.station import Station, load_station, station_names
+from impact_env import moved_modules
+
+# the modules that moved in 0.3.0 (one folder per world family): old path -> new path, for one release
+moved_modules.register({
+    "impact_env.names": "impact_env.catalogue",
+    "impact_env.envs.actions": "impact_env.transport.actions",
+    "impact_env.envs.clock": "impact_env.env_shell",
+    "impact_env.envs.core": "impact_env.transport.core",
+    "impact_env.envs.docstrings": "impact_env.env_docstrings",
+    "impact_env.envs.render_support": "impact_env.transport.rendering",
+    "impact_env.envs.starts": "impact_env.transport.starts",
+    "impact_env.envs.transport": "impact_env.transport.gym_env",
+    "impact_env.envs.transport_parallel": "impact_env.transport.pettingzoo_env",
+    "impact_env.physics": "impact_env.transport.physics",
+    "impact_env.plotting": "impact_env.transport.plotting",
+    "impact_env.rendering": "impact_env.transport.rendering",
+    "impact_env.scenario": "impact_env.transport.scenario",
+    "impact_env.scenarios": "impact_env.transport.scenarios",
+    "impact_env.envs.tether": "impact_env.tether.gym_env",
+    "impact_env.envs.tether_core": "impact_env.tether.core",
+    "impact_env.envs.tether_parallel": "impact_env.tether.pettingzoo_env",
+    "impact_env.station": "impact_env.tether.station",
+    "impact_env.stations": "impact_env.tether.stations",
+    "impact_env.tether_cli": "impact_env.tether.cli",
+    "impact_env.tether_physics": "impact_env.tether.physics",
+    "impact_env.tether_plotting": "impact_env.tether.plotting",
+    "impact_env.tether_rendering": "impact_env.tether.rendering",
+})
+
+from impact_env.errors import (  # noqa: E402
+    ActionError,
+    ImpactEnvError,
+    ScenarioError,
+    STLBindingError,
+    STLError,
+    STLSyntaxError,
+)
+from impact_env.tether.station import Station, load_station, station_names  # noqa: E402
+from impact_env.transport.scenario import Scenario, load_scenario, scenario_names  # noqa: E402
 
 __version__ = "0.2.0"
 
@@ -48,17 +84,17 @@ def _horizon_steps(task_source) -> int:
 def _register() -> None:
     for env_id, scenario in GYM_IDS.items():
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point="impact_env.envs.transport:TransportEnv",
+            gymnasium.register(id=env_id, entry_point="impact_env.transport.gym_env:TransportEnv",
                                kwargs={"scenario": scenario},
                                max_episode_steps=_horizon_steps(load_scenario(scenario)))
     if "impact_env/Transport-v0" not in gymnasium.registry:
-        gymnasium.register(id="impact_env/Transport-v0", entry_point="impact_env.envs.transport:TransportEnv")
+        gymnasium.register(id="impact_env/Transport-v0", entry_point="impact_env.transport.gym_env:TransportEnv")
     for env_id, station in TETHER_GYM_IDS.items():
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point="impact_env.envs.tether:TetherEnv", kwargs={"station": station},
-                               max_episode_steps=_horizon_steps(load_station(station)))
+            gymnasium.register(id=env_id, entry_point="impact_env.tether.gym_env:TetherEnv",
+                               kwargs={"station": station}, max_episode_steps=_horizon_steps(load_station(station)))
     if "impact_env/Tether-v0" not in gymnasium.registry:
-        gymnasium.register(id="impact_env/Tether-v0", entry_point="impact_env.envs.tether:TetherEnv")
+        gymnasium.register(id="impact_env/Tether-v0", entry_point="impact_env.tether.gym_env:TetherEnv")
     try:
         import pettingzoo
         from pettingzoo.env_registry.registration import parallel_registry

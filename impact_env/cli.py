@@ -7,24 +7,20 @@
 
 SCENARIO is a shipped name (``impact-env scenarios``) or a path to a TOML file. Tether stations (a shipped
 station name, or a TOML file with a ``[station]`` table) work in the same places; ``run`` then takes
-``--fidelity kinematic|reel|force`` and ``--energy-penalty``. Subcommands defined in
-other packages (e.g. ``plan`` in ``planners/``) join through the ``impact_env.commands`` entry points.
+``--fidelity kinematic|reel|force`` and ``--energy-penalty``. Each world family answers for its own files
+(:mod:`impact_env.transport.cli`, :mod:`impact_env.tether.cli`). Subcommands defined in other packages (e.g.
+``plan`` in ``planners/``) join through the ``impact_env.commands`` entry points.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import textwrap
 from importlib.metadata import entry_points
-from pathlib import Path
 
-import numpy as np
-
-from impact_env.cli_options import Parser, add_tether_options, add_transport_options, transport_options
-from impact_env.envs.core import REWARD_MODES
+from impact_env.cli_options import Parser, add_tether_options, add_transport_options
 from impact_env.errors import ImpactEnvError
+from impact_env.transport.core import REWARD_MODES
 
 COMMANDS_GROUP = "impact_env.commands"
 
@@ -41,107 +37,41 @@ examples:
 
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
-    from impact_env.scenario import load_scenario, scenario_names
+    from impact_env.tether.cli import list_stations
+    from impact_env.transport.cli import list_scenarios
 
-    rows = []
-    for name in scenario_names():
-        sc = load_scenario(name)
-        rows.append((name, len(sc.robots), len(sc.objects), sc.restitution, sc.tf_s, sc.description))
-    print(f"{'name':<22}{'robots':>7}{'objects':>8}{'e':>6}{'tf_s':>7}  description")
-    for name, nr, no, e, tf, desc in rows:
-        print(f"{name:<22}{nr:>7}{no:>8}{e:>6.2f}{tf:>7.0f}  {desc}")
-    from impact_env.station import load_station, station_names
-
-    print(f"\n{'station':<22}{'robots':>7}{'k':>3}{'anchors':>8}{'w_mps':>7}{'tf_s':>6}  description")
-    for name in station_names():
-        st = load_station(name)
-        print(f"{name:<22}{st.n_robots:>7}{st.k:>3}{st.n_anchors:>8}{st.pull_speed_mps:>7.2f}{st.tf_s:>6.0f}  "
-              f"{st.description}")
+    list_scenarios()
+    print()
+    list_stations()
     return 0
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
-    from impact_env.plotting import save_scenario_figure
-    from impact_env.scenario import load_scenario
-    from impact_env.station import is_station_file
+    from impact_env.tether.station import is_station_file
 
     if is_station_file(args.scenario):
-        from impact_env.tether_cli import show_station
+        from impact_env.tether.cli import show_station
 
         return show_station(args)
-    sc = load_scenario(args.scenario)
-    path = save_scenario_figure(sc, args.out)
-    print(f"wrote {path}")
-    print(textwrap.fill(f"task: {' '.join(sc.task.split())}", width=100, subsequent_indent="      "))
-    return 0
+    from impact_env.transport.cli import show_scenario
 
-
-def _env_kwargs(args: argparse.Namespace) -> dict:
-    return transport_options(args)
+    return show_scenario(args)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from impact_env.controllers import make_controller
-    from impact_env.envs.transport import TransportEnv
-    from impact_env.plotting import count_impacts
-    from impact_env.rollout import run_episode, write_video
-    from impact_env.scenario import load_scenario
-    from impact_env.station import is_station_file
+    from impact_env.tether.station import is_station_file
 
     if args.episodes < 1:
         raise ImpactEnvError(f"--episodes must be >= 1, got {args.episodes}")
     if args.seed < 0:
         raise ImpactEnvError(f"--seed must be >= 0, got {args.seed}")
     if is_station_file(args.scenario):
-        from impact_env.tether_cli import run_station
+        from impact_env.tether.cli import run_station
 
         return run_station(args)
-    if (args.fidelity, args.energy_penalty, args.pull_speed_mps, args.max_active) != ("kinematic", 0.0, None, None):
-        raise ImpactEnvError("--fidelity, --energy-penalty, --pull-speed-mps and --max-active apply to tether "
-                             "stations, not to impact scenarios")
-    sc = load_scenario(args.scenario)
-    env = TransportEnv(sc, render_mode="rgb_array" if args.video else None, **_env_kwargs(args))
-    controller = make_controller(args.controller, sc, plan=args.plan, trust_pickle=True if args.trust_pickle else None,
-                                 allow_other_scenario=True if args.allow_other_scenario else None)
-    results = []
-    for k in range(args.episodes):
-        seed = args.seed + k
-        res = run_episode(env, controller, seed=seed, record_frames=bool(args.video) and k == 0)
-        if hasattr(controller, "report"):  # e.g. the expert's planned-versus-executed numbers
-            res.extra = controller.report()
-        results.append(res)
-        hits, contacts = count_impacts(sc, res.impacts)
-        print(f"episode {k + 1}/{args.episodes} seed={seed}: robustness={res.robustness:+.4f} m "
-              f"success={res.success} impacts={hits} (robot-object; {contacts} contacts in all) "
-              f"fuel={res.fuel_Ns:.2f} N s ({res.steps} steps, {res.wall_time_s:.2f} s)", flush=True)
-    first = results[0]
-    if args.video:
-        write_video(first.frames, args.video, fps=env.metadata["render_fps"])
-        print(f"wrote {args.video}")
-    if args.plot:
-        if hasattr(controller, "plot_episode"):  # the expert draws executed against planned (Fig. 6)
-            controller.plot_episode(first, args.plot)
-        else:
-            from impact_env.plotting import plot_run
+    from impact_env.transport.cli import run_scenario
 
-            plot_run(sc, first.times_s, first.positions, first.impacts, first.robustness, args.plot)
-        print(f"wrote {args.plot}")
-    summary = {
-        "scenario": sc.name, "controller": args.controller, "env_options": _env_kwargs(args),
-        # the first episode's numbers at the top level; every episode under "episodes"
-        **{k: v for k, v in first.summary().items()
-           if k in ("success", "robustness", "impacts", "fuel_Ns", "controller_ms", "controller_report")},
-        "success_rate": float(np.mean([r.success for r in results])),
-        "robustness_mean": float(np.mean([r.robustness for r in results])),
-        "robustness_std": float(np.std([r.robustness for r in results])),
-        "episodes": [r.summary() for r in results],
-    }
-    if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(summary, indent=2))
-        print(f"wrote {args.json}")
-    env.close()
-    return 0
+    return run_scenario(args)
 
 
 def _version() -> str:

@@ -1,4 +1,4 @@
-"""What every ``impact-env`` subcommand shares: the parser class and the environment options.
+"""What every ``impact-env`` subcommand shares: the parser class, the environment options and ``run``'s outputs.
 
 :class:`Parser` prints each option's default in ``--help`` and adds "did you mean" to argparse's errors for
 a mistyped subcommand, choice or option. The environment options are named exactly as the environments'
@@ -9,10 +9,13 @@ keyword arguments, hyphenated (``--reward-mode`` is ``reward_mode=``, ``--initia
 from __future__ import annotations
 
 import argparse
+import json
 import re
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
-from impact_env.names import suggestion
+from impact_env.catalogue import suggestion
 
 # options renamed in 0.2.0 to match the environments' keywords
 RENAMED = {"--reward": "--reward-mode", "--init-noise": "--initial-position-noise-m"}
@@ -112,3 +115,47 @@ def transport_options(args: argparse.Namespace) -> dict[str, Any]:
     return {"reward_mode": args.reward_mode, "fuel_penalty": args.fuel_penalty, "restitution": args.restitution,
             "thrust_noise": args.thrust_noise, "initial_position_noise_m": args.initial_position_noise_m,
             "impact_velocity_noise_mps": args.impact_velocity_noise_mps}
+
+
+def run_and_report(args: argparse.Namespace, env: Any, controller: Any, details: Callable[[Any], str]) -> list[Any]:
+    """``run``'s episodes (``--episodes`` from ``--seed`` on): a line each with robustness, success,
+    ``details(result)``, steps and time, and the first one's video if ``--video``; returns the results."""
+    from impact_env.rollout import run_episodes as episodes
+
+    results = []
+    for res in episodes(env, controller, args.seed, args.episodes, record_first=bool(args.video)):
+        results.append(res)
+        print(f"episode {len(results)}/{args.episodes} seed={res.seed}: robustness={res.robustness:+.4f} m "
+              f"success={res.success} {details(res)} ({res.steps} steps, {res.wall_time_s:.2f} s)", flush=True)
+    save_video(args.video, results[0], env)
+    return results
+
+
+def save_video(path: str | None, result: Any, env: Any) -> None:
+    """The recorded frames of ``result`` (an ``EpisodeResult``) as an mp4 at the env's frame rate, if ``path``."""
+    if path:
+        from impact_env.rollout import write_video
+
+        write_video(result.frames, path, fps=env.metadata["render_fps"])
+        print(f"wrote {path}")
+
+
+def save_summary(path: str | None, summary: dict[str, Any]) -> None:
+    """``run``'s JSON summary, if ``path`` (its folder created)."""
+    if path:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(json.dumps(summary, indent=2))
+        print(f"wrote {path}")
+
+
+def print_catalogue(first: str, names: Sequence[str], load: Callable[[str], Any],
+                    columns: Sequence[tuple[str, str, Callable[[Any], Any]]]) -> None:
+    """``impact-env scenarios``' table of one kind of shipped file: a row per name, its ``columns`` (title, format
+    spec, value of the loaded file) between the name (headed ``first``) and the description."""
+    widths = [re.match(r"[<>^]?\d*", spec).group() for _, spec, _ in columns]
+    print(f"{first:<22}" + "".join(format(title, width) for (title, _, _), width in zip(columns, widths))
+          + "  description")
+    for name in names:
+        loaded = load(name)
+        print(f"{name:<22}" + "".join(format(value(loaded), spec) for _, spec, value in columns)
+              + f"  {loaded.description}")

@@ -80,7 +80,7 @@ def make_controller(spec: str, scenario: Any, **options: Any) -> Controller:
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         if ep.name == spec:
             return ep.load()(scenario, **{k: v for k, v in options.items() if v is not None})
-    from impact_env.names import suggestion
+    from impact_env.catalogue import suggestion
 
     raise ControllerError(f"unknown controller {spec!r}{suggestion(spec, available_controllers())}; available: "
                           f"{', '.join(available_controllers())}, or a model path ending in .zip")

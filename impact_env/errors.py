@@ -94,3 +94,16 @@ TYPED_ERRORS: tuple[type[ImpactEnvError], ...] = (
     ControllerError, TetherError, HyperparameterError, ModelFileError, UntrustedFileError, EngineError,
     ResultsFileError,
 )
+
+
+def brief(value: object, width: int = 60) -> str:
+    """``value`` as an error message quotes it: its repr, cut to ``width`` characters (``...`` at the end).
+
+    A value whose repr fails or recurses (an integer of thousands of digits, a list nested thousands deep)
+    is named by its type instead, so that building the message never raises.
+    """
+    try:
+        text = repr(value)
+    except (ValueError, RecursionError):
+        return f"a {type(value).__name__}"
+    return text if len(text) <= width else text[:width - 3] + "..."

@@ -2,28 +2,12 @@
 
 pymunk integrates with a fixed step and detects contacts between positions, so a body that moves too far
 in one substep can pass through a disc or a wall, and a body whose mass or yaw inertia is tiny gets an
-infinite inverse (then NaN). The scenario loader calls :func:`check_limits` so that such a scenario is a
-:class:`~impact_env.errors.ScenarioError` naming the field, not a body outside the world later. The
-limits, and why each is where it is (``docs/scenario_format.md`` repeats them for users):
-
-- **Accuracy of impacts.** At the fastest planned speed, one substep must move a body less than a quarter of
-  the smallest radius, so a contact is seen while the overlap is small and the bounce is exact. The fastest
-  planned speed is (1 + e) times the largest initial speed or velocity bound: (1 + e) is what a resting body
-  of any mass can leave an impact with (Eq. 5).
-- **No tunnelling.** At the fastest speed a body can reach, one substep must move it less than the smallest
-  radius: a disc then overlaps what it runs into before its centre can cross it, so it is pushed back out on
-  the side it came from, whatever the wall's or the other disc's thickness. The fastest reachable speed adds
-  the thrust: (1 + e) times the speed of one straight full-thrust run across the world's diagonal from the
-  robot's initial speed, sqrt(|v0|^2 + 2 |F| D / m). This is an envelope of what a plan or a policy does,
-  not a worst case: a robot that keeps thrusting while bouncing between walls for a long time goes faster.
-- **Substeps** at most :data:`MAX_SUBSTEPS` per control period (each costs ~5 us; 1,000 make a step ~5 ms).
-  A scenario that needs more is rejected with what to change.
-- **Episode length** at most :data:`MAX_EPISODE_STEPS` control periods, and tf_s at most :data:`MAX_TF_S`.
-- **Mass and inertia.** mass_kg in [:data:`MIN_MASS_KG`, :data:`MAX_MASS_KG`]; inertia_kgm2 at least
-  :data:`MIN_INERTIA_FRACTION` of m r^2 (the inertia of all the mass on the rim): contacts are frictionless
-  and through the centre, so they create no spin, but their rounding does, divided by the inertia.
-- **Spin.** The yaw rate a body can reach (its initial rate, plus for a robot the torque limit over the
-  inertia for all of tf_s) at most :data:`MAX_YAW_RATE_RADPS`, so headings and observations stay finite.
+infinite inverse (then NaN). The scenario loader calls these checks so that such a scenario is a
+:class:`~impact_env.errors.ScenarioError` naming the field, not a body outside the world later: impacts
+accurate to a quarter radius per substep, no tunnelling at the fastest reachable speed, at most
+:data:`MAX_SUBSTEPS` substeps and :data:`MAX_EPISODE_STEPS` steps, masses and inertias in range, a bounded
+yaw rate. Why each limit is where it is: ``docs/background.md#limits`` (``docs/scenario_format.md`` repeats
+them for users).
 """
 
 from __future__ import annotations
@@ -58,7 +42,7 @@ def check_timing(tf_s: float, control_period_s: float, substeps: int) -> None:
 
 
 def check_body(body: Any, where: str, tf_s: float) -> None:
-    """Mass, inertia and reachable yaw rate of one body (a :class:`impact_env.scenario.Body`)."""
+    """Mass, inertia and reachable yaw rate of one body (a :class:`impact_env.transport.scenario.Body`)."""
     if not MIN_MASS_KG <= body.mass_kg <= MAX_MASS_KG:
         raise ScenarioError(f"{where}.mass_kg must be in [{MIN_MASS_KG:g}, {MAX_MASS_KG:g}] kg, got {body.mass_kg:g}")
     rim = body.mass_kg * body.radius_m * body.radius_m

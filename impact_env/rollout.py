@@ -1,15 +1,16 @@
-"""Run one episode of a controller in the Gymnasium env and summarise it (CLI, benchmarks)."""
+"""Run episodes of a controller in a Gymnasium env and summarise them (the CLI's ``run``, benchmarks)."""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from impact_env.controllers import Controller
-from impact_env.envs.transport import TransportEnv
 
 
 @dataclass
@@ -49,12 +50,13 @@ def robot_object_impacts(scenario, impacts: list[dict[str, Any]]) -> list[dict[s
     return [i for i in impacts if {i["a"], i["b"]} & robots and {i["a"], i["b"]} & objects]
 
 
-def run_episode(env: TransportEnv, controller: Controller, seed: int | None = None,
+def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
                 record_frames: bool = False) -> EpisodeResult:
     """Reset with ``seed``, let the controller act until the episode ends, return its summary.
 
-    Works for the tether environments too (:class:`~impact_env.envs.tether.TetherEnv`): their one body is the
-    cargo, and they report no impacts and no fuel.
+    ``env`` is a :class:`~impact_env.transport.gym_env.TransportEnv` or a
+    :class:`~impact_env.tether.gym_env.TetherEnv` (possibly wrapped): a tether env's one body is the cargo, and
+    it reports no impacts and no fuel.
     """
     start = time.perf_counter()
     obs, info = env.reset(seed=seed)
@@ -84,6 +86,29 @@ def run_episode(env: TransportEnv, controller: Controller, seed: int | None = No
         controller_ms=ms, times_s=np.arange(steps + 1) * core.dt_s, positions=np.array(positions), frames=frames,
         final_info=info,
     )
+
+
+def run_episodes(env: gym.Env, controller: Controller, first_seed: int, episodes: int,
+                 record_first: bool = False) -> Iterator[EpisodeResult]:
+    """:func:`run_episode` with seeds ``first_seed, first_seed + 1, ...``, each result as its episode ends.
+
+    A controller with a ``report()`` (e.g. the expert's planned-versus-executed numbers) has it stored in the
+    result's ``extra``; ``record_first`` keeps the first episode's frames.
+    """
+    for k in range(episodes):
+        result = run_episode(env, controller, seed=first_seed + k, record_frames=record_first and k == 0)
+        if hasattr(controller, "report"):
+            result.extra = controller.report()
+        yield result
+
+
+def statistics(results: list[EpisodeResult]) -> dict[str, float]:
+    """Success rate and robustness mean and standard deviation (m) over episodes: the CLI summary's numbers."""
+    return {
+        "success_rate": float(np.mean([r.success for r in results])),
+        "robustness_mean": float(np.mean([r.robustness for r in results])),
+        "robustness_std": float(np.std([r.robustness for r in results])),
+    }
 
 
 def write_video(frames: list[np.ndarray], path: str, fps: int) -> None:

@@ -9,25 +9,7 @@ as long as ``fn`` depends on nothing but its job (columns that measure wall-cloc
         rows = engine.map(run_one_episode, jobs)
     print(engine.placement_summary())  # e.g. "20 jobs on 2 nodes (node 3f2a1c: 10, node 9b8e77: 10)"
 
-Engines:
-
-- ``local``: a pool of ``workers`` spawned processes on this machine (spawn, not fork: a forked worker
-  inherits the parent's solver and torch thread-pool locks and can deadlock on its first solve).
-- ``ray``: one Ray task per job (1 CPU each, scheduled with Ray's SPREAD strategy, so a cluster's nodes
-  share the sweep even while the head node has free CPUs). ``address`` (or the ``RAY_ADDRESS`` environment
-  variable) names a running cluster: ``auto`` for the one started on this machine with ``ray start --head``,
-  ``HOST:6379`` for a head elsewhere. Without an address a private local Ray instance with ``workers`` CPUs
-  is started and shut down again when the ``with`` block ends.
-
-Workers must import this package. On a cluster either install it on every node (``pip install
-impact_env[ray]`` into the same Python version as the driver's), or pass ``ship_code=True``
-(``--ship-code``): the driver's own ``impact_env``, ``planners`` and ``baselines`` folders then travel in
-Ray's runtime environment (``py_modules``) and shadow whatever is installed on the nodes. Their third-party
-dependencies (pymunk, casadi, highspy, ...) must be installed on the nodes either way.
-
-Both engines give each worker one thread for OpenMP and torch (Ray does this for 1-CPU tasks; the local
-pool sets ``OMP_NUM_THREADS=1`` and ``torch.set_num_threads(1)``), so a worker's floating-point results do
-not depend on the engine's threading, and ``workers`` processes use ``workers`` cores.
+The two engines, what a worker needs on a cluster and its one thread: see :func:`open_engine`.
 """
 
 from __future__ import annotations
@@ -309,7 +291,28 @@ class Engine:
 
 def open_engine(config: EngineConfig | None = None, n_jobs: int | None = None) -> Engine:
     """Start the engine ``config`` describes (local: a process pool of at most ``n_jobs`` workers; ray: connect
-    to the cluster or start a private local instance). Use it as a context manager."""
+    to the cluster or start a private local instance). Use it as a context manager.
+
+    Engines:
+
+    - ``local``: a pool of ``workers`` spawned processes on this machine (spawn, not fork: a forked worker
+      inherits the parent's solver and torch thread-pool locks and can deadlock on its first solve).
+    - ``ray``: one Ray task per job (1 CPU each, scheduled with Ray's SPREAD strategy, so a cluster's nodes
+      share the sweep even while the head node has free CPUs). ``address`` (or the ``RAY_ADDRESS`` environment
+      variable) names a running cluster: ``auto`` for the one started on this machine with ``ray start --head``,
+      ``HOST:6379`` for a head elsewhere. Without an address a private local Ray instance with ``workers`` CPUs
+      is started and shut down again when the ``with`` block ends.
+
+    Workers must import this package. On a cluster either install it on every node (``pip install
+    impact_env[ray]`` into the same Python version as the driver's), or pass ``ship_code=True``
+    (``--ship-code``): the driver's own ``impact_env``, ``planners`` and ``baselines`` folders then travel in
+    Ray's runtime environment (``py_modules``) and shadow whatever is installed on the nodes. Their third-party
+    dependencies (pymunk, casadi, highspy, ...) must be installed on the nodes either way.
+
+    Both engines give each worker one thread for OpenMP and torch (Ray does this for 1-CPU tasks; the local
+    pool sets ``OMP_NUM_THREADS=1`` and ``torch.set_num_threads(1)``), so a worker's floating-point results do
+    not depend on the engine's threading, and ``workers`` processes use ``workers`` cores.
+    """
     config = config or EngineConfig()
     engine = Engine(config)
     if config.name == "local":

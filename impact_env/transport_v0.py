@@ -4,11 +4,9 @@
 
     env = transport_v0.parallel_env(scenario="corridor")   # or env() / raw_env() for the AEC form
 
-The version follows the environment's (:class:`~impact_env.envs.transport_parallel.TransportParallelEnv`):
+The version follows the environment's (:class:`~impact_env.transport.pettingzoo_env.TransportParallelEnv`):
 a new module ``transport_v1`` would come with any change of dynamics, reward or observations, and this one
 would stay as it is.
 """
 
-from impact_env.envs.transport_parallel import TransportParallelEnv, env, parallel_env, raw_env
-
-__all__ = ["TransportParallelEnv", "env", "parallel_env", "raw_env"]
+from impact_env.transport.pettingzoo_env import TransportParallelEnv, env, parallel_env, raw_env  # noqa: F401

@@ -195,8 +195,8 @@ def tether_media(name: str, out: Path, max_steps: int | None) -> None:
 
 def scenario_figures(names: list[str], out: Path) -> None:
     from impact_env import load_scenario, load_station, scenario_names
-    from impact_env.plotting import save_scenario_figure
-    from impact_env.tether_plotting import save_station_figure
+    from impact_env.tether.plotting import save_station_figure
+    from impact_env.transport.plotting import save_scenario_figure
 
     for name in names:
         if name in scenario_names():

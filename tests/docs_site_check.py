@@ -135,7 +135,7 @@ def browser(tmp_path_factory):
 @pytest.mark.parametrize("slug, env_class", [("corridor", "TransportEnv"), ("tether_L", "TetherEnv")])
 def test_an_environment_page_shows_its_gif_and_arguments_table_in_chromium(browser, slug, env_class):
     import impact_env.envs as envs
-    from impact_env.envs.docstrings import arguments as constructor_arguments
+    from impact_env.env_docstrings import arguments as constructor_arguments
 
     arguments = len(constructor_arguments(getattr(envs, env_class)))  # the rows the page was generated from
     from matplotlib.image import imread

@@ -1,10 +1,10 @@
-"""Small scenario builders shared by the tests."""
+"""Small scenario builders and checks shared by the tests."""
 
 from __future__ import annotations
 
 import copy
 
-from impact_env.scenario import Scenario, scenario_from_dict
+from impact_env.transport.scenario import Scenario, scenario_from_dict
 
 FREEFLYER = {"mass_kg": 16.8, "radius_m": 0.2, "inertia_kgm2": 0.1594}
 
@@ -47,3 +47,13 @@ def modified(data: dict, path: str, value) -> dict:
 
 _DELETE = object()
 DELETE = _DELETE
+
+
+def one_line_error(argv: list[str], capsys) -> str:
+    """What ``impact-env argv`` writes to stderr; it must fail with exit code 2 and no traceback."""
+    from impact_env.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return err

@@ -20,9 +20,9 @@ import math
 
 import numpy as np
 
-from impact_env.physics import World
-from impact_env.scenario import Scenario
 from impact_env.stl import robustness
+from impact_env.transport.physics import World
+from impact_env.transport.scenario import Scenario
 from planners.plan import Plan
 
 
@@ -68,7 +68,7 @@ def contact_offsets(plan: Plan, scenario: Scenario, window_s: float, substep_s: 
 
 
 def _allow_planned_contacts_only(world: World, plan: Plan, window_s: float) -> None:
-    from impact_env import physics
+    from impact_env.transport import physics
 
     robots = {r.name for r in world.scenario.robots}
     objects = {o.name for o in world.scenario.objects}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import copy
 
-from impact_env.station import Station, station_from_dict
+from impact_env.tether.station import Station, station_from_dict
 
 L_POLYGON = [[0, 0], [5, 0], [5, 10], [20, 10], [20, 15], [0, 15]]
 

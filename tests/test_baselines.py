@@ -63,7 +63,7 @@ def test_pettingzoo_parameter_sharing_route(tmp_path):
                                 out=str(tmp_path), multiagent=True, progress_bar=False))
     assert json.loads((run_dir / "train.json").read_text())["multiagent"] is True
     from baselines.policy import SB3Controller
-    from impact_env.envs.transport import TransportEnv
+    from impact_env.transport.gym_env import TransportEnv
 
     env = TransportEnv("throw_and_catch_exp")
     controller = SB3Controller(env.scenario, run_dir / "model.zip")

@@ -11,6 +11,7 @@ import sys
 import pytest
 
 from impact_env.cli import build_parser, main
+from tests.helpers import one_line_error
 
 
 def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
@@ -74,9 +75,7 @@ def test_argparse_errors_suggest_a_name(argv, hint, capsys):
     (["plan", "corridor", "--solver", "higs"], "did you mean 'highs'?"),
 ])
 def test_names_get_a_suggestion(argv, hint, capsys):
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert hint in err and "Traceback" not in err
+    assert hint in one_line_error(argv, capsys)
 
 
 def _headless_env() -> dict[str, str]:

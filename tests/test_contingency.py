@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from impact_env.envs.transport import TransportEnv
 from impact_env.rollout import run_episode
-from impact_env.scenario import load_scenario
+from impact_env.transport.gym_env import TransportEnv
+from impact_env.transport.scenario import load_scenario
 from planners.expert import Expert
 from planners.funnels import box_coordinates, copy_targets
 from planners.offline.ir_planner import plan_impact_robust

@@ -27,12 +27,12 @@ import numpy as np
 import pymunk
 import pytest
 
-from impact_env.envs.transport import TransportEnv
 from impact_env.geometry import ConvexPolygon
-from impact_env.physics import World
 from impact_env.rollout import run_episode
-from impact_env.scenario import load_scenario, scenario_from_dict
 from impact_env.stl import Always, InRegion
+from impact_env.transport.gym_env import TransportEnv
+from impact_env.transport.physics import World
+from impact_env.transport.scenario import load_scenario, scenario_from_dict
 from planners.expert import Expert, ExpertConfig
 from planners.offline.milp.model import Model
 from planners.offline.milp.stl_encoding import STLEncoder

@@ -28,7 +28,7 @@ hooks = _load(ROOT / "docs" / "hooks.py", "impact_env_docs_hooks")
 @pytest.mark.parametrize("page", hooks.pages(), ids=lambda p: p.slug)
 def test_environment_page_is_written_from_the_environment(page):
     from impact_env import envs
-    from impact_env.envs.docstrings import arguments
+    from impact_env.env_docstrings import arguments
 
     text = hooks.render_page(page)
     assert text.startswith(f"# {page.title}")

@@ -13,8 +13,8 @@ import pytest
 
 import impact_env
 from impact_env import GYM_IDS, TETHER_GYM_IDS
+from impact_env.env_docstrings import arguments, documented_arguments, sections
 from impact_env.envs import TetherEnv, TetherParallelEnv, TransportEnv, TransportParallelEnv
-from impact_env.envs.docstrings import arguments, documented_arguments, sections
 
 ENV_CLASSES = (TransportEnv, TransportParallelEnv, TetherEnv, TetherParallelEnv)
 

@@ -53,8 +53,8 @@ def test_the_fuzzers_accept_exactly_the_listed_errors():
 
 def test_moved_errors_are_still_importable_from_their_old_modules():
     from impact_env.controllers import ControllerError
-    from impact_env.envs.core import EnvConfigError
     from impact_env.errors import ControllerError as C2
     from impact_env.errors import EnvConfigError as E2
+    from impact_env.transport.core import EnvConfigError
 
     assert ControllerError is C2 and EnvConfigError is E2

@@ -9,8 +9,8 @@ import pytest
 
 import impact_env
 from impact_env.cli import main
-from impact_env.envs.transport import TransportEnv
-from impact_env.scenario import load_scenario
+from impact_env.transport.gym_env import TransportEnv
+from impact_env.transport.scenario import load_scenario
 from planners.expert import Expert
 from planners.offline.sr_planner import plan_spatially_robust
 from planners.wrappers import ExpertActionInfo

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 import impact_env
-from impact_env.physics import World
-from impact_env.scenario import load_scenario
+from impact_env.transport.physics import World
+from impact_env.transport.scenario import load_scenario
 from planners.expert import Expert
 from planners.online.identification import ImpactIdentifier
 from tests.helpers import two_body

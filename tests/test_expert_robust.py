@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from impact_env.envs.transport import TransportEnv
 from impact_env.rollout import run_episode
-from impact_env.scenario import load_scenario
 from impact_env.stl import parse
+from impact_env.transport.gym_env import TransportEnv
+from impact_env.transport.scenario import load_scenario
 from planners.expert import Expert, ExpertConfig
 from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
 from planners.online.bookkeeping import ImpactBook

@@ -10,9 +10,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import impact_env
-from impact_env.envs.transport import TransportEnv
 from impact_env.errors import ActionError, ScenarioError
 from impact_env.stl import robustness
+from impact_env.transport.gym_env import TransportEnv
 
 IDS = ["impact_env/Corridor-v0", "impact_env/ObstacleAvoidance-v0", "impact_env/ThrowAndCatchExp-v0"]
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from impact_env.physics import World
+from impact_env.transport.physics import World
 from planners.errors import PlannerError
 from planners.expert import ExpertConfig
 from planners.online.identification import IdentificationConfig, ImpactIdentifier, significance_test

@@ -8,7 +8,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from impact_env.physics import World
+from impact_env.transport.physics import World
 from planners.online.impact_model import disc_impact, required_contact
 from planners.online.replanner import SegmentLimits, bounded_segment, hermite, replan_around_impact, replan_segment
 from planners.online.segment_qp import _linspace, _qp

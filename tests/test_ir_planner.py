@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import tomllib
 
-from impact_env.scenario import load_scenario, scenario_from_dict
+from impact_env.transport.scenario import load_scenario, scenario_from_dict
 from planners.errors import InfeasiblePlanError, PlanCheckError
 from planners.offline.guarantee import rollout, worst_case_errors
 from planners.offline.ir_planner import IRPlannerConfig, plan_impact_robust
@@ -18,7 +18,7 @@ from planners.plan import Plan
 
 
 def scenario_dict(name: str) -> dict:
-    return tomllib.loads(resources.files("impact_env.scenarios").joinpath(f"{name}.toml").read_text())
+    return tomllib.loads(resources.files("impact_env.transport.scenarios").joinpath(f"{name}.toml").read_text())
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from impact_env.scenario import load_scenario
+from impact_env.transport.scenario import load_scenario
 from planners.errors import PlannerError, ReplanInputError
 from planners.online.bookkeeping import ImpactBook
 from planners.online.impact_model import required_contact
@@ -228,8 +228,8 @@ def test_an_unreachable_impact_makes_the_monitor_replan_earlier(relay):
 def fly_relay_cell(predict_reachability: bool):
     """The benchmark cell's episode: relay, all parts, simulator restitution 0.75 - 0.6 = 0.15, seed 0."""
     from benchmarks.robustness import env_options, expert_config
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
+    from impact_env.transport.gym_env import TransportEnv
     from planners.expert import Expert
 
     scenario = load_scenario("relay")

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from impact_env.envs.transport import TransportEnv
 from impact_env.rollout import run_episode
-from impact_env.scenario import load_scenario
+from impact_env.transport.gym_env import TransportEnv
+from impact_env.transport.scenario import load_scenario
 from planners.errors import PlannerError
 from planners.expert import Expert, ExpertConfig
 from planners.online.bookkeeping import ImpactBook

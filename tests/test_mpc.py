@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from impact_env.physics import World
-from impact_env.scenario import Body, Scenario, scenario_from_dict
+from impact_env.transport.physics import World
+from impact_env.transport.scenario import Body, Scenario, scenario_from_dict
 from planners.online.mpc import (
     AvoidSpec,
     FreeflyerMPC,

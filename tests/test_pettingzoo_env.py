@@ -11,7 +11,7 @@ import pytest
 from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, render_test
 
 import impact_env
-from impact_env.envs import transport_parallel
+from impact_env.transport import pettingzoo_env as transport_parallel
 
 
 def test_parallel_api_test():

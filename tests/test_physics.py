@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from impact_env.envs.core import TransportCore
-from impact_env.physics import World
+from impact_env.transport.core import TransportCore
+from impact_env.transport.physics import World
 from tests.helpers import two_body
 
 
@@ -160,7 +160,7 @@ def test_thrust_noise_never_exceeds_limits():
 
 def test_no_tunnelling_through_thin_obstacle_at_the_speed_the_check_allows():
     """A scenario passing the substep check cannot tunnel through a 2 cm obstacle."""
-    from impact_env.scenario import scenario_from_dict
+    from impact_env.transport.scenario import scenario_from_dict
     from tests.helpers import two_body_dict
 
     data = two_body_dict(robot_vel=(0.0, 0.0), object_pos=(8.0, 8.0))
@@ -180,7 +180,7 @@ def test_no_tunnelling_through_thin_obstacle_at_the_speed_the_check_allows():
 
 def test_fast_path_matches_public_api_bit_for_bit():
     """World.step's C-function fast path and pymunk's public API give identical trajectories."""
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.scenario import load_scenario
 
     sc = load_scenario("corridor")
     rng = np.random.default_rng(3)
@@ -238,7 +238,7 @@ def test_impact_velocity_noise_leaves_wall_contacts_exact():
 
 def test_impact_velocity_noise_option_in_the_env():
     from impact_env.envs import TransportEnv
-    from impact_env.envs.core import EnvConfigError
+    from impact_env.transport.core import EnvConfigError
 
     def first_impact(noise: float, seed: int):
         env = TransportEnv("throw_and_catch_exp", impact_velocity_noise_mps=noise)

@@ -14,7 +14,7 @@ import pytest
 from matplotlib.figure import Figure
 
 from impact_env.cli import main
-from impact_env.scenario import load_scenario
+from impact_env.transport.scenario import load_scenario
 from planners.cli import format_progress, progress_printer
 from planners.errors import PlanTimeoutError
 from planners.offline.solvers.base import Progress
@@ -135,7 +135,7 @@ def test_missing_gurobi_says_how_to_install_it(monkeypatch, capsys):
 def test_infeasible_user_scenario_names_the_conflicting_groups(tmp_path, capsys):
     from planners.offline.sr_planner import PlannerConfig, build_model
 
-    text = files("impact_env.scenarios").joinpath(f"{SCENARIO}.toml").read_text()
+    text = files("impact_env.transport.scenarios").joinpath(f"{SCENARIO}.toml").read_text()
     text = text.replace("tf_s = 20.0", "tf_s = 2.0").replace("F[0,20]", "F[0,2]")
     assert "tf_s = 2.0" in text and "F[0,2]" in text
     path = tmp_path / "too_short.toml"

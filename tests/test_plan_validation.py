@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from impact_env.cli import main
-from impact_env.scenario import load_scenario
+from impact_env.transport.scenario import load_scenario
 from planners.errors import PlanCheckError
 from planners.plan import Plan
 

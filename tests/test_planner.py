@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from impact_env.scenario import load_scenario, scenario_from_dict
+from impact_env.transport.scenario import load_scenario, scenario_from_dict
 from planners.errors import InfeasiblePlanError, PlanCheckError, PlannerError, PlanTimeoutError, UnsupportedSpecError
 from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
 from planners.plan import Plan
@@ -158,7 +158,7 @@ def _lab(**changes) -> dict:
 
     import tomllib
 
-    data = tomllib.loads(files("impact_env.scenarios").joinpath("throw_and_catch_exp.toml").read_text())
+    data = tomllib.loads(files("impact_env.transport.scenarios").joinpath("throw_and_catch_exp.toml").read_text())
     data.update(changes)
     return data
 

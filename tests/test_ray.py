@@ -105,8 +105,8 @@ def test_rllib_iterations_checkpoint_restore_and_fly(rllib_run, tmp_path, capsys
     from ray.rllib.utils.filter import RunningStat
 
     from baselines.rllib_policy import RLlibController
-    from impact_env.envs.transport import TransportEnv
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.scenario import load_scenario
 
     scenario = load_scenario("throw_and_catch_exp")
     controller = RLlibController(scenario, run)

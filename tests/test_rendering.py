@@ -14,11 +14,11 @@ import numpy as np  # noqa: E402
 import pygame  # noqa: E402
 import pytest  # noqa: E402
 
-from impact_env import rendering  # noqa: E402
 from impact_env.geometry import ConvexPolygon  # noqa: E402
-from impact_env.plotting import draw_scenario, plot_run, save_scenario_figure  # noqa: E402
-from impact_env.rendering import FORCE_SCALE_M_PER_N, HEADER_PX, MARGIN_PX, Renderer, RenderFrame  # noqa: E402
-from impact_env.scenario import Body, Region, Scenario, load_scenario  # noqa: E402
+from impact_env.transport import rendering  # noqa: E402
+from impact_env.transport.plotting import draw_scenario, plot_run, save_scenario_figure  # noqa: E402
+from impact_env.transport.rendering import FORCE_SCALE_M_PER_N, HEADER_PX, MARGIN_PX, Renderer, RenderFrame  # noqa: E402
+from impact_env.transport.scenario import Body, Region, Scenario, load_scenario  # noqa: E402
 
 SHIPPED = ["corridor", "obstacle_avoidance", "throw_and_catch_exp"]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

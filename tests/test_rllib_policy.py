@@ -11,7 +11,7 @@ import pytest
 from baselines.rllib_policy import load_weights, read_policy_json, resolve_policy_dir
 from impact_env.controllers import make_controller
 from impact_env.errors import ModelFileError
-from impact_env.scenario import load_scenario
+from impact_env.transport.scenario import load_scenario
 
 GOOD = {"format": "impact_env.rllib_policy/1", "scenario": "throw_and_catch_exp",
         "agent_policies": {"R1": "R1", "R2": "R2"},

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from impact_env.errors import ScenarioError
-from impact_env.scenario import load_scenario, scenario_from_dict, scenario_names
+from impact_env.transport.scenario import load_scenario, scenario_from_dict, scenario_names
 from tests.helpers import DELETE, modified, two_body_dict
 
 
@@ -44,7 +44,7 @@ def test_lab_and_obstacle_numbers():
 
 def test_user_file_by_path(tmp_path):
     text = (load_scenario("corridor").source and
-            __import__("importlib.resources").resources.files("impact_env.scenarios")
+            __import__("importlib.resources").resources.files("impact_env.transport.scenarios")
             .joinpath("corridor.toml").read_text())
     path = tmp_path / "mine.toml"
     path.write_text(text.replace('name = "corridor"', 'name = "mine"'))
@@ -100,17 +100,6 @@ def test_substep_check_suggests_a_number():
     data["robots"][0]["velocity_bound_mps"] = [2.0, 2.0]
     with pytest.raises(ScenarioError, match=r"use substeps >= \d+"):
         scenario_from_dict(data)
-
-
-def test_unknown_name_missing_file_and_bad_toml(tmp_path):
-    with pytest.raises(ScenarioError, match="unknown scenario 'corrid'.*corridor"):
-        load_scenario("corrid")
-    with pytest.raises(ScenarioError, match="does not exist"):
-        load_scenario(tmp_path / "nope.toml")
-    bad = tmp_path / "bad.toml"
-    bad.write_text("name = \n")
-    with pytest.raises(ScenarioError, match="not valid TOML"):
-        load_scenario(bad)
 
 
 def test_final_box_table():

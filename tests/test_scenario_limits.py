@@ -15,14 +15,14 @@ import pytest
 from impact_env.envs import TransportEnv
 from impact_env.errors import ScenarioError
 from impact_env.geometry import ConvexPolygon
-from impact_env.scenario import load_scenario, scenario_from_dict
+from impact_env.transport.scenario import load_scenario, scenario_from_dict
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
 
-CORRIDOR_TEXT = resources.files("impact_env.scenarios").joinpath("corridor.toml").read_text()
+CORRIDOR_TEXT = resources.files("impact_env.transport.scenarios").joinpath("corridor.toml").read_text()
 CORRIDOR = tomllib.loads(CORRIDOR_TEXT)
 GOAL_CORNERS = [[0.25, 7.25], [1.75, 7.25], [1.75, 8.75], [0.25, 8.75]]
 

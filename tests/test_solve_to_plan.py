@@ -8,7 +8,7 @@ import dataclasses
 
 import pytest
 
-from impact_env.scenario import load_scenario
+from impact_env.transport.scenario import load_scenario
 from planners.errors import PlanTimeoutError
 from planners.offline import stages
 from planners.offline.ir_planner import plan_impact_robust

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import planners.online.mission as mission
-from impact_env.scenario import load_scenario
+from impact_env.transport.scenario import load_scenario
 from planners.errors import PlannerError
 from planners.offline.batch import plan_scenarios
 from planners.offline.sr_planner import PlannerConfig

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from shapely.geometry import LineString, Point, Polygon
 
 from impact_env.errors import ScenarioError
-from impact_env.station import load_station, station_from_dict, station_names
+from impact_env.tether.station import load_station, station_from_dict, station_names
 from tests.helpers import DELETE, modified
 from tests.station_helpers import L_POLYGON, make_station, station_dict
 
@@ -178,21 +178,6 @@ def test_bad_fields_raise_scenario_error_naming_them(path, value, message):
     with pytest.raises(ScenarioError) as info:
         station_from_dict(modified(station_dict(), path, value), source="bad.toml")
     assert message in str(info.value) and str(info.value).startswith("bad.toml: ")
-
-
-def test_load_by_name_and_path(tmp_path):
-    with pytest.raises(ScenarioError, match="unknown station 'nowhere'; shipped stations: .*L"):
-        load_station("nowhere")
-    with pytest.raises(ScenarioError, match="does not exist"):
-        load_station(tmp_path / "missing.toml")
-    path = tmp_path / "bad.toml"
-    path.write_text("name = [")
-    with pytest.raises(ScenarioError, match="not valid TOML"):
-        load_station(path)
-    from importlib.resources import files
-
-    path.write_text(files("impact_env.stations").joinpath("T.toml").read_text())
-    assert load_station(path) == load_station("T")
 
 
 def test_narrow_passage_gives_a_free_space_in_pieces():

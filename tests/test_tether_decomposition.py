@@ -8,7 +8,7 @@ import pytest
 import shapely
 from shapely.geometry import Polygon
 
-from impact_env.station import load_station, station_names
+from impact_env.tether.station import load_station, station_names
 from planners.tether.automaton import build_automaton, build_thesis_map, half_planes
 from planners.tether.decomposition import (
     check_l,

@@ -9,10 +9,10 @@ import pytest
 
 from impact_env.cli import main
 from impact_env.controllers import make_controller
-from impact_env.envs.tether import TetherEnv
-from impact_env.envs.tether_parallel import TetherParallelEnv
 from impact_env.rollout import run_episode
-from impact_env.station import load_station, station_names
+from impact_env.tether.gym_env import TetherEnv
+from impact_env.tether.pettingzoo_env import TetherParallelEnv
+from impact_env.tether.station import load_station, station_names
 from planners.errors import PlannerError
 from planners.tether.expert import TetherExpert
 from planners.tether.plan import TetherPlan

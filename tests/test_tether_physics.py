@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from impact_env.station import load_station
-from impact_env.tether_physics import TetherError, TetherWorld, eq5_rk4_path
+from impact_env.tether.physics import TetherError, TetherWorld, eq5_rk4_path
+from impact_env.tether.station import load_station
 from tests.station_helpers import make_station
 
 ROOM = [[0, 0], [40, 0], [40, 40], [0, 40]]  # big enough that nothing touches a wall

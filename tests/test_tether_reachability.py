@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import shapely
 
-from impact_env.station import load_station, station_names
+from impact_env.tether.station import load_station, station_names
 from planners.errors import PlannerError
 from planners.tether.errors import TetherInfeasibleError, TetherPlanCheckError
 from planners.tether.geometry import free_space_polygon, pull_segment, visibility_polygon

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from impact_env.station import load_station
+from impact_env.tether.station import load_station
 from planners.errors import PlannerError
 from planners.tether.automaton import build_automaton, build_thesis_map, half_planes
 from planners.tether.drh import automaton_drh, export_drh, parse_drh, subproblem_drh

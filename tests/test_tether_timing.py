@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from impact_env.station import load_station
+from impact_env.tether.station import load_station
 from planners.errors import PlannerError
 from planners.tether.reachability import plan_reachability
 from planners.tether.timing import refine_timing

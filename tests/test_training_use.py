@@ -103,7 +103,7 @@ def test_a_model_refuses_another_scenario_and_warns_about_other_options(short_ru
 
     run_dir, _ = short_run
     model = str(run_dir / "model.zip")
-    text = files("impact_env.scenarios").joinpath("throw_and_catch_exp.toml").read_text()
+    text = files("impact_env.transport.scenarios").joinpath("throw_and_catch_exp.toml").read_text()
     other = tmp_path / "wider_goal.toml"
     other.write_text(text.replace("2.1, 2.9", "2.0, 3.0"))  # the same observation size, another task
     assert text != other.read_text()

@@ -4,35 +4,8 @@
 ``robustness(formula, trace[:k+1], regions, dt)`` returns (the hold-last completion of the prefix), up to the
 last bits of the scalar versus vectorised signed distance. Only min, max and negation act on those numbers.
 
-Algorithm. The formula is compiled into a flat list of small node objects, children before parents. Times
-and intervals are in samples; node n has horizon h_n and, after sample k,
-
-* NEEDED interval [lo_n, hi_n]: the times its parent reads. The root is needed at t = 0 only; the child of
-  F/G[a, b] whose parent is needed on [lo, hi] is needed on [lo + a, hi + b]; U's left child on [lo, hi + b]
-  and its right child on [lo + a, hi + b]; Not/And/Or pass the interval through.
-* FINAL values at t <= k - h_n: they read only real samples and never change again. Each step a node emits
-  (``out``) its one new final value, at tau = k - h_n, if tau is needed.
-* TENTATIVE values at k - h_n < t < k: they read the hold-last completion. Each step a node recomputes them
-  (``tent``, starting at time ``ts``), for needed t only.
-* the CONSTANT c_n for t >= k: the node evaluated atemporally on sample k (a temporal operator on a constant
-  signal is its child, U is min(c_left, c_right)).
-
-F/G[a, b] keep one running max/min per needed t whose window [t + a, t + b] has started receiving final child
-values; each new child final at tau updates the live accumulators (t in [tau - b, tau - a]) and, when
-tau = t + b, the accumulator of t is the final value of t and is emitted and dropped. A tentative value is
-the accumulator (child finals in the window), combined with the child's tentative values in the window and
-c_child if the window reaches k. U[a, b] does the same with the pair (running min of left over [t, tau],
-best so far), fed with (left, right) finals in step; the child with the shorter horizon is buffered until
-the other catches up, as are the faster children of And/Or. Nothing is kept for times no parent needs, and a
-node stops working once its last needed time is final (k > hi_n + h_n); once the root is final, updates are
-O(number of bodies).
-
-Cost per update. Predicates, and And/Or/Not over them, have horizon 0: always final, no tentative values,
-O(1) each. An F/G node costs O(L + |T| * min(b - a + 1, h_child)) and a U node O(L + |T| * (b + 1)), where
-L <= min(hi - lo + 1, window) is its number of live accumulators and |T| <= min(hi - lo + 1, h_n - 1) its
-number of needed tentative times. Both are bounded by the nested window lengths, never by k. For formulas
-without nested temporal operators, e.g. ``F[0,100] in(O1,goal) & G[0,100] (!in(R1,W1) & !in(R2,W2))``, every
-temporal node is needed at t = 0 only, so L <= 1, |T| <= 1 and an update is O(number of nodes).
+How (a compiled node list fed final and tentative values per needed time) and what an update costs: see
+:class:`OnlineMonitor`.
 """
 
 from __future__ import annotations
@@ -356,6 +329,36 @@ class OnlineMonitor:
     """Robustness (m) of the trace so far, one sample per :meth:`update`, equal to the offline robustness.
 
     formula: the STL formula; regions: region name -> ConvexPolygon; dt: period between samples (s).
+
+    Algorithm. The formula is compiled into a flat list of small node objects, children before parents. Times
+    and intervals are in samples; node n has horizon h_n and, after sample k,
+
+    * NEEDED interval [lo_n, hi_n]: the times its parent reads. The root is needed at t = 0 only; the child of
+      F/G[a, b] whose parent is needed on [lo, hi] is needed on [lo + a, hi + b]; U's left child on [lo, hi + b]
+      and its right child on [lo + a, hi + b]; Not/And/Or pass the interval through.
+    * FINAL values at t <= k - h_n: they read only real samples and never change again. Each step a node emits
+      (``out``) its one new final value, at tau = k - h_n, if tau is needed.
+    * TENTATIVE values at k - h_n < t < k: they read the hold-last completion. Each step a node recomputes them
+      (``tent``, starting at time ``ts``), for needed t only.
+    * the CONSTANT c_n for t >= k: the node evaluated atemporally on sample k (a temporal operator on a constant
+      signal is its child, U is min(c_left, c_right)).
+
+    F/G[a, b] keep one running max/min per needed t whose window [t + a, t + b] has started receiving final child
+    values; each new child final at tau updates the live accumulators (t in [tau - b, tau - a]) and, when
+    tau = t + b, the accumulator of t is the final value of t and is emitted and dropped. A tentative value is
+    the accumulator (child finals in the window), combined with the child's tentative values in the window and
+    c_child if the window reaches k. U[a, b] does the same with the pair (running min of left over [t, tau],
+    best so far), fed with (left, right) finals in step; the child with the shorter horizon is buffered until
+    the other catches up, as are the faster children of And/Or. Nothing is kept for times no parent needs, and a
+    node stops working once its last needed time is final (k > hi_n + h_n); once the root is final, updates are
+    O(number of bodies).
+
+    Cost per update. Predicates, and And/Or/Not over them, have horizon 0: always final, no tentative values,
+    O(1) each. An F/G node costs O(L + |T| * min(b - a + 1, h_child)) and a U node O(L + |T| * (b + 1)), where
+    L <= min(hi - lo + 1, window) is its number of live accumulators and |T| <= min(hi - lo + 1, h_n - 1) its
+    number of needed tentative times. Both are bounded by the nested window lengths, never by k. For formulas
+    without nested temporal operators, e.g. ``F[0,100] in(O1,goal) & G[0,100] (!in(R1,W1) & !in(R2,W2))``, every
+    temporal node is needed at t = 0 only, so L <= 1, |T| <= 1 and an update is O(number of nodes).
     """
 
     def __init__(self, formula: Formula, regions: Mapping[str, ConvexPolygon], dt: float) -> None:

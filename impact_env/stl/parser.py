@@ -9,17 +9,9 @@ A hand-written tokenizer and recursive-descent parser. Grammar, loosest binding 
     atom    := 'in' '(' NAME ',' NAME ')' | 'true' | 'false' | '(' formula ')'
     interval:= '[' NUMBER ',' NUMBER ']'            # seconds, 0 <= a <= b
 
-so ``F[0,100] in(O1, goal) & G[0,100] !in(R1, W1)`` is ``And(F(...), G(Not(...)))``. Names match
-``[A-Za-z_][A-Za-z0-9_]*``; ``F``, ``G``, ``U``, ``in``, ``true``, ``false`` are keywords only where the grammar
-expects an operator, so a body may still be called ``F``. Numbers: ``0``, ``2.5``, ``.5``, ``1e2``, ``1e-05``.
-A chain ``a & b & c`` becomes one n-ary And; a parenthesised group stays a separate node, which is what makes
-``parse(str(f)) == f`` hold for every tree.
-
-Errors are :class:`STLSyntaxError` with the 0-based column of the offending token.
-
-Nesting (parentheses and the prefixes ``!``, ``F``, ``G``) is limited to :data:`MAX_NESTING` levels: every
-walker of the tree (robustness, the online monitor, printing, the MILP encoding) recurses once per level, and
-no task needs more than a handful. A flat chain ``a & b & c & ...`` is one level however long it is.
+so ``F[0,100] in(O1, goal) & G[0,100] !in(R1, W1)`` is ``And(F(...), G(Not(...)))``. A chain ``a & b & c``
+becomes one n-ary And; a parenthesised group stays a separate node, which is what makes ``parse(str(f)) == f``
+hold for every tree. Names, numbers, errors and the limit on nesting: see :func:`parse`.
 """
 
 from __future__ import annotations
@@ -209,7 +201,18 @@ class _Parser:
 
 
 def parse(text: str) -> Formula:
-    """Parse STL text such as ``F[0,100] in(O1, goal) & G[0,100] !in(R1, W1)`` (bounds in seconds)."""
+    """Parse STL text such as ``F[0,100] in(O1, goal) & G[0,100] !in(R1, W1)`` (bounds in seconds).
+
+    Names match ``[A-Za-z_][A-Za-z0-9_]*``; ``F``, ``G``, ``U``, ``in``, ``true``, ``false`` are keywords only where
+    the grammar expects an operator, so a body may still be called ``F``. Numbers: ``0``, ``2.5``, ``.5``, ``1e2``,
+    ``1e-05``.
+
+    Errors are :class:`STLSyntaxError` with the 0-based column of the offending token.
+
+    Nesting (parentheses and the prefixes ``!``, ``F``, ``G``) is limited to :data:`MAX_NESTING` levels: every
+    walker of the tree (robustness, the online monitor, printing, the MILP encoding) recurses once per level, and
+    no task needs more than a handful. A flat chain ``a & b & c & ...`` is one level however long it is.
+    """
     if not isinstance(text, str):
         raise STLSyntaxError(f"an STL formula must be a string, got {type(text).__name__}")
     parser = _Parser(text)

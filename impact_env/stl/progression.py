@@ -7,18 +7,8 @@ Given a formula phi, a trace prefix of samples 0..k (sample j at time j * dt) an
 
 where ``trace[k:]`` restarts the clock at sample k (which both parts share). It is the quantitative form of
 formula progression: a part of phi whose samples all lie in the prefix becomes a :class:`Constant` leaf
-holding its robustness; windows still to come are shifted to start at the cut; a window that straddles the
-cut splits into its past samples (each progressed) and one shifted operator for its future ones:
-
-- ``F[a,b] g`` at sample j: ``Or(P(g, j+a) .. P(g, k-1), F[max(j+a,k)-k, j+b-k] g)``; ``G`` likewise with And;
-- ``l U[a,b] r`` at j: the past split points give ``And(P(r, t), P(l, j) .. P(l, t))`` for t < k, and the
-  future ones ``And(P(l, j) .. P(l, k-1), l U[max(j+a,k)-k, j+b-k] r)``;
-- a boolean node progresses its children; a node evaluated at the cut itself is unchanged.
-
-Constants are folded as they appear (a min or max of constants is one constant), so a task whose temporal
-operators all sit at the top (the planner's fragment) progresses into the same fragment: the past of each
-``G`` becomes one constant, a satisfied ``F`` window becomes one constant, and so on. Nested temporal
-operators progress exactly too, into one term per past sample that the prefix does not decide.
+holding its robustness, and a window that straddles the cut splits into its past samples and one shifted
+operator (the rules: :func:`progress`).
 
 :func:`without_constants` turns a progressed task into one the offline planner can take for the rest of the
 mission: what the past decided cannot be changed, so a decided conjunct is dropped (satisfied or not), a
@@ -150,6 +140,20 @@ def progress(formula: Formula, trace: Mapping[str, np.ndarray], regions: Mapping
     ``trace`` maps body name -> (N, 2) positions (m), sample j at time j * dt (s); ``k`` is the cut sample
     (default N - 1, the last one given; samples after k are ignored). The result is evaluated on the trace
     from sample k on, with sample k at time 0.
+
+    A part of the formula whose samples all lie in the prefix becomes a :class:`Constant` leaf holding its
+    robustness; windows still to come are shifted to start at the cut; a window that straddles the
+    cut splits into its past samples (each progressed) and one shifted operator for its future ones:
+
+    - ``F[a,b] g`` at sample j: ``Or(P(g, j+a) .. P(g, k-1), F[max(j+a,k)-k, j+b-k] g)``; ``G`` likewise with And;
+    - ``l U[a,b] r`` at j: the past split points give ``And(P(r, t), P(l, j) .. P(l, t))`` for t < k, and the
+      future ones ``And(P(l, j) .. P(l, k-1), l U[max(j+a,k)-k, j+b-k] r)``;
+    - a boolean node progresses its children; a node evaluated at the cut itself is unchanged.
+
+    Constants are folded as they appear (a min or max of constants is one constant), so a task whose temporal
+    operators all sit at the top (the planner's fragment) progresses into the same fragment: the past of each
+    ``G`` becomes one constant, a satisfied ``F`` window becomes one constant, and so on. Nested temporal
+    operators progress exactly too, into one term per past sample that the prefix does not decide.
     """
     if not isinstance(formula, Formula):
         raise STLError(f"formula must be an STL Formula, got {type(formula).__name__}")

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from hypothesis import strategies as st
 
-from impact_env.scenario import scenario_names
+from impact_env.transport.scenario import scenario_names
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -21,7 +21,8 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 SCENARIOS = tuple(scenario_names())  # every shipped scenario
-TEXTS = {name: resources.files("impact_env.scenarios").joinpath(f"{name}.toml").read_text() for name in SCENARIOS}
+TEXTS = {name: resources.files("impact_env.transport.scenarios").joinpath(f"{name}.toml").read_text()
+         for name in SCENARIOS}
 DICTS = {name: tomllib.loads(text) for name, text in TEXTS.items()}
 # copies of the published plans (results/baselines/plans/): key "<scenario>"
 PLANS_DIR = Path(__file__).resolve().parents[1] / "data" / "plans" / "bench"

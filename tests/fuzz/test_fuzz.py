@@ -32,8 +32,8 @@ from hypothesis import strategies as st
 
 import impact_env
 from impact_env.envs import TransportEnv
-from impact_env.scenario import load_scenario, scenario_from_dict
 from impact_env.stl import parse, robustness
+from impact_env.transport.scenario import load_scenario, scenario_from_dict
 from planners.plan import Plan
 from tests.fuzz import strategies as S
 from tests.fuzz.invariant import COUNTS, assert_finite, assert_inside, attempt, cpu_deadline, fly

@@ -1,6 +1,6 @@
 """matplotlib figures of a station and of a tether run (``impact-env show`` / ``run`` for stations).
 
-The object-oriented API only, as :mod:`impact_env.plotting`: headless, no pyplot state.
+The conventions of :mod:`impact_env.figures` (object-oriented matplotlib, headless; its DPI and colours).
 """
 
 from __future__ import annotations
@@ -10,17 +10,21 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Patch, Rectangle
 from matplotlib.patches import Polygon as PolygonPatch
 
-from impact_env.plotting import DPI, OBJECT_COLOUR, REGION_COLOUR
+from impact_env import figures
+from impact_env.figures import OBJECT_COLOUR, REGION_COLOUR
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
-    from impact_env.station import Station
+    from impact_env.tether.station import Station
+
+# names of impact_env.tether_plotting (0.2), for that path's release (planners' tether figures import them)
+DPI, _png_path = figures.DPI, figures.png_path
 
 WALL_COLOUR = "0.15"
 ANCHOR_COLOUR = "tab:blue"
@@ -38,18 +42,15 @@ def draw_station(station: Station, ax: Axes | None = None, fan: bool = True) -> 
     handles = _draw(station, ax, fan)
     ax.set_title(f"station {station.name}  (k = {station.k} of {station.n_robots} robots, "
                  f"w = {station.pull_speed_mps:g} m/s, {station.n_anchors} anchors)")
-    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize="small")
+    figures.legend_beside(ax, handles)
     return ax
 
 
 def save_station_figure(station: Station, path: str | Path) -> Path:
     """Draw ``station`` (see :func:`draw_station`) into a PNG; returns the written path (``.png`` added if none)."""
-    path = _png_path(path)
     fig = _figure(station)
     draw_station(station, fig.add_subplot())
-    fig.savefig(path, dpi=DPI, bbox_inches="tight")
-    fig.clear()
-    return path
+    return figures.save(fig, path)
 
 
 def plot_tether_run(station: Station, positions: np.ndarray, events: Sequence[dict[str, Any]], robustness: float,
@@ -64,7 +65,7 @@ def plot_tether_run(station: Station, positions: np.ndarray, events: Sequence[di
         p = p[:, 0]
     if p.ndim != 2 or p.shape[1] != 2 or len(p) == 0:
         raise ValueError(f"positions must have shape (T, 2) or (T, 1, 2), got {np.shape(positions)}")
-    path = _png_path(path)
+    path = figures.png_path(path)
     fig = _figure(station)
     ax = fig.add_subplot()
     handles = _draw(station, ax, fan=False)
@@ -77,25 +78,14 @@ def plot_tether_run(station: Station, positions: np.ndarray, events: Sequence[di
             at = np.array(at)
             handles.append(ax.scatter(at[:, 0], at[:, 1], marker=marker, color=colour, s=50, zorder=6, label=kind))
     ax.set_title(f"station {station.name}: robustness {robustness:+.3f} m")
-    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize="small")
-    fig.savefig(path, dpi=DPI, bbox_inches="tight")
-    fig.clear()
-    return path
+    figures.legend_beside(ax, handles)
+    return figures.save(fig, path)
 
 
 def _figure(station: Station) -> Figure:
     xmin, xmax, ymin, ymax = station.bounds
     scale = 8.0 / max(xmax - xmin, ymax - ymin)
-    return Figure(figsize=(max(2.5, (xmax - xmin) * scale) + 2.5, max(2.5, (ymax - ymin) * scale) + 0.6),
-                  layout="constrained")
-
-
-def _png_path(path: str | Path) -> Path:
-    path = Path(path)
-    if not path.suffix:
-        path = path.with_suffix(".png")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return path
+    return figures.new_figure(max(2.5, (xmax - xmin) * scale) + 2.5, max(2.5, (ymax - ymin) * scale) + 0.6)
 
 
 def _draw(station: Station, ax: Axes, fan: bool) -> list:
@@ -128,10 +118,5 @@ def _draw(station: Station, ax: Axes, fan: bool) -> list:
         ax.annotate(str(a.index), p, fontsize=6, ha="center", va="center", color=ANCHOR_COLOUR)
     ax.add_patch(Circle(start, station.cargo.radius_m, facecolor=OBJECT_COLOUR, edgecolor="k", zorder=6))
     handles.append(Patch(facecolor=OBJECT_COLOUR, edgecolor="k", label="cargo at its start"))
-    pad = 0.5
-    ax.set_xlim(xmin - pad, xmax + pad)
-    ax.set_ylim(ymin - pad, ymax + pad)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
+    figures.world_axes(ax, station.bounds, pad=0.5)
     return handles

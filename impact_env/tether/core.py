@@ -1,6 +1,6 @@
 """The episode logic shared by the tether Gymnasium and PettingZoo environments.
 
-One :class:`TetherCore` owns a station, the pymunk :class:`~impact_env.tether_physics.TetherWorld` (rebuilt on
+One :class:`TetherCore` owns a station, the pymunk :class:`~impact_env.tether.physics.TetherWorld` (rebuilt on
 every reset), the online STL monitor and the fleet's rules. The environment classes only translate its inputs
 and outputs into their APIs.
 
@@ -10,11 +10,7 @@ is REJECTED, the robot keeping what it had and ``info["rejected"]`` saying why, 
 sight of the cargo centre, the cargo is already inside the anchor's stop radius, another robot holds the anchor,
 or ``k`` other robots already hold anchors (pulling or attaching). Attaching to the anchor a robot already holds
 is a keep. A command that is not an integer in ``0 .. n_anchors + 1`` (or NaN, or the wrong number of commands)
-raises :class:`~impact_env.errors.ActionError`: no rule can make sense of it.
-
-Reward: ``"dense"`` (default) the per-step increment of the online robustness estimate of the station's task
-(the trace so far with its last sample held), so an episode's rewards sum to its final robustness; ``"sparse"``
-the final robustness on the last step. Both subtract ``energy_penalty`` times the step's winch work (J).
+raises :class:`~impact_env.errors.ActionError`: no rule can make sense of it. The rewards: see :class:`TetherCore`.
 """
 
 from __future__ import annotations
@@ -24,11 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from impact_env.envs.core import EnvConfigError
-from impact_env.errors import ActionError, ImpactEnvError
-from impact_env.station import CARGO, Station, load_station
+from impact_env.env_shell import check_can_step, clip_to_space, time_left
+from impact_env.errors import ActionError, EnvConfigError, ImpactEnvError
 from impact_env.stl import OnlineMonitor
-from impact_env.tether_physics import FIDELITIES, TetherWorld
+from impact_env.tether.physics import FIDELITIES, TetherWorld
+from impact_env.tether.station import CARGO, Station, load_station
 
 REWARD_MODES = ("dense", "sparse")
 KEEP, RELEASE, ATTACH0 = 0, 1, 2
@@ -37,9 +33,14 @@ KEEP, RELEASE, ATTACH0 = 0, 1, 2
 class TetherCore:
     """Station + tether physics + STL monitor + fleet rules: reset, apply commands, observe.
 
+    Reward: ``"dense"`` (default) the per-step increment of the online robustness estimate of the station's task
+    (the trace so far with its last sample held), so an episode's rewards sum to its final robustness;
+    ``"sparse"`` the final robustness on the last step. Both subtract ``energy_penalty`` times the step's winch
+    work (J).
+
     Args:
         station: a Station, a shipped station name or a path to a TOML file.
-        fidelity: ``"kinematic"`` (default), ``"reel"`` or ``"force"`` (see :mod:`impact_env.tether_physics`).
+        fidelity: ``"kinematic"`` (default), ``"reel"`` or ``"force"`` (see :mod:`impact_env.tether.physics`).
         reward_mode: ``"dense"`` or ``"sparse"``.
         energy_penalty: reward cost per joule of winch work (>= 0).
         pull_speed_mps: the winches' actual ``w`` (default the station's): a mismatch for a planner.
@@ -199,10 +200,7 @@ class TetherCore:
 
     def step(self, action: Any) -> tuple[float, bool, dict[str, Any]]:
         """Apply one command per robot and simulate one control period; returns (reward, terminated, info)."""
-        if self.world is None:
-            raise ImpactEnvError("call reset() before step()")
-        if self.step_count >= self.horizon_steps:
-            raise ImpactEnvError("the episode has ended (the task's horizon was reached); call reset()")
+        check_can_step(self)
         commands = self.decode(action)
         world = self.world
         rejected: list[dict] = []
@@ -229,6 +227,10 @@ class TetherCore:
             reward = estimate if terminated else 0.0
         reward -= self.energy_penalty * work
         return float(reward), terminated, self.info(step_events, rejected)
+
+    def reset_info(self) -> dict[str, Any]:
+        """``info`` of ``reset()``: the robustness of the start, no events yet."""
+        return self.info()
 
     def info(self, events: list[dict] | None = None, rejected: list[dict] | None = None) -> dict[str, Any]:
         world = self.world
@@ -264,10 +266,8 @@ class TetherCore:
                 out[base + self.n_anchors + 1] = world.tether_length_m(robot)
         los0 = 4 + self.n_robots * self.robot_block
         out[los0: los0 + self.n_anchors] = self._los
-        out[-1] = max(0.0, 1.0 - self.step_count / self.horizon_steps)
-        obs = out.astype(np.float32)
-        np.minimum(obs, self.obs_high, out=obs)
-        return np.maximum(obs, self.obs_low, out=obs)
+        out[-1] = time_left(self)
+        return clip_to_space(out.astype(np.float32), self)
 
     def line_of_sight_mask(self) -> np.ndarray:
         """Which anchors a tether from the cargo reaches now (bool, n_anchors)."""

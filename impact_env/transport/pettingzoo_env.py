@@ -11,25 +11,23 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.utils import EzPickle, seeding
-from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
-from impact_env.envs import render_support
-from impact_env.envs.actions import numbers_of
-from impact_env.envs.clock import EpisodeClock, check_max_cycles, check_render_options, reject_unknown, required
-from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
-from impact_env.envs.transport import SCENARIO_HINT
+from impact_env.env_shell import ParallelShell, required
 from impact_env.errors import ActionError
-from impact_env.scenario import Scenario
+from impact_env.transport.actions import numbers_of
+from impact_env.transport.core import ACTION_PER_ROBOT, TransportCore
+from impact_env.transport.gym_env import SCENARIO_HINT
+from impact_env.transport.rendering import Renderer, RenderFrame, frame_of
+from impact_env.transport.scenario import Scenario
 
 
-class TransportParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
+class TransportParallelEnv(ParallelShell):
     """The transport task with one agent per robot (agent names are the robots' names).
 
     ## Description
-    The world, task and reward of :class:`~impact_env.envs.transport.TransportEnv`, with each robot an agent
+    The world, task and reward of :class:`~impact_env.transport.gym_env.TransportEnv`, with each robot an agent
     of a PettingZoo ``ParallelEnv``; ``raw_env`` and ``env`` are its AEC forms. Import it as
     ``from impact_env import transport_v0`` (PettingZoo's versioned module) or make it with
     ``pettingzoo``'s registry id ``impact_env/transport-v0``.
@@ -59,7 +57,8 @@ class TransportParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
     ## Arguments
     The keywords of ``TransportEnv`` (same names as the CLI options), and:
 
-    * ``scenario``: a shipped name, a path to a TOML file or a :class:`~impact_env.scenario.Scenario`; required.
+    * ``scenario``: a shipped name, a path to a TOML file or a :class:`~impact_env.transport.scenario.Scenario`;
+      required.
     * ``reward_mode``: ``"dense"``, ``"sparse"`` or ``"conjuncts"``.
     * ``fuel_penalty``: reward cost per N s of fuel (>= 0).
     * ``restitution``: simulate with this restitution instead of the scenario's; None keeps it.
@@ -89,12 +88,9 @@ class TransportParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
                  initial_position_noise_m: float = 0.0, max_cycles: int | None = None,
                  render_mode: str | None = None, render_width_px: int = 600,
                  impact_velocity_noise_mps: float = 0.0, **unknown: Any) -> None:
-        reject_unknown(unknown, type(self))
-        EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
-                          initial_position_noise_m, max_cycles, render_mode, render_width_px,
-                          impact_velocity_noise_mps)
-        check_render_options(self.metadata, render_mode, render_width_px)
-        check_max_cycles(max_cycles)
+        self._open(unknown, (scenario, reward_mode, fuel_penalty, restitution, thrust_noise, initial_position_noise_m,
+                             max_cycles, render_mode, render_width_px, impact_velocity_noise_mps),
+                   render_mode, render_width_px, max_cycles)
         scenario = required(scenario, "scenario", SCENARIO_HINT,
                             "impact_env.transport_v0.parallel_env(scenario='corridor')")
         self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
@@ -104,47 +100,12 @@ class TransportParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
         self.scenario = self.core.scenario
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.scenario.control_period_s),
                              name=f"transport_{self.scenario.name}_v0")
-        self.max_cycles = max_cycles
-        self.render_mode = render_mode
-        self.render_width_px = render_width_px
-        self.possible_agents = [r.name for r in self.scenario.robots]
-        self.agents: list[str] = []
-        obs_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
-        act_space = spaces.Box(-1.0, 1.0, shape=(ACTION_PER_ROBOT,), dtype=np.float32)
-        self.observation_spaces = {a: obs_space for a in self.possible_agents}
-        self.action_spaces = {a: act_space for a in self.possible_agents}
-        self.state_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
+        self._set_agents([r.name for r in self.scenario.robots],
+                         spaces.Box(-1.0, 1.0, shape=(ACTION_PER_ROBOT,), dtype=np.float32))
         self._zero_list = [0.0] * ACTION_PER_ROBOT
         self._agent_set = frozenset(self.possible_agents)
-        self._renderer = None
-        self.np_random, _ = seeding.np_random(None)
 
-    def observation_space(self, agent: str) -> spaces.Box:
-        return self.observation_spaces[agent]
-
-    def action_space(self, agent: str) -> spaces.Box:
-        return self.action_spaces[agent]
-
-    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
-        if seed is not None or not hasattr(self, "_seeded"):
-            self.np_random, _ = seeding.np_random(seed)
-            self._seeded = True
-        self.core.reset(self.np_random)
-        self.agents = list(self.possible_agents)
-        self._cycles = 0
-        if self.render_mode == "human":
-            self.render()
-        info = {"robustness": self.core.log.robustness, "is_success": self.core.log.robustness > 0.0,
-                "impacts": [], "fuel_Ns": 0.0, "time_s": 0.0}
-        return self._observations(), {a: dict(info) for a in self.agents}
-
-    def _observations(self) -> dict[str, np.ndarray]:
-        return {a: self.core.agent_observation(i) for i, a in enumerate(self.possible_agents) if a in self.agents}
-
-    def state(self) -> np.ndarray:
-        return self.core.observation()
-
-    def step(self, actions: dict[str, Any]):
+    def _joint_action(self, actions: dict[str, Any]) -> np.ndarray:
         if not isinstance(actions, Mapping):
             raise ActionError(f"actions must be a dict from agent name to action, got {type(actions).__name__}")
         unknown = [a for a in actions if a not in self._agent_set]
@@ -156,30 +117,13 @@ class TransportParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
             action = actions.get(a)
             joint += self._zero_list if action is None else numbers_of(action, ((ACTION_PER_ROBOT,),),
                                                                         f"actions[{a!r}]", "Fx, Fy, torque")
-        reward, terminated, info = self.core.step(np.array(joint))
-        self._cycles += 1
-        truncated = not terminated and self.max_cycles is not None and self._cycles >= self.max_cycles
-        agents = self.agents
-        obs = self._observations()
-        rewards = {a: reward for a in agents}
-        terminations = {a: terminated for a in agents}
-        truncations = {a: truncated for a in agents}
-        infos = {a: dict(info) for a in agents}
-        if terminated or truncated:
-            self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return obs, rewards, terminations, truncations, infos
+        return np.array(joint)
 
-    def render(self):
-        if self.render_mode is None:
-            return None
-        if self.core.world is None:
-            raise RuntimeError("call reset() before render()")
-        return render_support.render(self)
+    def _new_renderer(self) -> Renderer:
+        return Renderer(self.scenario, self.render_mode, width_px=self.render_width_px, fps=self.metadata["render_fps"])
 
-    def close(self) -> None:
-        render_support.close(self)
+    def _frame(self) -> RenderFrame:
+        return frame_of(self.core)
 
 
 def parallel_env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,

@@ -1,11 +1,7 @@
-"""pygame-ce renderer of a scenario's state: the picture behind ``render()`` of every environment.
+"""pygame-ce renderer of a scenario's state: the picture behind ``render()`` of the transport environments.
 
-One :class:`Renderer` per environment. It is cheap to build (only arithmetic) and creates no pygame state
-until the first :meth:`Renderer.render` call, so environments can build it in ``__init__`` whatever the
-render mode.
-
-Picture (metres square, y up; the world box scaled to ``width_px`` minus a small margin, with a text band
-above it):
+One :class:`Renderer` per environment, on the shared :class:`~impact_env.canvas.Canvas` (metres square, y up,
+a text band above the world, no pygame state before the first frame). Picture:
 
 - the world box border, obstacles (filled, dark red-grey, named), regions (translucent green, named);
 - bodies as discs of their radius (robots blue, objects orange, named) with a line from the centre to the
@@ -14,84 +10,109 @@ above it):
   arrow per newton (0.2 m/N: the 2.8 N thrust limit is a 0.56 m arrow);
 - every impact younger than ``IMPACT_FLASH_S`` as a red ring that grows and fades with the impact's age;
 - the line ``t = 12.3 s  rho = 0.412 m`` (time and current STL robustness) in the band above the world.
-
-``rgb_array`` draws onto an off-screen ``pygame.Surface`` only and never initialises ``pygame.display``;
-``human`` opens a window (``pygame.display``), pumps events and caps the frame rate at ``fps``.
 """
 
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from impact_env.scenario import Scenario
+from impact_env.canvas import (  # noqa: F401 - the colours and layout of impact_env.rendering (0.2)
+    BACKGROUND,
+    BODY_EDGE,
+    BORDER,
+    HEADER_PX,
+    MARGIN_PX,
+    OBJECT,
+    REGION,
+    REGION_EDGE,
+    REGION_TEXT,
+    RENDER_MODES,
+    ROBOT,
+    TEXT,
+    Canvas,
+    Frame,
+    prepare_display,
+)
 
-RENDER_MODES = ("human", "rgb_array")
+if TYPE_CHECKING:
+    from impact_env.transport.core import TransportCore
+    from impact_env.transport.physics import ImpactEvent
+    from impact_env.transport.scenario import Scenario
+
 FORCE_SCALE_M_PER_N = 0.2  # thrust arrow length per newton of applied force
 IMPACT_FLASH_S = 1.0  # how long an impact ring stays visible
-MARGIN_PX = 10  # around the world box (left, right, bottom)
-HEADER_PX = 30  # text band above the world box
+FLASH_S = IMPACT_FLASH_S  # how long an impact is reported to the renderer
 
-BACKGROUND = (246, 246, 241)
-BORDER = (40, 40, 40)
-TEXT = (20, 20, 20)
 OBSTACLE = (110, 72, 72)
 OBSTACLE_EDGE = (60, 38, 38)
 OBSTACLE_TEXT = (250, 250, 250)
-REGION = (60, 180, 75, 80)  # RGBA: blended over the background
-REGION_EDGE = (40, 140, 55)
-REGION_TEXT = (20, 100, 35)
-ROBOT = (60, 110, 220)
-OBJECT = (245, 150, 40)
-BODY_EDGE = (30, 30, 30)
-HEADING = (20, 20, 20)
+HEADING = TEXT  # the line from a disc's centre along its heading
 THRUST = (200, 0, 160)
 IMPACT = (230, 30, 30)
 
 
-def prepare_display() -> None:
-    """Quiet, working SDL set-up before ``pygame.display.init()`` (human mode).
-
-    SDL prints ``error: XDG_RUNTIME_DIR is invalid or not set in the environment`` when that variable does not
-    name a folder, which is the rule on servers and in containers: give it a private temporary folder then. On
-    Linux without ``DISPLAY`` or ``WAYLAND_DISPLAY`` there is no screen to open a window on: SDL's ``offscreen``
-    driver is used (the frames are drawn, nothing is shown) with one warning that says so, unless
-    ``SDL_VIDEODRIVER`` is set already.
-    """
-    import sys
-    import tempfile
-
-    runtime = os.environ.get("XDG_RUNTIME_DIR")
-    if not runtime or not os.path.isdir(runtime):
-        os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="impact_env_xdg_")
-    headless = sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-    if headless and "SDL_VIDEODRIVER" not in os.environ:
-        import gymnasium
-
-        os.environ["SDL_VIDEODRIVER"] = "offscreen"
-        gymnasium.logger.warn("no display (DISPLAY and WAYLAND_DISPLAY are unset): render_mode='human' draws "
-                              "off-screen; use render_mode='rgb_array' to get the frames")
-
-
 @dataclass
-class RenderFrame:
+class RenderFrame(Frame):
     """What one picture shows. Per-body sequences follow ``scenario.bodies`` (robots first, then objects)."""
 
-    time_s: float
-    robustness: float  # current STL robustness estimate (m)
     positions: Sequence[tuple[float, float]]  # per body, world frame (m)
     headings: Sequence[float]  # per body (rad, counter-clockwise from +x)
     robot_forces_world: Sequence[tuple[float, float]]  # per robot, applied force in the world frame (N)
     impacts: Sequence[tuple[float, float, float]]  # recent impacts: (x_m, y_m, age_s)
 
 
-class Renderer:
+def impact_flashes(core: TransportCore, events: list[ImpactEvent]) -> list[tuple[float, float, float]]:
+    """(x, y, age_s) of recent impacts: the midpoint of two bodies, or the body for a wall contact.
+
+    Events are logged at separation, so the position is where the bodies are then: a few millimetres
+    from the contact point at these speeds, which is all a flash needs.
+    """
+    names = core.body_names
+    state = core._state
+    out = []
+    for e in events:
+        age = core.time_s - e.time_s
+        if age > FLASH_S:
+            continue
+        pts = [state[names.index(n)][:2] for n in (e.a, e.b) if n in names]
+        if pts:
+            out.append((sum(p[0] for p in pts) / len(pts), sum(p[1] for p in pts) / len(pts), age))
+    return out
+
+
+def frame_of(core: TransportCore) -> RenderFrame:
+    """The frame of a transport environment's current state."""
+    recent = [e for e in core.log.impacts[-8:]]
+    return RenderFrame(
+        time_s=core.time_s,
+        robustness=core.log.robustness,
+        positions=[(s[0], s[1]) for s in core._state],
+        headings=[s[4] for s in core._state],
+        robot_forces_world=core.robot_forces_world(),
+        impacts=impact_flashes(core, recent),
+    )
+
+
+# impact_env.envs.render_support's names (0.2), for that old path's release
+make_frame = frame_of
+
+
+def render(env: Any) -> np.ndarray | None:
+    """``env.render()``'s drawing, as ``impact_env.envs.render_support.render`` (0.2) named it."""
+    return env._draw()
+
+
+def close(env: Any) -> None:
+    """``env.close()``, as ``impact_env.envs.render_support.close`` (0.2) named it."""
+    env.close()
+
+
+class Renderer(Canvas):
     """Draws :class:`RenderFrame` s of one scenario, in a window (``human``) or to an array (``rgb_array``).
 
     Args:
@@ -102,70 +123,28 @@ class Renderer:
     """
 
     def __init__(self, scenario: Scenario, render_mode: str, width_px: int = 600, fps: int = 10) -> None:
-        if render_mode not in RENDER_MODES:
-            raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
-        if int(width_px) != width_px or width_px < 2 * MARGIN_PX + 40:
-            raise ValueError(f"width_px must be an integer >= {2 * MARGIN_PX + 40}, got {width_px!r}")
-        if not fps > 0:
-            raise ValueError(f"fps must be > 0, got {fps!r}")
+        super().__init__(scenario.world_box, render_mode, width_px, fps)
         self.scenario = scenario
-        self.render_mode = render_mode
-        self.fps = fps
-        xmin, xmax, ymin, ymax = scenario.world_box
-        self.scale_px_per_m = (int(width_px) - 2 * MARGIN_PX) / (xmax - xmin)
-        self.size_px = (int(width_px), HEADER_PX + round((ymax - ymin) * self.scale_px_per_m) + MARGIN_PX)
-        # pygame state, created by the first render()
-        self._pygame: Any = None
-        self._static: Any = None  # background, regions, obstacles, border: drawn once
-        self._canvas: Any = None
-        self._status_font: Any = None
         self._body_labels: list[Any] = []
-        self._window: Any = None
-        self._clock: Any = None
-
-    # ------------------------------------------------------------------------------------ coordinates
-
-    def world_to_px(self, x_m: float, y_m: float) -> tuple[float, float]:
-        """World point (m) -> pixel (column, row) of the image, row 0 at the top."""
-        xmin, _, _, ymax = self.scenario.world_box
-        return (MARGIN_PX + (x_m - xmin) * self.scale_px_per_m, HEADER_PX + (ymax - y_m) * self.scale_px_per_m)
-
-    # ------------------------------------------------------------------------------------------ public
-
-    def render(self, frame: RenderFrame) -> np.ndarray | None:
-        """Draw ``frame``. Returns a uint8 (H, W, 3) image in ``rgb_array`` mode, None in ``human`` mode."""
-        positions, headings, forces = self._check(frame)
-        if self._pygame is None:
-            self._start()
-        pygame = self._pygame
-        canvas = self._canvas
-        canvas.blit(self._static, (0, 0))
-        self._draw_bodies(canvas, positions, headings, forces)
-        self._draw_impacts(canvas, frame.impacts)
-        status = f"t = {frame.time_s:.1f} s  rho = {frame.robustness:.3f} m"
-        text = self._status_font.render(status, True, TEXT)
-        canvas.blit(text, (MARGIN_PX, (HEADER_PX - text.get_height()) // 2))
-        if self.render_mode == "rgb_array":
-            width, height = self.size_px
-            # tobytes is row-major already: (H, W, 3) without the transpose surfarray would need
-            return np.frombuffer(pygame.image.tobytes(canvas, "RGB"), dtype=np.uint8).reshape(height, width, 3).copy()
-        self._window.blit(canvas, (0, 0))
-        pygame.event.pump()
-        pygame.display.flip()
-        self._clock.tick(self.fps)
-        return None
 
     def close(self) -> None:
-        """Release pygame state and close the window (if any). Rendering again starts afresh."""
-        if self._pygame is not None and self._window is not None:
-            self._pygame.display.quit()
-        self._pygame = self._static = self._canvas = self._status_font = None
-        self._window = self._clock = None
+        super().close()
         self._body_labels = []
+
+    def _status(self, frame: RenderFrame) -> str:
+        return f"t = {frame.time_s:.1f} s  rho = {frame.robustness:.3f} m"
+
+    def _caption(self) -> str:
+        return f"impact_env: {self.scenario.name}"
+
+    def _draw_frame(self, canvas: Any, drawn: tuple[np.ndarray, np.ndarray, np.ndarray, Any]) -> None:
+        positions, headings, forces, impacts = drawn
+        self._draw_bodies(canvas, positions, headings, forces)
+        self._draw_impacts(canvas, impacts)
 
     # ----------------------------------------------------------------------------------------- drawing
 
-    def _check(self, frame: RenderFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _checked(self, frame: RenderFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
         n_bodies, n_robots = len(self.scenario.bodies), len(self.scenario.robots)
         positions = np.asarray(frame.positions, dtype=float)
         headings = np.asarray(frame.headings, dtype=float)
@@ -185,32 +164,14 @@ class Renderer:
         magnitudes = np.hypot(forces[:, 0], forces[:, 1])
         longest_N = reach / FORCE_SCALE_M_PER_N
         forces = forces * np.minimum(1.0, longest_N / np.maximum(magnitudes, 1e-300))[:, None]
-        return positions, headings, forces
-
-    def _start(self) -> None:
-        os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-        import pygame
-
-        self._pygame = pygame
-        pygame.font.init()  # works without a display
-        width = self.size_px[0]
-        self._status_font = pygame.font.Font(None, max(14, width // 24))
-        label_font = pygame.font.Font(None, max(12, width // 28))
-        self._body_labels = [label_font.render(b.name, True, TEXT) for b in self.scenario.bodies]
-        self._static = self._draw_static(label_font)
-        self._canvas = pygame.Surface(self.size_px)
-        if self.render_mode == "human":
-            prepare_display()
-            pygame.display.init()
-            self._window = pygame.display.set_mode(self.size_px)
-            pygame.display.set_caption(f"impact_env: {self.scenario.name}")
-            self._clock = pygame.time.Clock()
+        return positions, headings, forces, frame.impacts
 
     def _polygon_px(self, vertices: np.ndarray) -> list[tuple[float, float]]:
         return [self.world_to_px(x, y) for x, y in vertices]
 
-    def _draw_static(self, font: Any) -> Any:
-        pygame = self._pygame
+    def _draw_static(self, pygame: Any) -> Any:
+        font = pygame.font.Font(None, max(12, self.size_px[0] // 28))
+        self._body_labels = [font.render(b.name, True, TEXT) for b in self.scenario.bodies]
         surface = pygame.Surface(self.size_px)
         surface.fill(BACKGROUND)
         overlay = pygame.Surface(self.size_px, pygame.SRCALPHA)  # regions are translucent

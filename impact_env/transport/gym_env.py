@@ -4,26 +4,24 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.utils import EzPickle
 
-from impact_env.envs import render_support
-from impact_env.envs.clock import EpisodeClock, check_render_options, reject_unknown, required
-from impact_env.envs.core import ACTION_PER_ROBOT, TransportCore
-from impact_env.scenario import Scenario
+from impact_env.env_shell import GymShell, required
+from impact_env.transport.core import ACTION_PER_ROBOT, TransportCore
+from impact_env.transport.rendering import Renderer, RenderFrame, frame_of
+from impact_env.transport.scenario import Scenario
 
 SCENARIO_HINT = "a shipped scenario name (impact-env scenarios), a path to a TOML file or a Scenario"
 SCENARIO_EXAMPLE = ("gym.make('impact_env/Transport-v0', scenario='corridor'), or the scenario's own id "
                     "gym.make('impact_env/Corridor-v0')")
 
 
-class TransportEnv(EpisodeClock, gym.Env, EzPickle):
+class TransportEnv(GymShell):
     """Robots move passive free-floating objects by impacts, in a 2D frictionless microgravity world.
 
     ## Description
-    A scenario (``impact_env/scenarios/*.toml`` or your own file) places robots and objects (discs) in a
+    A scenario (``impact_env/transport/scenarios/*.toml`` or your own file) places robots and objects (discs) in a
     box with solid obstacles. Robots are actuated free-flyers; objects move only when hit. Restitution is
     the scenario's ``e`` for every contact. The task is an STL formula over the bodies' positions; the
     reward is its spatial robustness (metres).
@@ -46,7 +44,7 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     (the trace so far with its last sample held), so an episode's rewards sum to its final robustness.
     ``reward_mode="sparse"``: the final robustness on the last step, 0 before.
     ``reward_mode="conjuncts"``: the per-step increment of the mean robustness of the task's conjuncts, so
-    each conjunct (e.g. each wall clearance) is credited when it changes (see impact_env.envs.core). All subtract
+    each conjunct (e.g. each wall clearance) is credited when it changes (see impact_env.transport.core). All subtract
     ``fuel_penalty * sum_robots |F| * dt`` (N s) if ``fuel_penalty > 0``. A robustness of +-inf (a task that
     holds or fails whatever happens, e.g. ``F[0,20] true``) is reported clipped to +- the diagonal of the box
     around the world and every region, so rewards stay finite.
@@ -80,7 +78,7 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
     ``--reward-mode``).
 
     * ``scenario``: a shipped name (``impact-env scenarios``), a path to a TOML file or a
-      :class:`~impact_env.scenario.Scenario`. Required by ``impact_env/Transport-v0``; the scenario ids
+      :class:`~impact_env.transport.scenario.Scenario`. Required by ``impact_env/Transport-v0``; the scenario ids
       (``impact_env/Corridor-v0`` ...) set it.
     * ``reward_mode``: ``"dense"``, ``"sparse"`` or ``"conjuncts"`` (see Rewards).
     * ``fuel_penalty``: reward cost per N s of fuel (>= 0).
@@ -110,10 +108,8 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
                  fuel_penalty: float = 0.0, restitution: float | None = None, thrust_noise: float = 0.0,
                  initial_position_noise_m: float = 0.0, render_mode: str | None = None,
                  render_width_px: int = 600, impact_velocity_noise_mps: float = 0.0, **unknown: Any) -> None:
-        reject_unknown(unknown, type(self))
-        EzPickle.__init__(self, scenario, reward_mode, fuel_penalty, restitution, thrust_noise,
-                          initial_position_noise_m, render_mode, render_width_px, impact_velocity_noise_mps)
-        check_render_options(self.metadata, render_mode, render_width_px)
+        self._open(unknown, (scenario, reward_mode, fuel_penalty, restitution, thrust_noise, initial_position_noise_m,
+                             render_mode, render_width_px, impact_velocity_noise_mps), render_mode, render_width_px)
         scenario = required(scenario, "scenario", SCENARIO_HINT, SCENARIO_EXAMPLE)
         self.core = TransportCore(scenario, reward_mode=reward_mode, fuel_penalty=fuel_penalty,
                                   restitution=restitution, thrust_noise=thrust_noise,
@@ -121,37 +117,12 @@ class TransportEnv(EpisodeClock, gym.Env, EzPickle):
                                   impact_velocity_noise_mps=impact_velocity_noise_mps)
         self.scenario = self.core.scenario
         self.metadata = dict(self.metadata, render_fps=round(1.0 / self.scenario.control_period_s))
-        self.render_mode = render_mode
-        self.render_width_px = render_width_px
         n = self.core.n_robots * ACTION_PER_ROBOT
         self.action_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
         self.observation_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
-        self._renderer = None
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        super().reset(seed=seed)
-        self.core.reset(self.np_random)
-        if self.render_mode == "human":
-            self.render()
-        return self.core.observation(), self._reset_info()
+    def _new_renderer(self) -> Renderer:
+        return Renderer(self.scenario, self.render_mode, width_px=self.render_width_px, fps=self.metadata["render_fps"])
 
-    def _reset_info(self) -> dict[str, Any]:
-        return {"robustness": self.core.log.robustness, "is_success": self.core.log.robustness > 0.0,
-                "impacts": [], "fuel_Ns": 0.0, "time_s": 0.0}
-
-    def step(self, action):
-        reward, terminated, info = self.core.step(action)
-        if self.render_mode == "human":
-            self.render()
-        return self.core.observation(), reward, terminated, False, info
-
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
-            return None
-        if self.core.world is None:
-            raise gym.error.ResetNeeded("call reset() before render()")
-        return render_support.render(self)
-
-    def close(self) -> None:
-        render_support.close(self)
+    def _frame(self) -> RenderFrame:
+        return frame_of(self.core)

@@ -1,9 +1,9 @@
 """Reading actions: whatever a caller passes becomes plain numbers of the documented shape, or an ActionError.
 
-Both environments accept an array-like of numbers (a numpy array of an integer or float dtype, or nested lists
-and tuples of Python numbers). Strings, booleans, None, dicts, ragged lists and any other shape than the
-documented ones are refused with a message naming the shape that would be accepted, rather than silently
-reinterpreted (a (3, 2) array holds six numbers, but not the (2, 3) = two robots times (Fx, Fy, torque)).
+Both transport environments accept an array-like of numbers (a numpy array of an integer or float dtype, or
+nested lists and tuples of Python numbers). Strings, booleans, None, dicts, ragged lists and any other shape
+than the documented ones are refused with a message naming the shape that would be accepted, rather than
+silently reinterpreted (a (3, 2) array holds six numbers, but not the (2, 3) = two robots times (Fx, Fy, torque)).
 """
 
 from __future__ import annotations
@@ -13,17 +13,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from impact_env.errors import ActionError
+from impact_env.errors import ActionError, brief
 
 _NUMERIC_KINDS = "iuf"  # signed and unsigned integers, floats (not bool, complex, strings, objects)
 
 
 def _brief(value: object) -> str:
-    try:
-        text = repr(value)
-    except (ValueError, RecursionError):  # an integer of thousands of digits; a list nested thousands deep
-        return f"a {type(value).__name__}"
-    return text if len(text) <= 80 else text[:77] + "..."
+    return brief(value, width=80)
 
 
 def numbers_of(action: object, shapes: tuple[tuple[int, ...], ...], what: str, layout: str) -> list[float]:

@@ -2,18 +2,14 @@
 
 The second transport mode of this package (an MSc thesis on hybrid motion planning for cargo in a space
 station): robots attach to the cargo and to anchor points on the station's walls and pull the cargo toward
-those anchors. A :class:`Station` holds everything a simulator or a planner needs: the station as a simple
-polygon (counter-clockwise, whatever the file's orientation), its walls and the anchors on them, the cargo,
-the goal box, the fleet (number of robots, the most that may pull at once ``k``, the pulling speed ``w``,
-the winch force limit, the stop radius around an anchor, the attach time ``t_switch``) and the STL task.
+those anchors. A :class:`Station` holds everything a simulator or a planner needs: the station polygon, its
+walls and anchors, the cargo, the goal box, the fleet and the STL task; its geometry (free space, line of
+sight) is done with shapely.
 
-Shipped stations live in ``impact_env/stations/*.toml``; a user file has the same format (see
-``docs/station_format.md``). As for scenarios, every field is checked on load, unknown keys are errors and
-every error names the field path, e.g. ``ScenarioError("cargo.radius_m must be > 0, got -0.2")``.
-
-Geometry is done with shapely: :meth:`Station.shapely_polygon`, :meth:`Station.free_space` (the cargo
-centre's free space, the polygon shrunk by the cargo radius) and :meth:`Station.line_of_sight` (which
-anchors a tether from a point can reach without a wall in between).
+Shipped stations live in ``impact_env/tether/stations/*.toml``; a user file has the same format (see
+``docs/station_format.md``). As for scenarios, every field is checked on load (:mod:`impact_env.toml_fields`),
+unknown keys are errors and every error names the field path, e.g.
+``ScenarioError("cargo.radius_m must be > 0, got -0.2")``.
 """
 
 from __future__ import annotations
@@ -22,7 +18,6 @@ import math
 import sys
 from dataclasses import dataclass, field
 from functools import cached_property
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -30,16 +25,25 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Point, Polygon
 
-from impact_env.errors import ScenarioError, STLError
+from impact_env import catalogue
+from impact_env.errors import ScenarioError
 from impact_env.geometry import ConvexPolygon
-from impact_env.scenario import _check, _Fields
+from impact_env.toml_fields import (
+    Fields,
+    check,
+    check_horizon,
+    load_toml,
+    positive,
+    read_header,
+    task_formula,
+    with_source,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
 
-_STATION_PACKAGE = "impact_env.stations"
 CARGO = "cargo"  # the cargo's name in the STL task
 GOAL = "goal"  # the goal box's name in the STL task
 ON_WALL_TOL_M = 1e-6  # a listed anchor may be this far from its wall; it is then projected onto it
@@ -197,8 +201,7 @@ class Station:
 
 def station_names() -> list[str]:
     """Names of the stations shipped with the package."""
-    files = resources.files(_STATION_PACKAGE)
-    return sorted(p.name[:-5] for p in files.iterdir() if p.name.endswith(".toml"))
+    return catalogue.names_of("station")
 
 
 def is_station_file(name_or_path: str | Path) -> bool:
@@ -219,81 +222,46 @@ def load_station(name_or_path: str | Path) -> Station:
     """Load a shipped station by name (``"L"``) or a TOML file by path, validated.
 
     Raises:
-        ScenarioError: unknown name, unreadable file, invalid TOML or any invalid field.
+        ScenarioError: unknown name, unreadable file, text that is not UTF-8, invalid TOML or any invalid field.
     """
-    path = Path(name_or_path)
-    if path.suffix == ".toml" or path.exists() or "/" in str(name_or_path):
-        if not path.is_file():
-            raise ScenarioError(f"station file {str(path)!r} does not exist")
-        text, source = path.read_text(encoding="utf-8"), str(path)
-    else:
-        name = str(name_or_path)
-        if name not in station_names():
-            from impact_env.names import shipped_names, suggestion
-
-            raise ScenarioError(f"unknown station {name!r}{suggestion(name, shipped_names())}; shipped stations: "
-                                f"{', '.join(station_names())} (or pass a path to a .toml file)")
-        text, source = resources.files(_STATION_PACKAGE).joinpath(f"{name}.toml").read_text(encoding="utf-8"), name
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
+    data, source = load_toml(name_or_path, "station")
     return station_from_dict(data, source=source)
 
 
 def station_from_dict(data: dict, source: str = "<dict>") -> Station:
     """Validate a parsed TOML document and build the Station; see :func:`load_station`."""
-    try:
-        return _build(data, source)
-    except ScenarioError as exc:
-        if str(exc).startswith(source):
-            raise
-        raise ScenarioError(f"{source}: {exc}") from None
-
-
-def _positive(value: float, where: str, allow_zero: bool = False) -> float:
-    if value < 0 or (value == 0 and not allow_zero):
-        raise ScenarioError(f"{where} must be {'>= 0' if allow_zero else '> 0'}, got {value}")
-    return value
+    return with_source(_build, data, source)
 
 
 def _build(data: dict, source: str) -> Station:
-    top = _Fields(data, "")
-    name = top.get("name", kind="name")
-    description = top.get("description", "", kind="str")
-    restitution = top.get("restitution", kind="float")
-    if not 0.0 <= restitution <= 1.0:
-        raise ScenarioError(f"restitution must be in [0, 1], got {restitution}")
-    tf = _positive(top.get("tf_s", kind="float"), "tf_s")
-    period = _positive(top.get("control_period_s", 1.0, kind="float"), "control_period_s")
-    substeps = top.get("substeps", 10, kind="int")
-    if substeps < 1:
-        raise ScenarioError(f"substeps must be >= 1, got {substeps}")
+    top = Fields(data, "")
+    header = read_header(top, default_period_s=1.0)
+    tf = header.tf_s
     task = top.get("task", None, kind="str")
 
-    st = _Fields(top.get("station"), "station")
+    st = Fields(top.get("station"), "station")
     polygon, file_to_ccw = _polygon(st.get("polygon"), "station.polygon")
     st.finish()
 
-    cg = _Fields(top.get("cargo"), "cargo")
-    cargo = Cargo(mass_kg=_positive(cg.get("mass_kg", kind="float"), "cargo.mass_kg"),
-                  radius_m=_positive(cg.get("radius_m", kind="float"), "cargo.radius_m"),
+    cg = Fields(top.get("cargo"), "cargo")
+    cargo = Cargo(mass_kg=positive(cg.get("mass_kg", kind="float"), "cargo.mass_kg"),
+                  radius_m=positive(cg.get("radius_m", kind="float"), "cargo.radius_m"),
                   start_m=cg.get("start_m", kind="vec2"))
     cg.finish()
 
     goal_box = _goal(top.get("goal"))
 
-    rb = _Fields(top.get("robots"), "robots")
+    rb = Fields(top.get("robots"), "robots")
     n_robots = rb.get("count", kind="int")
     if n_robots < 1:
         raise ScenarioError(f"robots.count must be >= 1, got {n_robots}")
     k = rb.get("max_active", n_robots, kind="int")
     if not 1 <= k <= n_robots:
         raise ScenarioError(f"robots.max_active must be in 1..robots.count = {n_robots}, got {k}")
-    w = _positive(rb.get("pull_speed_mps", kind="float"), "robots.pull_speed_mps")
-    winch = _positive(rb.get("winch_force_limit_N", kind="float"), "robots.winch_force_limit_N")
-    stop = _positive(rb.get("stop_radius_m", kind="float"), "robots.stop_radius_m")
-    t_switch = _positive(rb.get("switch_time_s", kind="float"), "robots.switch_time_s", allow_zero=True)
+    w = positive(rb.get("pull_speed_mps", kind="float"), "robots.pull_speed_mps")
+    winch = positive(rb.get("winch_force_limit_N", kind="float"), "robots.winch_force_limit_N")
+    stop = positive(rb.get("stop_radius_m", kind="float"), "robots.stop_radius_m")
+    t_switch = positive(rb.get("switch_time_s", kind="float"), "robots.switch_time_s", allow_zero=True)
     rb.finish()
 
     anchors = _anchors(top.get("anchors"), polygon, file_to_ccw)
@@ -302,10 +270,10 @@ def _build(data: dict, source: str) -> Station:
     if task is None:
         task = f"F[0,{_fmt(tf)}] in({CARGO}, {GOAL})"
     station = Station(
-        name=name, description=description, polygon=polygon, anchors=anchors, cargo=cargo, goal_box=goal_box,
-        n_robots=n_robots, k=k, pull_speed_mps=w, winch_force_limit_N=winch, stop_radius_m=stop,
-        switch_time_s=t_switch, restitution=restitution, tf_s=tf, task=task, control_period_s=period,
-        substeps=substeps, source=source,
+        name=header.name, description=header.description, polygon=polygon, anchors=anchors, cargo=cargo,
+        goal_box=goal_box, n_robots=n_robots, k=k, pull_speed_mps=w, winch_force_limit_N=winch, stop_radius_m=stop,
+        switch_time_s=t_switch, restitution=header.restitution, tf_s=tf, task=task,
+        control_period_s=header.control_period_s, substeps=header.substeps, source=source,
     )
     _check_placement(station)
     _check_rates(station)
@@ -321,7 +289,7 @@ def _polygon(value: Any, where: str) -> tuple[tuple[tuple[float, float], ...], l
     """Validated counter-clockwise vertices, and for each wall as written its index after normalisation."""
     if not isinstance(value, list) or len(value) < 3:
         raise ScenarioError(f"{where} must be a list of at least 3 vertices [[x, y], ...], got {value!r}")
-    pts = [_check(v, "vec2", f"{where}[{i}]") for i, v in enumerate(value)]
+    pts = [check(v, "vec2", f"{where}[{i}]") for i, v in enumerate(value)]
     n = len(pts)
     if pts[0] == pts[-1]:
         raise ScenarioError(f"{where}: the last vertex repeats the first; list each vertex once (the polygon "
@@ -363,7 +331,7 @@ def _polygon(value: Any, where: str) -> tuple[tuple[tuple[float, float], ...], l
 
 
 def _goal(value: Any) -> tuple[float, float, float, float]:
-    g = _Fields(value, "goal")
+    g = Fields(value, "goal")
     box = g.get("box", None, kind="box")
     center = g.get("center_m", None, kind="vec2")
     half = g.get("half_size_m", None, kind="float")
@@ -377,13 +345,13 @@ def _goal(value: Any) -> tuple[float, float, float, float]:
         return box
     if half is None:
         raise ScenarioError("goal.half_size_m is required with goal.center_m (the box is center +- half_size_m)")
-    _positive(half, "goal.half_size_m")
+    positive(half, "goal.half_size_m")
     return (center[0] - half, center[0] + half, center[1] - half, center[1] + half)
 
 
 def _anchors(value: Any, polygon: tuple[tuple[float, float], ...], file_to_ccw: list[int]) -> tuple[Anchor, ...]:
     """The spacing rule on the chosen walls and the listed points, sorted along the walls."""
-    f = _Fields(value, "anchors")
+    f = Fields(value, "anchors")
     spacing = f.get("spacing_m", None, kind="float")
     walls = f.get("walls", None)
     points = f.get("points", None)
@@ -396,7 +364,7 @@ def _anchors(value: Any, polygon: tuple[tuple[float, float], ...], file_to_ccw: 
     n = len(polygon)
     found: list[tuple[int, float, tuple[float, float]]] = []  # (wall, position along it, point)
     if spacing is not None:
-        _positive(spacing, "anchors.spacing_m")
+        positive(spacing, "anchors.spacing_m")
         if walls is None:
             chosen = list(range(n))
         else:
@@ -404,7 +372,7 @@ def _anchors(value: Any, polygon: tuple[tuple[float, float], ...], file_to_ccw: 
                 raise ScenarioError(f"anchors.walls must be a non-empty list of wall indices, got {walls!r}")
             chosen = []
             for i, wi in enumerate(walls):
-                wi = _check(wi, "int", f"anchors.walls[{i}]")
+                wi = check(wi, "int", f"anchors.walls[{i}]")
                 if not 0 <= wi < n:
                     raise ScenarioError(f"anchors.walls[{i}] = {wi} is not a wall; walls are 0..{n - 1} (wall i joins "
                                         "station.polygon[i] and polygon[i + 1] as written)")
@@ -421,7 +389,7 @@ def _anchors(value: Any, polygon: tuple[tuple[float, float], ...], file_to_ccw: 
         if not isinstance(points, list):
             raise ScenarioError(f"anchors.points must be a list of [x, y] points, got {points!r}")
         for i, pv in enumerate(points):
-            p = _check(pv, "vec2", f"anchors.points[{i}]")
+            p = check(pv, "vec2", f"anchors.points[{i}]")
             best = None
             for wall in range(n):
                 a, b = polygon[wall], polygon[(wall + 1) % n]
@@ -491,18 +459,11 @@ def _check_rates(station: Station) -> None:
 
 
 def _check_task(station: Station) -> None:
-    try:
-        formula = station.formula
-    except STLError as exc:
-        raise ScenarioError(f"task: {exc}") from None
+    formula = task_formula(station)
     if formula.bodies() - {CARGO}:
         raise ScenarioError(f"task names body {sorted(formula.bodies() - {CARGO})[0]!r}; a station task can only "
                             f"name the body {CARGO!r}")
     if formula.regions() - {GOAL}:
         raise ScenarioError(f"task names region {sorted(formula.regions() - {GOAL})[0]!r}; a station task can only "
                             f"name the region {GOAL!r}")
-    if formula.horizon_s <= 0:
-        raise ScenarioError("task has no temporal operator, so the episode would have no steps; "
-                            f"wrap it, e.g. 'F[0,{_fmt(station.tf_s)}] in({CARGO}, {GOAL})'")
-    if formula.horizon_s > station.tf_s + 1e-9:
-        raise ScenarioError(f"task horizon {formula.horizon_s} s exceeds tf_s = {station.tf_s} s")
+    check_horizon(formula, station.tf_s, example=f"'F[0,{_fmt(station.tf_s)}] in({CARGO}, {GOAL})'")

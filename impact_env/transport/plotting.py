@@ -1,7 +1,6 @@
 """matplotlib figures of a scenario and of a run: what the README, the planners and the CLI save as PNG.
 
-Only the object-oriented API (:class:`matplotlib.figure.Figure`) is used: no pyplot global state, no
-backend selection, nothing shown on screen, so it works headless and in parallel tests.
+The conventions of :mod:`impact_env.figures` (object-oriented matplotlib, headless; its DPI and colours).
 """
 
 from __future__ import annotations
@@ -11,22 +10,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, FancyArrowPatch, Patch, Polygon, Rectangle
+
+from impact_env import figures
+from impact_env.figures import IMPACT_COLOUR, OBJECT_COLOUR, OBSTACLE_COLOUR, REGION_COLOUR, ROBOT_COLOUR
 
 if TYPE_CHECKING:
     from matplotlib.artist import Artist
     from matplotlib.axes import Axes
 
-    from impact_env.scenario import Scenario
+    from impact_env.transport.scenario import Scenario
 
-DPI = 120
-ROBOT_COLOUR = "tab:blue"
-OBJECT_COLOUR = "tab:orange"
-OBSTACLE_COLOUR = "0.45"
-REGION_COLOUR = "tab:green"
-IMPACT_COLOUR = "red"
+DPI, _png_path = figures.DPI, figures.png_path  # names of impact_env.plotting (0.2), for that path's release
 # trajectory colours per body: blues for robots, oranges/browns for objects, cycled
 ROBOT_TRACE_COLOURS = ("tab:blue", "tab:cyan", "tab:purple", "navy", "steelblue")
 OBJECT_TRACE_COLOURS = ("tab:orange", "tab:brown", "goldenrod", "tab:red", "chocolate")
@@ -40,10 +36,10 @@ def draw_scenario(scenario: Scenario, ax: Axes | None = None) -> Axes:
     is None (reach it through ``ax.figure``).
     """
     if ax is None:
-        ax = _new_figure(*_xy_figsize(scenario)).add_subplot()
+        ax = figures.new_figure(*_xy_figsize(scenario)).add_subplot()
     handles = _draw_scenario(scenario, ax)
     ax.set_title(f"{scenario.name}  (restitution e = {scenario.restitution:g}, tf = {scenario.tf_s:g} s)")
-    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize="small")
+    figures.legend_beside(ax, handles)
     return ax
 
 
@@ -52,12 +48,9 @@ def save_scenario_figure(scenario: Scenario, path: str | Path) -> Path:
 
     A path without a suffix gets ``.png``; missing parent folders are created. Returns the written path.
     """
-    path = _png_path(path)
-    fig = _new_figure(*_xy_figsize(scenario))
+    fig = figures.new_figure(*_xy_figsize(scenario))
     draw_scenario(scenario, fig.add_subplot())
-    fig.savefig(path, dpi=DPI, bbox_inches="tight")
-    fig.clear()  # an OO Figure is not registered with pyplot: clearing and dropping it frees it
-    return path
+    return figures.save(fig, path)
 
 
 def count_impacts(scenario: Scenario, impacts: Sequence[dict[str, Any]]) -> tuple[int, int]:
@@ -109,14 +102,14 @@ def plot_run(scenario: Scenario, times_s: np.ndarray, positions: np.ndarray, imp
         missing = [key for key in ("time", "a", "b", "impulse") if key not in impact]
         if missing:
             raise ValueError(f"impacts[{k}] lacks key(s) {missing}; each impact needs 'time', 'a', 'b', 'impulse'")
-    path = _png_path(path)
+    path = figures.png_path(path)
     index = {b.name: i for i, b in enumerate(bodies)}
     colours = _trace_colours(scenario)
     objects = {b.name for b in scenario.objects}
     robots = {b.name for b in scenario.robots}
 
     w, h = _xy_figsize(scenario)
-    fig = _new_figure(w + 7.5, max(h, 5.5))
+    fig = figures.new_figure(w + 7.5, max(h, 5.5))
     grid = fig.add_gridspec(2, 2, width_ratios=[w, 7.5])
     ax_xy = fig.add_subplot(grid[:, 0])
     ax_p = fig.add_subplot(grid[0, 1])
@@ -136,8 +129,7 @@ def plot_run(scenario: Scenario, times_s: np.ndarray, positions: np.ndarray, imp
         handles.append(ax_xy.scatter(stars[:, 0], stars[:, 1], marker="*", s=160, color=IMPACT_COLOUR,
                                      edgecolor="k", linewidth=0.5, zorder=9, label="robot-object impact"))
     ax_xy.set_title("xy view")
-    ax_xy.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
-                 fontsize="small")
+    figures.legend_beside(ax_xy, handles)
 
     velocities = np.gradient(positions, times_s, axis=0) if times_s.size > 1 else np.zeros_like(positions)
     for i, body in enumerate(bodies):
@@ -163,19 +155,12 @@ def plot_run(scenario: Scenario, times_s: np.ndarray, positions: np.ndarray, imp
     ax_v.set_ylabel("velocity (m/s)")
     ax_v.set_xlabel("time (s)")
     ax_v.set_title("velocities (vx solid, vy dashed); impacts dotted")
-    ax_p.legend(handles=time_handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
-                fontsize="small")
+    figures.legend_beside(ax_p, time_handles)
     fig.suptitle(f"{scenario.name}: robustness rho = {robustness:.3f} m  ({impacts_text(scenario, impacts)})")
-    fig.savefig(path, dpi=DPI)
-    fig.clear()
-    return path
+    return figures.save(fig, path, tight=False)
 
 
 # --------------------------------------------------------------------------------------------- helpers
-
-
-def _new_figure(width_in: float, height_in: float) -> Figure:
-    return Figure(figsize=(width_in, height_in), layout="constrained")
 
 
 def _xy_figsize(scenario: Scenario) -> tuple[float, float]:
@@ -184,14 +169,6 @@ def _xy_figsize(scenario: Scenario) -> tuple[float, float]:
     aspect = (ymax - ymin) / (xmax - xmin)
     w, h = (7.0, 7.0 * aspect) if aspect <= 1.0 else (7.0 / aspect, 7.0)
     return max(w, 2.5) + 2.0, max(h, 2.5) + 0.6
-
-
-def _png_path(path: str | Path) -> Path:
-    path = Path(path)
-    if not path.suffix:
-        path = path.with_suffix(".png")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return path
 
 
 def trace_colours(scenario: Scenario) -> list[str]:
@@ -233,12 +210,7 @@ def _draw_scenario(scenario: Scenario, ax: Axes) -> list[Artist]:
         if body.name in robot_names and np.hypot(fx - x, fy - y) > 1e-9:
             ax.add_patch(FancyArrowPatch((x, y), (fx, fy), arrowstyle="-|>", mutation_scale=12, color=colour,
                                          lw=1.0, alpha=0.7, shrinkA=0, shrinkB=0, zorder=3))
-    pad = 0.03 * max(xmax - xmin, ymax - ymin)
-    ax.set_xlim(xmin - pad, xmax + pad)
-    ax.set_ylim(ymin - pad, ymax + pad)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
+    figures.world_axes(ax, scenario.world_box, pad=0.03 * max(xmax - xmin, ymax - ymin))
 
     handles: list[Artist] = []
     if scenario.robots:

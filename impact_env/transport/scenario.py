@@ -1,30 +1,40 @@
 """Scenario: the world, its bodies, the restitution and the STL task, loaded from a validated TOML file.
 
 A scenario is the single description that the simulator, the planners and the plotters read. Shipped
-scenarios live in ``impact_env/scenarios/*.toml``; a user file has the same format (see
-``docs/scenario_format.md``). Every field is checked on load; unknown keys are errors, not ignored, and
-every error names the field path, e.g. ``ScenarioError("robots[1].radius_m must be > 0, got -0.2")``.
+scenarios live in ``impact_env/transport/scenarios/*.toml``; a user file has the same format (see
+``docs/scenario_format.md``). Every field is checked on load (:mod:`impact_env.toml_fields`); unknown keys
+are errors, not ignored, and every error names the field path, e.g.
+``ScenarioError("robots[1].radius_m must be > 0, got -0.2")``.
 """
 
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from impact_env import limits
-from impact_env.errors import ScenarioError, STLError
+from impact_env import catalogue, limits
+from impact_env.errors import ScenarioError, STLError, brief
 from impact_env.geometry import ConvexPolygon
+from impact_env.toml_fields import (
+    Fields,
+    check,
+    check_horizon,
+    is_finite,
+    load_toml,
+    positive,
+    read_header,
+    read_source,
+    task_formula,
+    with_source,
+)
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+# the private names 0.2 code imported from impact_env.scenario (station.py did), kept for that path's release
+_Fields, _check, _finite, _positive, _short = Fields, check, is_finite, positive, brief
 
-_SCENARIO_PACKAGE = "impact_env.scenarios"
+_STATION_GIVEN = ("{name!r} is a tether station, not an impact scenario: load it with impact_env.load_station (or "
+                  "use a Tether env)")
 MAX_PLANNER_INTERVALS = 1000  # the MILP grows linearly with them; far beyond what solves in minutes
 MIN_ROBOT_DEGREE, MAX_ROBOT_DEGREE = 2, 8
 
@@ -140,8 +150,7 @@ class Scenario:
 
 def scenario_names() -> list[str]:
     """Names of the scenarios shipped with the package."""
-    files = resources.files(_SCENARIO_PACKAGE)
-    return sorted(p.name[:-5] for p in files.iterdir() if p.name.endswith(".toml"))
+    return catalogue.names_of("scenario")
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario:
@@ -150,132 +159,17 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     Raises:
         ScenarioError: unknown name, unreadable file, text that is not UTF-8, invalid TOML or any invalid field.
     """
-    if not isinstance(name_or_path, (str, Path)):
-        raise ScenarioError("a scenario is a shipped name or a path to a .toml file, "
-                            f"got {type(name_or_path).__name__}")
-    text, source = _read_source(name_or_path)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
-    except (ValueError, RecursionError) as exc:  # an integer of thousands of digits; arrays nested thousands deep
-        raise ScenarioError(f"{source}: not a usable TOML file: {str(exc)[:120]}") from None
+    data, source = load_toml(name_or_path, "scenario", elsewhere={"station": _STATION_GIVEN})
     return scenario_from_dict(data, source=source)
 
 
 def _read_source(name_or_path: str | Path) -> tuple[str, str]:
-    path = Path(name_or_path)
-    try:
-        is_path = path.suffix == ".toml" or path.exists() or "/" in str(name_or_path)
-    except (OSError, ValueError):  # e.g. a NUL byte or a name too long for the file system
-        raise ScenarioError(f"{str(name_or_path)[:80]!r} is neither a shipped scenario nor a readable path") from None
-    if is_path:
-        if not path.is_file():
-            raise ScenarioError(f"scenario file {str(path)!r} does not exist")
-        try:
-            raw = path.read_bytes()
-        except OSError as exc:
-            raise ScenarioError(f"cannot read scenario file {str(path)!r}: {exc.strerror or exc}") from None
-        try:
-            return raw.decode("utf-8"), str(path)
-        except UnicodeDecodeError as exc:
-            line = raw[:exc.start].count(b"\n") + 1
-            raise ScenarioError(f"{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at line {line}, byte offset "
-                                f"{exc.start}); TOML files must be UTF-8") from None
-    name = str(name_or_path)
-    if name not in scenario_names():
-        from impact_env.names import shipped_names, suggestion
-        from impact_env.station import station_names
-
-        if name in station_names():
-            raise ScenarioError(f"{name!r} is a tether station, not an impact scenario: load it with "
-                                "impact_env.station.load_station (or use a Tether env)")
-        raise ScenarioError(f"unknown scenario {name!r}{suggestion(name, shipped_names())}; shipped scenarios: "
-                            f"{', '.join(scenario_names())} (or pass a path to a .toml file)")
-    return resources.files(_SCENARIO_PACKAGE).joinpath(f"{name}.toml").read_text(encoding="utf-8"), name
-
-
-class _Fields:
-    """Reads one TOML table, tracking which keys were consumed so that leftovers are reported."""
-
-    def __init__(self, table: Any, path: str) -> None:
-        if not isinstance(table, dict):
-            raise ScenarioError(f"{path} must be a table, got {type(table).__name__}")
-        self.table, self.path, self.used = table, path, set()
-
-    def _at(self, key: str) -> str:
-        return f"{self.path}.{key}" if self.path else key
-
-    def get(self, key: str, default: Any = ..., kind: str = "any") -> Any:
-        self.used.add(key)
-        if key not in self.table:
-            if default is ...:
-                raise ScenarioError(f"{self._at(key)} is required")
-            return default
-        return _check(self.table[key], kind, self._at(key))
-
-    def finish(self) -> None:
-        extra = sorted(set(self.table) - self.used)
-        if extra:
-            raise ScenarioError(f"{self._at(extra[0])}: unknown key (allowed here: {', '.join(sorted(self.used))})")
-
-
-def _check(value: Any, kind: str, where: str) -> Any:
-    if kind == "any":
-        return value
-    if kind == "str":
-        if not isinstance(value, str):
-            raise ScenarioError(f"{where} must be a string, got {_short(value)}")
-        return value
-    if kind == "name":
-        if not isinstance(value, str) or not value.isidentifier():
-            raise ScenarioError(f"{where} must be a name made of letters, digits and _, got {_short(value)}")
-        return value
-    if kind == "int":
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ScenarioError(f"{where} must be an integer, got {_short(value)}")
-        return value
-    if kind == "float":
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite(value):
-            raise ScenarioError(f"{where} must be a finite number, got {_short(value)}")
-        return float(value)
-    if kind == "vec2":
-        if not isinstance(value, list) or len(value) != 2:
-            raise ScenarioError(f"{where} must be a list of 2 numbers [x, y], got {_short(value)}")
-        return tuple(_check(v, "float", f"{where}[{i}]") for i, v in enumerate(value))
-    if kind == "box":
-        if not isinstance(value, list) or len(value) != 4:
-            raise ScenarioError(f"{where} must be [xmin, xmax, ymin, ymax], got {_short(value)}")
-        box = tuple(_check(v, "float", f"{where}[{i}]") for i, v in enumerate(value))
-        if not (box[0] < box[1] and box[2] < box[3]):
-            raise ScenarioError(f"{where} must have xmin < xmax and ymin < ymax, got {list(box)}")
-        return box
-    raise AssertionError(kind)  # programming error, not user input
-
-
-def _finite(value: int | float) -> bool:
-    try:
-        return math.isfinite(value)
-    except OverflowError:  # an integer too large for a float
-        return False
-
-
-def _short(value: Any) -> str:
-    try:
-        text = repr(value)
-    except (ValueError, RecursionError):  # an integer of thousands of digits; a list nested thousands deep
-        return f"a {type(value).__name__}"
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-def _positive(value: float, where: str, allow_zero: bool = False) -> float:
-    if value < 0 or (value == 0 and not allow_zero):
-        raise ScenarioError(f"{where} must be {'>= 0' if allow_zero else '> 0'}, got {value}")
-    return value
+    """(text, source) of a scenario name or path (the name 0.2 code imported from ``impact_env.scenario``)."""
+    return read_source(name_or_path, "scenario", {"station": _STATION_GIVEN})
 
 
 def _region(table: Any, where: str) -> Region:
-    f = _Fields(table, where)
+    f = Fields(table, where)
     name = f.get("name", kind="name")
     box = f.get("box", None, kind="box")
     vertices = f.get("polygon", None)
@@ -287,26 +181,26 @@ def _region(table: Any, where: str) -> Region:
         return Region(name, ConvexPolygon.from_box(*box, where=f"{where}.box"))
     if not isinstance(vertices, list):
         raise ScenarioError(f"{where}.polygon must be a list of [x, y] vertices")
-    pts = [_check(v, "vec2", f"{where}.polygon[{i}]") for i, v in enumerate(vertices)]
+    pts = [check(v, "vec2", f"{where}.polygon[{i}]") for i, v in enumerate(vertices)]
     return Region(name, ConvexPolygon.from_vertices(pts, where=f"{where}.polygon"))
 
 
 def _body(table: Any, where: str, robot: bool) -> Body:
-    f = _Fields(table, where)
+    f = Fields(table, where)
     name = f.get("name", kind="name")
-    mass = _positive(f.get("mass_kg", kind="float"), f"{where}.mass_kg")
-    radius = _positive(f.get("radius_m", kind="float"), f"{where}.radius_m")
-    inertia = _positive(f.get("inertia_kgm2", kind="float"), f"{where}.inertia_kgm2")
+    mass = positive(f.get("mass_kg", kind="float"), f"{where}.mass_kg")
+    radius = positive(f.get("radius_m", kind="float"), f"{where}.radius_m")
+    inertia = positive(f.get("inertia_kgm2", kind="float"), f"{where}.inertia_kgm2")
     vbound = f.get("velocity_bound_mps", None, kind="vec2")
     if vbound is not None:
         for i, v in enumerate(vbound):
-            _positive(v, f"{where}.velocity_bound_mps[{i}]")
+            positive(v, f"{where}.velocity_bound_mps[{i}]")
     thrust = torque = None
     if robot:
         thrust = f.get("thrust_limit_N", kind="vec2")
         for i, v in enumerate(thrust):
-            _positive(v, f"{where}.thrust_limit_N[{i}]")
-        torque = _positive(f.get("torque_limit_Nm", kind="float"), f"{where}.torque_limit_Nm")
+            positive(v, f"{where}.thrust_limit_N[{i}]")
+        torque = positive(f.get("torque_limit_Nm", kind="float"), f"{where}.torque_limit_Nm")
     body = Body(
         name=name, mass_kg=mass, radius_m=radius, inertia_kgm2=inertia,
         position_m=f.get("position_m", kind="vec2"),
@@ -323,30 +217,18 @@ def _body(table: Any, where: str, robot: bool) -> Body:
 
 def scenario_from_dict(data: dict, source: str = "<dict>") -> Scenario:
     """Validate a parsed TOML document and build the Scenario; see :func:`load_scenario`."""
-    try:
-        return _build(data, source)
-    except ScenarioError as exc:
-        if str(exc).startswith(source):
-            raise
-        raise ScenarioError(f"{source}: {exc}") from None
+    return with_source(_build, data, source)
 
 
 def _build(data: dict, source: str) -> Scenario:
-    top = _Fields(data, "")
-    name = top.get("name", kind="name")
-    description = top.get("description", "", kind="str")
-    restitution = top.get("restitution", kind="float")
-    if not 0.0 <= restitution <= 1.0:
-        raise ScenarioError(f"restitution must be in [0, 1], got {restitution}")
-    tf = _positive(top.get("tf_s", kind="float"), "tf_s")
-    period = _positive(top.get("control_period_s", 0.1, kind="float"), "control_period_s")
-    substeps = top.get("substeps", 10, kind="int")
-    if substeps < 1:
-        raise ScenarioError(f"substeps must be >= 1, got {substeps}")
+    top = Fields(data, "")
+    header = read_header(top, default_period_s=0.1)
+    name, description, restitution = header.name, header.description, header.restitution
+    tf, period, substeps = header.tf_s, header.control_period_s, header.substeps
     limits.check_timing(tf, period, substeps)
     task = top.get("task", kind="str")
 
-    world = _Fields(top.get("world"), "world")
+    world = Fields(top.get("world"), "world")
     world_box = world.get("box", kind="box")
     world.finish()
     world_poly = ConvexPolygon.from_box(*world_box, where="world.box")
@@ -364,7 +246,7 @@ def _build(data: dict, source: str) -> Scenario:
     if not robots:
         raise ScenarioError("a scenario needs at least one [[robots]] entry")
 
-    planner = _Fields(top.get("planner", {}), "planner")
+    planner = Fields(top.get("planner", {}), "planner")
     segments = planner.get("bezier_segments", {})
     if not isinstance(segments, dict):
         raise ScenarioError("planner.bezier_segments must be a table like { R1 = 4, O1 = 6 }")
@@ -379,7 +261,7 @@ def _build(data: dict, source: str) -> Scenario:
         raise ScenarioError(f"planner.copy_intervals must be in 1..{(intervals or 10) // 2} (half the grid's "
                             f"intervals), got {copy_intervals}")
     planner.finish()
-    final_table = _Fields(top.get("final_box", {}), "final_box")
+    final_table = Fields(top.get("final_box", {}), "final_box")
     final_boxes = tuple(_final_box(final_table.get(key), f"final_box.{key}", key)
                         for key in list(final_table.table))
     final_table.finish()
@@ -400,7 +282,7 @@ def _build(data: dict, source: str) -> Scenario:
         where = f"planner.bezier_segments.{key}"
         if key not in {b.name for b in bodies}:
             raise ScenarioError(f"{where}: no body named {key!r}")
-        if _check(value, "int", where) < 1:
+        if check(value, "int", where) < 1:
             raise ScenarioError(f"{where} must be >= 1, got {value}")
 
     for i, b in enumerate(bodies):
@@ -438,12 +320,12 @@ def _build(data: dict, source: str) -> Scenario:
 
 def _final_box(table: Any, where: str, name: str) -> FinalBox:
     """``{ position_m = 0.5, velocity_mps = 0.05 }``; each a number > 0 or a per-axis pair [x, y] of them."""
-    f = _Fields(table, where)
+    f = Fields(table, where)
     halves = {}
     for key in ("position_m", "velocity_mps"):
         value = f.get(key)
-        pair = _check(value, "vec2", f"{where}.{key}") if isinstance(value, list) else (
-            (_check(value, "float", f"{where}.{key}"),) * 2)
+        pair = check(value, "vec2", f"{where}.{key}") if isinstance(value, list) else (
+            (check(value, "float", f"{where}.{key}"),) * 2)
         for i, v in enumerate(pair):
             if v <= 0:
                 at = f"{where}.{key}" + (f"[{i}]" if isinstance(value, list) else "")
@@ -464,10 +346,7 @@ def _unique(names: list[str], what: str) -> None:
 def _check_task(scenario: Scenario) -> None:
     from impact_env.stl import horizon_steps
 
-    try:
-        formula = scenario.formula
-    except STLError as exc:
-        raise ScenarioError(f"task: {exc}") from None
+    formula = task_formula(scenario)
     bodies = {b.name for b in scenario.bodies}
     regions = set(scenario.region_map())
     unknown_bodies = sorted(formula.bodies() - bodies)
@@ -478,11 +357,7 @@ def _check_task(scenario: Scenario) -> None:
     if unknown_regions:
         raise ScenarioError(f"task names region {unknown_regions[0]!r}, which is not in the scenario "
                             f"(regions and obstacles: {', '.join(sorted(regions))})")
-    if formula.horizon_s <= 0:
-        raise ScenarioError("task has no temporal operator, so the episode would have no steps; "
-                            "wrap it, e.g. 'F[0,100] in(O1, goal)'")
-    if formula.horizon_s > scenario.tf_s + 1e-9:
-        raise ScenarioError(f"task horizon {formula.horizon_s} s exceeds tf_s = {scenario.tf_s} s")
+    check_horizon(formula, scenario.tf_s, example="'F[0,100] in(O1, goal)'")
     try:
         steps = horizon_steps(formula, scenario.control_period_s)
     except STLError as exc:  # an interval between two samples

@@ -4,25 +4,24 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.utils import EzPickle
 
-from impact_env.envs.clock import EpisodeClock, check_render_options, reject_unknown, required
-from impact_env.envs.tether_core import TetherCore
-from impact_env.station import Station
+from impact_env.env_shell import GymShell, required
+from impact_env.tether.core import TetherCore
+from impact_env.tether.rendering import TetherFrame, TetherRenderer, frame_of
+from impact_env.tether.station import Station
 
 STATION_HINT = "a shipped station name (impact-env scenarios), a path to a TOML file or a Station"
 STATION_EXAMPLE = ("gym.make('impact_env/Tether-v0', station='L'), or the station's own id "
                    "gym.make('impact_env/TetherL-v0')")
 
 
-class TetherEnv(EpisodeClock, gym.Env, EzPickle):
+class TetherEnv(GymShell):
     """Robots carry a free-floating cargo through a space station by pulling it toward anchors on the walls.
 
     ## Description
-    A station (``impact_env/stations/*.toml`` or your own file, see ``docs/station_format.md``) is a polygon
+    A station (``impact_env/tether/stations/*.toml`` or your own file, see ``docs/station_format.md``) is a polygon
     with anchor points on its walls, a cargo disc, a goal box and a fleet of robots. A robot attaches a tether to
     the cargo and to an anchor and reels it in: with one tether the cargo moves straight toward the anchor at the
     pulling speed ``w``, with several along the sum of their directions (the thesis's Eq. 5). At most ``k``
@@ -30,7 +29,7 @@ class TetherEnv(EpisodeClock, gym.Env, EzPickle):
     between cargo and anchor it snags (is released), and it is released when the cargo comes within the stop
     radius of its anchor. How the cargo moves depends on ``fidelity`` (``kinematic``: exactly Eq. 5, no
     inertia; ``reel``: pymunk slide joints reeled in at ``w`` with the winch force limit, the cargo keeps its
-    momentum; ``force``: saturating winch tension), see :mod:`impact_env.tether_physics`.
+    momentum; ``force``: saturating winch tension), see :mod:`impact_env.tether.physics`.
 
     ## Action space
     ``MultiDiscrete([n_anchors + 2] * n_robots)``: per robot, ``0`` keep, ``1`` release, ``2 + j`` attach to
@@ -75,7 +74,7 @@ class TetherEnv(EpisodeClock, gym.Env, EzPickle):
     Each keyword has the name of its ``impact-env run`` option (``energy_penalty`` is ``--energy-penalty``).
 
     * ``station``: a shipped station name (``impact-env scenarios``), a path to a TOML file or a
-      :class:`~impact_env.station.Station`. Required by ``impact_env/Tether-v0``; the station ids
+      :class:`~impact_env.tether.station.Station`. Required by ``impact_env/Tether-v0``; the station ids
       (``impact_env/TetherL-v0`` ...) set it.
     * ``fidelity``: ``"kinematic"`` (the thesis's Eq. 5), ``"reel"`` (slide joints reeled in) or ``"force"``
       (saturating tension).
@@ -97,57 +96,29 @@ class TetherEnv(EpisodeClock, gym.Env, EzPickle):
                  energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
                  initial_position_noise_m: float = 0.0, render_mode: str | None = None,
                  render_width_px: int = 600, **unknown: Any) -> None:
-        reject_unknown(unknown, type(self))
-        EzPickle.__init__(self, station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
-                          initial_position_noise_m, render_mode, render_width_px)
-        check_render_options(self.metadata, render_mode, render_width_px)
+        self._open(unknown, (station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
+                             initial_position_noise_m, render_mode, render_width_px), render_mode, render_width_px)
         station = required(station, "station", STATION_HINT, STATION_EXAMPLE)
         self.core = TetherCore(station, fidelity=fidelity, reward_mode=reward_mode, energy_penalty=energy_penalty,
                                pull_speed_mps=pull_speed_mps, max_active=max_active,
                                initial_position_noise_m=initial_position_noise_m)
         self.station = self.core.station
-        self.render_mode = render_mode
-        self.render_width_px = render_width_px
         self.action_space = spaces.MultiDiscrete([self.core.n_commands] * self.core.n_robots)
         self.observation_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
-        self._renderer = None
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        super().reset(seed=seed)
-        self.core.reset(self.np_random)
-        if self.render_mode == "human":
-            self.render()
-        return self.core.observation(), self.core.info()
+    def _new_renderer(self) -> TetherRenderer:
+        return TetherRenderer(self.station, self.render_mode, width_px=self.render_width_px,
+                              fps=self.metadata["render_fps"])
 
-    def step(self, action):
-        reward, terminated, info = self.core.step(action)
-        if self.render_mode == "human":
-            self.render()
-        return self.core.observation(), reward, terminated, False, info
-
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
-            return None
-        if self.core.world is None:
-            raise gym.error.ResetNeeded("call reset() before render()")
-        return render_tether(self)
-
-    def close(self) -> None:
-        close_tether(self)
+    def _frame(self) -> TetherFrame:
+        return frame_of(self.core)
 
 
-def render_tether(env) -> object:
-    """Shared ``render()`` of both tether environments: builds the pygame renderer on first use, draws a frame."""
-    from impact_env.tether_rendering import TetherRenderer, frame_of
-
-    if env._renderer is None:
-        env._renderer = TetherRenderer(env.station, env.render_mode, width_px=env.render_width_px,
-                                       fps=env.metadata["render_fps"])
-    return env._renderer.render(frame_of(env.core))
+# impact_env.envs.tether's names (0.2), kept for that old path's release
+def render_tether(env: GymShell) -> Any:
+    """``env.render()``'s drawing."""
+    return env._draw()
 
 
-def close_tether(env) -> None:
-    if env._renderer is not None:
-        env._renderer.close()
-        env._renderer = None
+def close_tether(env: GymShell) -> None:
+    env.close()

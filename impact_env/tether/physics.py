@@ -1,44 +1,13 @@
 """The pymunk world of a station: a free-floating cargo disc pulled by tethers toward wall anchors.
 
-Conventions of the impact world (``impact_env/physics.py``): no gravity, ``space.damping = 1.0`` (no damping;
-pymunk's damping is a retention factor), zero friction, every shape gets ``sqrt(e)`` so a cargo-wall contact
-bounces with exactly the station's restitution ``e``, collision slop 0.1 mm, and a fresh space per episode.
-The station's walls are static segments; the cargo is a dynamic disc; each pulling tether joins the cargo's
-centre to its anchor.
-
-Fidelity levels (``fidelity=``):
-
-- ``"kinematic"``: what the thesis plans with. The cargo has no inertia: every substep its velocity is set so
-  that it moves exactly as Eq. (5), ``x' = w * sum_i (a_i - x) / |a_i - x|`` over the pulling anchors ``a_i``,
-  integrated by one classical Runge-Kutta (RK4) step; with no tether it stops. One tether: a straight line
-  toward the anchor at speed ``w``. Two: the branch of the hyperbola ``|x - a_1| - |x - a_2| = const`` (both
-  distances shrink at the same rate ``w (1 + cos theta)``) at speed ``2 w cos(theta / 2)``, ``theta`` the angle
-  between the tethers at the cargo. Where the cargo touches a wall, the velocity component into it is dropped
-  (it slides, frictionless).
-- ``"reel"``: each tether is a pymunk slide joint whose maximum length is set, every substep, to the current
-  distance minus ``w dt``, with the joint's ``max_force`` at the winch limit and its error fully corrected in
-  one step. So a winch reels in at least at ``w`` whenever its force suffices, can only pull (a slack tether
-  exerts nothing), and the cargo keeps its momentum: a released cargo drifts on, and a new tether keeps the
-  velocity component across it. Several tethers: the cargo must approach each anchor at ``w`` or faster, so when
-  both of two tethers are taut the cargo moves along the bisector at ``w / cos(theta / 2)`` (each distance
-  shrinks at exactly ``w``), not at Eq. (5)'s ``2 w cos(theta / 2)``: equal at ``theta = 90 deg``, half of it
-  for parallel tethers, and growing without bound toward opposite tethers, where the winch limit takes over.
-- ``"force"``: a tension ``T_i = F_max * clip(1 - v_r,i / w, 0, 1)`` along each tether, ``v_r,i`` the cargo's
-  speed toward anchor ``i``: full winch force from rest, none once the cargo approaches at ``w``. One tether
-  from rest: ``v_n = w (1 - (1 - g)^n)`` after ``n`` substeps, ``g = dt F_max / (m w)`` (pymunk's semi-implicit
-  Euler step); continuous time constant ``m w / F_max``. Several tethers settle where no tether pulls, as in
-  ``reel`` (each distance shrinking at ``w``).
-
-Every substep, after the physics step, a tether is released when the cargo centre is within the stop radius of
-its anchor (event ``"arrived"``), and snags when a wall comes between the cargo centre and its anchor (event
-``"snagged"``: the tether is released; :meth:`Station.line_of_sight` is the test, so touching a corner does not
-snag, crossing it does). An attachment commanded with a delay (the attach time ``t_switch``) starts pulling at
-the first substep at or after its ready time, if its anchor is in line of sight then (else ``"blocked"``).
-
-Winch work (J): the work the tethers do on the cargo, per tether and substep ``J_i . (v_before + v_after) / 2``
-(``J_i`` its impulse vector), which sums over the tethers to the step's change of kinetic energy exactly when no
-wall is touched; :attr:`TetherWorld.winch_work_J` adds the positive parts (a winch does not recover energy).
-Under ``kinematic`` the impulse is what it takes to give the cargo's mass the velocity of Eq. (5).
+Conventions of the impact world (:mod:`impact_env.transport.physics`): no gravity, ``space.damping = 1.0`` (no
+damping; pymunk's damping is a retention factor), zero friction, every shape gets ``sqrt(e)`` so a cargo-wall
+contact bounces with exactly the station's restitution ``e``, collision slop 0.1 mm, and a fresh space per
+episode. The station's walls are static segments; the cargo is a dynamic disc; each pulling tether joins the
+cargo's centre to its anchor. How a tether pulls depends on the fidelity (``"kinematic"``: the thesis's Eq. (5)
+exactly; ``"reel"``: slide joints reeled in at ``w``; ``"force"``: a saturating winch tension), and the events
+of a tether (attached, released, arrived, snagged, blocked) and the winch work are counted the same way in all
+three: :class:`TetherWorld` describes each.
 """
 
 from __future__ import annotations
@@ -50,7 +19,7 @@ import numpy as np
 import pymunk
 
 from impact_env.errors import TetherError
-from impact_env.station import Station
+from impact_env.tether.station import Station
 
 FIDELITIES = ("kinematic", "reel", "force")
 _SLOP_M = 1e-4
@@ -88,7 +57,7 @@ class TetherWorld:
 
     Args:
         station: the station to build.
-        fidelity: ``"kinematic"``, ``"reel"`` or ``"force"`` (see the module docstring).
+        fidelity: ``"kinematic"``, ``"reel"`` or ``"force"`` (see below).
         pull_speed_mps: the winches' actual reel-in speed ``w``; default the station's (a planner that assumes
             the station's ``w`` meets a mismatch when this differs).
         start_m: the cargo's initial centre; default the station's.
@@ -97,6 +66,40 @@ class TetherWorld:
 
     Robots are numbered ``0 .. station.n_robots - 1``; their tethers are commanded with :meth:`attach` and
     :meth:`release`, which do not check the fleet's rules (``k``, distinct anchors): the environments do.
+
+    Fidelity levels (``fidelity=``):
+
+    - ``"kinematic"``: what the thesis plans with. The cargo has no inertia: every substep its velocity is set so
+      that it moves exactly as Eq. (5), ``x' = w * sum_i (a_i - x) / |a_i - x|`` over the pulling anchors ``a_i``,
+      integrated by one classical Runge-Kutta (RK4) step; with no tether it stops. One tether: a straight line
+      toward the anchor at speed ``w``. Two: the branch of the hyperbola ``|x - a_1| - |x - a_2| = const`` (both
+      distances shrink at the same rate ``w (1 + cos theta)``) at speed ``2 w cos(theta / 2)``, ``theta`` the angle
+      between the tethers at the cargo. Where the cargo touches a wall, the velocity component into it is dropped
+      (it slides, frictionless).
+    - ``"reel"``: each tether is a pymunk slide joint whose maximum length is set, every substep, to the current
+      distance minus ``w dt``, with the joint's ``max_force`` at the winch limit and its error fully corrected in
+      one step. So a winch reels in at least at ``w`` whenever its force suffices, can only pull (a slack tether
+      exerts nothing), and the cargo keeps its momentum: a released cargo drifts on, and a new tether keeps the
+      velocity component across it. Several tethers: the cargo must approach each anchor at ``w`` or faster, so when
+      both of two tethers are taut the cargo moves along the bisector at ``w / cos(theta / 2)`` (each distance
+      shrinks at exactly ``w``), not at Eq. (5)'s ``2 w cos(theta / 2)``: equal at ``theta = 90 deg``, half of it
+      for parallel tethers, and growing without bound toward opposite tethers, where the winch limit takes over.
+    - ``"force"``: a tension ``T_i = F_max * clip(1 - v_r,i / w, 0, 1)`` along each tether, ``v_r,i`` the cargo's
+      speed toward anchor ``i``: full winch force from rest, none once the cargo approaches at ``w``. One tether
+      from rest: ``v_n = w (1 - (1 - g)^n)`` after ``n`` substeps, ``g = dt F_max / (m w)`` (pymunk's semi-implicit
+      Euler step); continuous time constant ``m w / F_max``. Several tethers settle where no tether pulls, as in
+      ``reel`` (each distance shrinking at ``w``).
+
+    Every substep, after the physics step, a tether is released when the cargo centre is within the stop radius of
+    its anchor (event ``"arrived"``), and snags when a wall comes between the cargo centre and its anchor (event
+    ``"snagged"``: the tether is released; :meth:`Station.line_of_sight` is the test, so touching a corner does not
+    snag, crossing it does). An attachment commanded with a delay (the attach time ``t_switch``) starts pulling at
+    the first substep at or after its ready time, if its anchor is in line of sight then (else ``"blocked"``).
+
+    Winch work (J): the work the tethers do on the cargo, per tether and substep ``J_i . (v_before + v_after) / 2``
+    (``J_i`` its impulse vector), which sums over the tethers to the step's change of kinetic energy exactly when no
+    wall is touched; :attr:`TetherWorld.winch_work_J` adds the positive parts (a winch does not recover energy).
+    Under ``kinematic`` the impulse is what it takes to give the cargo's mass the velocity of Eq. (5).
     """
 
     def __init__(self, station: Station, fidelity: str = "kinematic", pull_speed_mps: float | None = None,

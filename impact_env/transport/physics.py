@@ -1,30 +1,15 @@
 """The pymunk world of a scenario: frictionless discs in microgravity, exact restitution, impact log.
 
-Design choices (each measured or taken from docs/background.md):
-
-- no gravity and ``space.damping = 1.0``: in pymunk damping is a velocity *retention* factor, so 1.0
-  means no damping at all (0.0 would stop every body);
-- robots and objects are DYNAMIC bodies; robots are driven by forces only (a kinematic robot has infinite
-  mass and would double the impulse it gives an object);
-- pymunk's pair restitution is the product of the two shapes' elasticities, so every shape gets
-  ``sqrt(e)`` and every pair, body-body or body-wall, bounces with exactly the scenario's ``e``;
-- the collision slop (allowed overlap) is 0.1 by default, half a disc radius here; it is set to 0.1 mm;
-- every contact is logged as an :class:`ImpactEvent` from pymunk's begin to separate callbacks, summing
-  ``arbiter.total_impulse`` over all the steps the contact lasts;
-- optional post-impact velocity noise (``impact_velocity_noise_mps``): when a robot-object contact ends, the
-  object's velocity gets a uniform error in [-noise, noise] on each axis, drawn from the episode's random
-  generator; the logged "after" velocities include it. This is the error the impact-robust planner's delta
-  bounds, so its guarantee can be tested in the simulator directly;
-- contacts that end in the same substep are closed (noise drawn, events listed) in a fixed order, the
-  scenario's order of the shapes, at the end of that substep, never in the order chipmunk reports them:
-  chipmunk keeps its contacts in a hash set keyed by the shapes' C addresses and calls the separate callbacks
-  in that set's order, so two robots that finish their impacts in the same substep (two_objects) would take
-  each other's draws depending on where malloc put the shapes, i.e. on what the process did before.
-
-Speed: pymunk's Python properties (and a typing mixin's ``__setattr__``) cost more than the physics itself
-at this size, so the substep loop calls the chipmunk functions that those properties wrap
-(``cpBodySetForce``, ``cpSpaceStep``, ...) when pymunk exposes them, and the public API otherwise. The
-two paths are tested to give bit-identical trajectories (``tests/test_physics.py``).
+No gravity and no damping (pymunk's ``space.damping = 1.0`` is full velocity retention); robots and objects
+are dynamic bodies and robots are driven by forces only (a kinematic robot has infinite mass and would double
+the impulse it gives an object); every shape gets ``sqrt(e)``, so every pair bounces with exactly the
+scenario's ``e`` (pymunk multiplies the two elasticities); the collision slop is 0.1 mm. Every contact is
+logged as an :class:`ImpactEvent` from first touch to separation, its impulse summed over the substeps it
+lasts, and the contacts that end in one substep are closed after it in the scenario's order of the shapes
+(chipmunk's own order depends on where malloc put them: ``docs/background.md#physics``). Optional post-impact
+velocity noise perturbs an object when a robot-object contact ends: the error the impact-robust planner's delta
+bounds. The substep loop calls chipmunk's C functions where pymunk exposes them (its Python properties cost
+more than the physics at this size); both paths give bit-identical trajectories (``tests/test_physics.py``).
 """
 
 from __future__ import annotations
@@ -36,7 +21,7 @@ from typing import Any
 
 import pymunk
 
-from impact_env.scenario import Scenario
+from impact_env.transport.scenario import Scenario
 
 try:  # the C functions behind pymunk's properties, for the hot loop (see World.step)
     from pymunk._chipmunk import lib as _cp

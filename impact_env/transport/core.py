@@ -1,31 +1,9 @@
-"""The episode logic shared by the Gymnasium and PettingZoo environments.
+"""The episode logic of the transport environments: scenario, physics, STL monitor, bookkeeping.
 
-One :class:`TransportCore` owns a scenario, the pymunk :class:`~impact_env.physics.World` (rebuilt on every
-reset), the online STL monitor and the episode bookkeeping (fuel, impacts). The two environment classes
-only translate its inputs and outputs into their APIs.
-
-Reward (both environments):
-
-- ``"dense"``: the per-step increment of the online robustness estimate, ``r_k = rho_k - rho_(k-1)`` with
-  ``rho_0 = 0`` before the first step. The estimate ``rho_k`` is the robustness of the trace so far with its
-  last sample held to the horizon, so at the last step it is the trace's exact robustness. The rewards of
-  an episode therefore sum to its final robustness: this is potential-based shaping, which never changes
-  which behaviour is optimal (undiscounted).
-- ``"sparse"``: 0 on every step but the last, which gives the final robustness.
-- ``"conjuncts"``: the per-step increment of the MEAN of the online estimates of the task's conjuncts
-  (:func:`impact_env.stl.conjuncts`: nested And flattened, G distributed over And), so the rewards sum to that
-  mean at the end. The task's robustness is their MIN, and a min only moves with its smallest part: in the
-  corridor the wall-clearance conjuncts (about 1 m) sit far above "F in(O1, goal)" (-5.25 m) until the object
-  nears the goal, so under ``"dense"`` a robot that grazes a wall early is charged only when the object
-  arrives, tens of seconds later. Here every conjunct is credited when it changes. This is shaping that
-  changes the objective (a mean is not a min): ``info["robustness"]`` and ``is_success`` stay the task's.
-- both: minus ``fuel_penalty`` times the step's fuel, sum over robots of |F| * control period (N s).
-
-A task that holds or fails whatever the bodies do (``F[0,20] true``, or ``true | in(O1, goal)``) has the
-robustness +-inf. No signed distance between a point of the world and a region can exceed the diagonal of
-the box around the world and every region, so the environment reports robustness clipped to +- that
-length (:attr:`TransportCore.robustness_limit_m`): rewards and ``info["robustness"]`` stay finite, the
-rewards still sum to the (clipped) final robustness, and the sign, hence ``is_success``, is unchanged.
+One :class:`TransportCore` owns a scenario, the pymunk :class:`~impact_env.transport.physics.World` (rebuilt on
+every reset), the online STL monitor and the episode bookkeeping (fuel, impacts). The Gymnasium and PettingZoo
+classes (:mod:`impact_env.transport.gym_env`, :mod:`impact_env.transport.pettingzoo_env`) only translate its
+inputs and outputs into their APIs; the rewards are defined in :class:`TransportCore`'s docstring.
 """
 
 from __future__ import annotations
@@ -36,12 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from impact_env.envs import starts
-from impact_env.envs.actions import numbers_of
-from impact_env.errors import ActionError, EnvConfigError, ImpactEnvError
-from impact_env.physics import ImpactEvent, World
-from impact_env.scenario import Scenario, load_scenario
+from impact_env.env_shell import check_can_step, clip_to_space, time_left
+from impact_env.errors import ActionError, EnvConfigError
 from impact_env.stl import OnlineMonitor, conjuncts
+from impact_env.transport import starts
+from impact_env.transport.actions import numbers_of
+from impact_env.transport.physics import ImpactEvent, World
+from impact_env.transport.scenario import Scenario, load_scenario
 
 REWARD_MODES = ("dense", "sparse", "conjuncts")
 OBS_PER_BODY = 7  # x, y, vx, vy, cos(heading), sin(heading), angular velocity
@@ -94,9 +73,32 @@ class EpisodeLog:
 class TransportCore:
     """Scenario + physics + STL monitor: reset, apply an action, observe.
 
+    Reward (both environments):
+
+    - ``"dense"``: the per-step increment of the online robustness estimate, ``r_k = rho_k - rho_(k-1)`` with
+      ``rho_0 = 0`` before the first step. The estimate ``rho_k`` is the robustness of the trace so far with its
+      last sample held to the horizon, so at the last step it is the trace's exact robustness. The rewards of
+      an episode therefore sum to its final robustness: this is potential-based shaping, which never changes
+      which behaviour is optimal (undiscounted).
+    - ``"sparse"``: 0 on every step but the last, which gives the final robustness.
+    - ``"conjuncts"``: the per-step increment of the MEAN of the online estimates of the task's conjuncts
+      (:func:`impact_env.stl.conjuncts`: nested And flattened, G distributed over And), so the rewards sum to
+      that mean at the end. The task's robustness is their MIN, and a min only moves with its smallest part: in
+      the corridor the wall-clearance conjuncts (about 1 m) sit far above "F in(O1, goal)" (-5.25 m) until the
+      object nears the goal, so under ``"dense"`` a robot that grazes a wall early is charged only when the
+      object arrives, tens of seconds later. Here every conjunct is credited when it changes. This is shaping
+      that changes the objective (a mean is not a min): ``info["robustness"]`` and ``is_success`` stay the task's.
+    - all: minus ``fuel_penalty`` times the step's fuel, sum over robots of |F| * control period (N s).
+
+    A task that holds or fails whatever the bodies do (``F[0,20] true``, or ``true | in(O1, goal)``) has the
+    robustness +-inf. No signed distance between a point of the world and a region can exceed the diagonal of
+    the box around the world and every region, so the core reports robustness clipped to +- that length
+    (:attr:`robustness_limit_m`): rewards and ``info["robustness"]`` stay finite, the rewards still sum to the
+    (clipped) final robustness, and the sign, hence ``is_success``, is unchanged.
+
     Args:
         scenario: a Scenario, a shipped scenario name or a path to a TOML file.
-        reward_mode: ``"dense"`` (default), ``"sparse"`` or ``"conjuncts"``; see the module docstring.
+        reward_mode: ``"dense"`` (default), ``"sparse"`` or ``"conjuncts"``; see above.
         fuel_penalty: reward cost per N s of fuel (>= 0).
         restitution: simulate with this restitution instead of the scenario's (model mismatch studies).
         thrust_noise: standard deviation of multiplicative thrust noise (0.05 = 5 %), re-clipped to limits.
@@ -186,6 +188,11 @@ class TransportCore:
             part.update(self._positions())
         self._prev_estimate = 0.0
 
+    def reset_info(self) -> dict[str, Any]:
+        """``info`` of ``reset()``: the robustness of the first sample, nothing happened yet."""
+        return {"robustness": self.log.robustness, "is_success": self.log.robustness > 0.0,
+                "impacts": [], "fuel_Ns": 0.0, "time_s": 0.0}
+
     def _clip(self, rho: float) -> float:
         limit = self.robustness_limit_m
         return limit if rho > limit else (-limit if rho < -limit else rho)
@@ -197,7 +204,7 @@ class TransportCore:
         """Scale a normalised action (n_robots * 3 numbers in [-1, 1]) to body-frame (Fx, Fy, torque).
 
         The action has shape (3 n_robots,) or (n_robots, 3); any other shape, non-numbers or a ragged list
-        raise :class:`ActionError` (:mod:`impact_env.envs.actions`). Values outside [-1, 1] are clipped (so
+        raise :class:`ActionError` (:mod:`impact_env.transport.actions`). Values outside [-1, 1] are clipped (so
         limits are never exceeded); NaN or infinite values raise :class:`ActionError`, since no clipping can
         make sense of them.
         """
@@ -221,10 +228,7 @@ class TransportCore:
 
     def step(self, action: Any) -> tuple[float, bool, dict[str, Any]]:
         """Apply an action for one control period; returns (reward, terminated, info)."""
-        if self.world is None:
-            raise ImpactEnvError("call reset() before step()")
-        if self.step_count >= self.horizon_steps:
-            raise ImpactEnvError("the episode has ended (the task's horizon was reached); call reset()")
+        check_can_step(self)
         wrenches = self.wrenches_from_action(action)
         self.last_wrenches = wrenches
         events = self.world.step(wrenches)
@@ -276,11 +280,9 @@ class TransportCore:
         for i in order:
             x, y, vx, vy, th, om = state[i]
             out += (x, y, vx, vy, math.cos(th), math.sin(th), om)
-        out.append(max(0.0, 1.0 - self.step_count / self.horizon_steps))
-        obs = np.array(out, dtype=np.float32)
+        out.append(time_left(self))
         # a disc centre can sit a hair outside the box only by float32 rounding; keep obs inside the space
-        np.minimum(obs, self.obs_high, out=obs)
-        return np.maximum(obs, self.obs_low, out=obs)
+        return clip_to_space(np.array(out, dtype=np.float32), self)
 
     def robot_forces_world(self) -> list[tuple[float, float]]:
         """Last applied force of each robot rotated into the world frame (N), for rendering."""

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from impact_env.errors import EnvConfigError
-from impact_env.scenario import Scenario
+from impact_env.transport.scenario import Scenario
 
 MAX_DRAWS = 1000  # per object and reset; with >= 5 % clear, all fail with probability < 1e-22
 MIN_CLEAR_FRACTION = 0.05

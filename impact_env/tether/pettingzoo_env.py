@@ -10,22 +10,21 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.utils import EzPickle, seeding
-from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
-from impact_env.envs.clock import EpisodeClock, check_max_cycles, check_render_options, reject_unknown, required
-from impact_env.envs.tether import STATION_HINT, close_tether, render_tether
-from impact_env.envs.tether_core import KEEP, TetherCore
-from impact_env.station import Station
+from impact_env.env_shell import ParallelShell, required
+from impact_env.tether.core import KEEP, TetherCore
+from impact_env.tether.gym_env import STATION_HINT
+from impact_env.tether.rendering import TetherFrame, TetherRenderer, frame_of
+from impact_env.tether.station import Station
 
 
-class TetherParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
+class TetherParallelEnv(ParallelShell):
     """Tether transport with one agent per robot (agents ``robot_0 .. robot_{n-1}``).
 
     ## Description
-    The station, task and reward of :class:`~impact_env.envs.tether.TetherEnv` with each robot an agent of a
+    The station, task and reward of :class:`~impact_env.tether.gym_env.TetherEnv` with each robot an agent of a
     PettingZoo ``ParallelEnv``; ``raw_env`` and ``env`` are its AEC forms. Import it as
     ``from impact_env import tether_v0`` or make it with PettingZoo's registry id ``impact_env/tether-v0``.
 
@@ -45,7 +44,7 @@ class TetherParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
     All agents terminate together at the task's horizon; ``max_cycles`` truncates earlier if given.
 
     ## Arguments
-    * ``station``: a shipped station name, a path to a TOML file or a :class:`~impact_env.station.Station`;
+    * ``station``: a shipped station name, a path to a TOML file or a :class:`~impact_env.tether.station.Station`;
       required.
     * ``fidelity``: ``"kinematic"``, ``"reel"`` or ``"force"``.
     * ``reward_mode``: ``"dense"`` or ``"sparse"``.
@@ -71,84 +70,29 @@ class TetherParallelEnv(EpisodeClock, ParallelEnv, EzPickle):
                  energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
                  initial_position_noise_m: float = 0.0, max_cycles: int | None = None,
                  render_mode: str | None = None, render_width_px: int = 600, **unknown: Any) -> None:
-        reject_unknown(unknown, type(self))
-        EzPickle.__init__(self, station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
-                          initial_position_noise_m, max_cycles, render_mode, render_width_px)
-        check_render_options(self.metadata, render_mode, render_width_px)
-        check_max_cycles(max_cycles)
+        self._open(unknown, (station, fidelity, reward_mode, energy_penalty, pull_speed_mps, max_active,
+                             initial_position_noise_m, max_cycles, render_mode, render_width_px),
+                   render_mode, render_width_px, max_cycles)
         station = required(station, "station", STATION_HINT, "impact_env.tether_v0.parallel_env(station='L')")
         self.core = TetherCore(station, fidelity=fidelity, reward_mode=reward_mode, energy_penalty=energy_penalty,
                                pull_speed_mps=pull_speed_mps, max_active=max_active,
                                initial_position_noise_m=initial_position_noise_m)
         self.station = self.core.station
         self.metadata = dict(self.metadata, name=f"tether_{self.station.name}_v0")
-        self.max_cycles = max_cycles
-        self.render_mode = render_mode
-        self.render_width_px = render_width_px
-        self.possible_agents = [f"robot_{i}" for i in range(self.core.n_robots)]
-        self.agents: list[str] = []
-        obs_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
-        act_space = spaces.Discrete(self.core.n_commands)
-        self.observation_spaces = {a: obs_space for a in self.possible_agents}
-        self.action_spaces = {a: act_space for a in self.possible_agents}
-        self.state_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
-        self._renderer = None
-        self.np_random, _ = seeding.np_random(None)
+        self._set_agents([f"robot_{i}" for i in range(self.core.n_robots)], spaces.Discrete(self.core.n_commands))
 
-    def observation_space(self, agent: str) -> spaces.Box:
-        return self.observation_spaces[agent]
-
-    def action_space(self, agent: str) -> spaces.Discrete:
-        return self.action_spaces[agent]
-
-    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
-        if seed is not None or not hasattr(self, "_seeded"):
-            self.np_random, _ = seeding.np_random(seed)
-            self._seeded = True
-        self.core.reset(self.np_random)
-        self.agents = list(self.possible_agents)
-        self._cycles = 0
-        if self.render_mode == "human":
-            self.render()
-        info = self.core.info()
-        return self._observations(), {a: dict(info) for a in self.agents}
-
-    def _observations(self) -> dict[str, np.ndarray]:
-        return {a: self.core.agent_observation(i) for i, a in enumerate(self.possible_agents) if a in self.agents}
-
-    def state(self) -> np.ndarray:
-        return self.core.observation()
-
-    def step(self, actions: dict[str, Any]):
+    def _joint_action(self, actions: dict[str, Any]) -> list:
         unknown = set(actions) - set(self.possible_agents)
         if unknown:
             raise KeyError(f"actions for unknown agents {sorted(unknown)}; agents are {self.possible_agents}")
-        joint = [KEEP if actions.get(a) is None else np.asarray(actions[a]).reshape(-1)[0]
-                 for a in self.possible_agents]
-        reward, terminated, info = self.core.step(joint)
-        self._cycles += 1
-        truncated = not terminated and self.max_cycles is not None and self._cycles >= self.max_cycles
-        agents = self.agents
-        obs = self._observations()
-        rewards = {a: reward for a in agents}
-        terminations = {a: terminated for a in agents}
-        truncations = {a: truncated for a in agents}
-        infos = {a: dict(info) for a in agents}
-        if terminated or truncated:
-            self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return obs, rewards, terminations, truncations, infos
+        return [KEEP if actions.get(a) is None else np.asarray(actions[a]).reshape(-1)[0] for a in self.possible_agents]
 
-    def render(self):
-        if self.render_mode is None:
-            return None
-        if self.core.world is None:
-            raise RuntimeError("call reset() before render()")
-        return render_tether(self)
+    def _new_renderer(self) -> TetherRenderer:
+        return TetherRenderer(self.station, self.render_mode, width_px=self.render_width_px,
+                              fps=self.metadata["render_fps"])
 
-    def close(self) -> None:
-        close_tether(self)
+    def _frame(self) -> TetherFrame:
+        return frame_of(self.core)
 
 
 def parallel_env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
