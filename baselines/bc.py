@@ -28,7 +28,7 @@ from baselines.record import dataset_id, datasets_path, use_datasets_path
 from baselines.run_meta import scenario_fingerprint
 from impact_env.config_checks import check_integer, check_number, check_text, fail
 from impact_env.errors import ImpactEnvError
-from impact_env.scenario import load_scenario
+from impact_env.transport.scenario import load_scenario
 
 MIN_OBS_STD = 1e-2  # features constant in the demonstrations (e.g. a passive disc's heading) are not blown up
 
@@ -99,7 +99,7 @@ def behaviour_clone(config: BCConfig) -> Path:
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from impact_env.envs.transport import TransportEnv
+    from impact_env.transport.gym_env import TransportEnv
 
     scenario = load_scenario(config.scenario)
     episodes = load_demonstrations(scenario.name, config.dataset_dir)

@@ -34,8 +34,8 @@ import numpy as np
 
 from impact_env.errors import ImpactEnvError
 from impact_env.results_store import atomic_path, write_atomic
-from impact_env.scenario import load_scenario
 from impact_env.sweep import EngineConfig, local_path, open_engine
+from impact_env.transport.scenario import load_scenario
 
 _CACHE: dict[tuple[str, str], Any] = {}
 
@@ -119,13 +119,13 @@ def _controller(scenario_name: str, scenario: Any, spec: ControllerSpec, files: 
 
 def _episode(job: tuple[str, ControllerSpec, int, Any, dict[str, Any]]) -> dict[str, Any]:
     from baselines import tether
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import robot_object_impacts, run_episode
+    from impact_env.transport.gym_env import TransportEnv
 
     scenario_name, spec, seed, files, env_options = job
     station = tether.is_station(scenario_name)
     if station:
-        from impact_env.station import load_station
+        from impact_env.tether.station import load_station
 
         scenario = load_station(scenario_name)
         env_options = tether.env_options(env_options, scenario_name)
@@ -147,11 +147,11 @@ def plan_expert(name: str) -> dict[str, Any]:
     from baselines import tether
 
     if tether.is_station(name):
-        from impact_env.station import load_station
+        from impact_env.tether.station import load_station
         from planners.tether.reachability import plan_reachability
 
         return plan_reachability(load_station(name)).to_dict()
-    from planners.offline.sr_planner import plan_spatially_robust
+    from planners.offline.spatially_robust import plan_spatially_robust
 
     return plan_spatially_robust(load_scenario(name)).to_dict()
 
@@ -166,7 +166,7 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
     plans and episodes run (default: ``workers`` local processes).
     """
     from baselines import tether
-    from impact_env.envs.core import TransportCore
+    from impact_env.transport.core import TransportCore
 
     env_options = dict(env_options or {})
     for name in scenarios:
@@ -251,7 +251,7 @@ def _figure(results, summary, scenarios, controllers, path: Path) -> None:
     from matplotlib.patches import Patch
 
     from baselines import tether
-    from impact_env.plotting import OBJECT_TRACE_COLOURS, draw_scenario, trace_colours
+    from impact_env.transport.plotting import OBJECT_TRACE_COLOURS, draw_scenario, trace_colours
 
     n_c = len(controllers)
     fig = Figure(figsize=(3.2 * (n_c + 1) + 1.6, 3.6 * len(scenarios)), layout="constrained")
@@ -271,8 +271,8 @@ def _figure(results, summary, scenarios, controllers, path: Path) -> None:
                            Line2D([], [], ls="", marker="$\\%$", color="k", label="success rate")], fontsize=7,
                   loc="lower left")
         if tether.is_station(s):
-            from impact_env.station import load_station
-            from impact_env.tether_plotting import draw_station
+            from impact_env.tether.plotting import draw_station
+            from impact_env.tether.station import load_station
 
             scenario, draw = load_station(s), draw_station
             names, colours = ["cargo"], [OBJECT_TRACE_COLOURS[0]]  # a station's trace is the cargo's path

@@ -12,8 +12,8 @@ import numpy as np
 # install (make demo), so stable-baselines3, yaml and minari are imported only by the command handlers.
 from baselines import ALGOS, rllib_cli
 from impact_env.cli_options import add_transport_options, transport_options
-from impact_env.envs.core import REWARD_MODES
 from impact_env.sweep import add_engine_arguments, engine_config
+from impact_env.transport.core import REWARD_MODES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -46,7 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "there is always one at the end)")
     add_transport_options(p, REWARD_MODES)
     p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
-                   help="tether stations only: the tether physics (see impact_env.tether_physics)")
+                   help="tether stations only: the tether physics (see impact_env.tether.physics)")
     p.add_argument("--no-progress", action="store_true", help="neither a progress bar nor progress lines")
     p.add_argument("--verbose", type=int, default=0, help="stable-baselines3's verbosity (0, 1, 2)")
     rllib_cli.add_arguments(p)
@@ -70,7 +70,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="also load pickled files of model folders (old vecnormalize.pkl, unknown pickled model "
                         "entries); a pickle can run any code: only for files you made yourself")
     p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
-                   help="tether stations only: the tether physics (see impact_env.tether_physics)")
+                   help="tether stations only: the tether physics (see impact_env.tether.physics)")
     add_engine_arguments(p)
     p.set_defaults(func=_bench)
 

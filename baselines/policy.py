@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 
 from baselines import model_files, run_meta
-from impact_env.envs.core import ACTION_PER_ROBOT, OBS_PER_BODY
 from impact_env.errors import ControllerError
+from impact_env.transport.core import ACTION_PER_ROBOT, OBS_PER_BODY
 
 
 class SB3Controller:
@@ -30,7 +30,7 @@ class SB3Controller:
                  allow_other_scenario: bool = False) -> None:
         from gymnasium import spaces
 
-        from impact_env.envs.core import TransportCore
+        from impact_env.transport.core import TransportCore
 
         path = Path(model_path)
         self.model_path = path

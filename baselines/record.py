@@ -24,7 +24,7 @@ import numpy as np
 
 from impact_env import GYM_IDS
 from impact_env.errors import ImpactEnvError
-from impact_env.scenario import load_scenario
+from impact_env.transport.scenario import load_scenario
 
 INFO_KEYS = ("robustness", "is_success", "impacts", "contacts", "fuel_Ns", "time_s")
 

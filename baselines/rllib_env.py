@@ -2,7 +2,7 @@
 
 RLlib's env runners (separate processes, possibly on other nodes) build the env by name from a creator that
 Ray registers once per driver: :func:`register` names :func:`make_env`, which wraps
-:func:`impact_env.envs.transport_parallel.parallel_env` in RLlib's own PettingZoo wrapper. The wrapper lists
+:func:`impact_env.transport.pettingzoo_env.parallel_env` in RLlib's own PettingZoo wrapper. The wrapper lists
 the agents from a set, so their order would depend on the process's hash seed; :class:`TransportMultiAgentEnv`
 keeps the scenario's robot order instead. The ``env_config`` dict is the env's keyword arguments, passed
 through unchanged: ``scenario`` (a loaded Scenario, so that it reaches env runners on other nodes whole) and
@@ -34,7 +34,7 @@ def _wrapper_class():
 
 def make_env(env_config: dict[str, Any]):
     """The env of one RLlib env runner: the transport ParallelEnv with ``env_config`` as its keywords."""
-    from impact_env.envs.transport_parallel import parallel_env
+    from impact_env.transport.pettingzoo_env import parallel_env
 
     return _wrapper_class()(parallel_env(**dict(env_config)))
 

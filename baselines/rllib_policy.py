@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from impact_env.envs.core import ACTION_PER_ROBOT, OBS_PER_BODY
 from impact_env.errors import ControllerError, ModelFileError
+from impact_env.transport.core import ACTION_PER_ROBOT, OBS_PER_BODY
 
 FORMAT = "impact_env.rllib_policy/1"
 POLICY_FOLDER = "policy"
@@ -187,7 +187,7 @@ class RLlibController:
         from gymnasium import spaces
 
         from baselines.run_meta import check_scenario
-        from impact_env.envs.core import TransportCore
+        from impact_env.transport.core import TransportCore
 
         if hasattr(scenario, "anchors"):
             raise ControllerError("RLlib policies fly impact scenarios; a tether station takes the expert or an SB3 "

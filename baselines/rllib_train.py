@@ -223,8 +223,8 @@ def _start_like_sb3(algo: Any, log_std_init: float, ortho_init: bool) -> None:
 
 
 def _evaluate(scenario, folder: Path, eval_options: dict[str, Any], episodes: int, seed: int) -> tuple[list, list]:
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
+    from impact_env.transport.gym_env import TransportEnv
 
     controller = RLlibController(scenario, folder)
     env = TransportEnv(scenario, **eval_options)
@@ -236,9 +236,9 @@ def _evaluate(scenario, folder: Path, eval_options: dict[str, Any], episodes: in
 def train_rllib(config: RLlibTrainConfig) -> Path:
     """Train, checkpoint, evaluate and export; returns the run folder."""
     from baselines.train import default_eval_freq, env_id_for
-    from impact_env.envs.transport_parallel import TransportParallelEnv
-    from impact_env.scenario import load_scenario
     from impact_env.sweep import EngineConfig, connect_ray
+    from impact_env.transport.pettingzoo_env import TransportParallelEnv
+    from impact_env.transport.scenario import load_scenario
 
     _check(config)
     scenario = load_scenario(config.scenario)

@@ -1,7 +1,7 @@
 """What the learned-baseline tools need for tether stations (``impact-env train ppo L``, ``bench L``).
 
 A station name or file is dispatched here by ``train``, ``bench`` and the sb3 controller: the Gymnasium env is
-:class:`~impact_env.envs.tether.TetherEnv` (a MultiDiscrete action: one command per robot, so PPO, not SAC),
+:class:`~impact_env.tether.gym_env.TetherEnv` (a MultiDiscrete action: one command per robot, so PPO, not SAC),
 the hyperparameters are keyed by the station's env id (``impact_env/TetherL-v0``; a user station takes the L
 map's), the expert is the tether expert with a plan of the exact planner. The impact world's options (thrust
 noise, fuel penalty, restitution, post-impact velocity noise) do not apply; the tether env's own are
@@ -19,14 +19,14 @@ IMPACT_ONLY = {"thrust_noise": 0.0, "fuel_penalty": 0.0, "restitution": None, "i
 
 
 def is_station(name: str) -> bool:
-    from impact_env.station import is_station_file
+    from impact_env.tether.station import is_station_file
 
     return is_station_file(name)
 
 
 def env_id_for_station(name: str) -> str:
     from impact_env import TETHER_GYM_IDS
-    from impact_env.station import load_station
+    from impact_env.tether.station import load_station
 
     station = load_station(name).name
     return next((env_id for env_id, st in TETHER_GYM_IDS.items() if st == station), DEFAULT_ENV_ID)
@@ -45,7 +45,7 @@ def env_options(options: dict[str, Any], name: str) -> dict[str, Any]:
 
 
 def make_env(name: str, **options: Any):
-    from impact_env.envs.tether import TetherEnv
+    from impact_env.tether.gym_env import TetherEnv
 
     return TetherEnv(name, **options)
 
@@ -55,7 +55,7 @@ def spaces_of(station: Any):
     import numpy as np
     from gymnasium import spaces
 
-    from impact_env.envs.tether_core import TetherCore
+    from impact_env.tether.core import TetherCore
 
     core = TetherCore(station)
     return (spaces.Box(core.obs_low, core.obs_high, dtype=np.float32),

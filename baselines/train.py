@@ -43,7 +43,7 @@ from impact_env.config_checks import (
     check_text,
 )
 from impact_env.errors import ImpactEnvError
-from impact_env.scenario import load_scenario
+from impact_env.transport.scenario import load_scenario
 
 
 @dataclass(frozen=True)
@@ -109,7 +109,7 @@ def load_world(name: str) -> Any:
     from baselines import tether
 
     if tether.is_station(name):
-        from impact_env.station import load_station
+        from impact_env.tether.station import load_station
 
         return load_station(name)
     return load_scenario(name)
@@ -161,12 +161,12 @@ def train(config: TrainConfig) -> Path:
 
     from baselines import tether
     from baselines import train_callbacks as cb
-    from impact_env.envs.transport import TransportEnv
+    from impact_env.transport.gym_env import TransportEnv
 
     station = tether.is_station(config.scenario)
     if station:  # a tether station: TetherEnv (MultiDiscrete commands), see baselines/tether.py
-        from impact_env.envs.tether import TetherEnv
-        from impact_env.station import load_station
+        from impact_env.tether.gym_env import TetherEnv
+        from impact_env.tether.station import load_station
 
         if config.algo != "ppo" or config.multiagent:
             raise ImpactEnvError("tether stations train with ppo on the central env (their actions are discrete)")
@@ -337,7 +337,7 @@ def _pettingzoo_vec_env(env_kwargs: dict[str, Any], n_envs: int):
     import supersuit as ss
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from impact_env.envs.transport_parallel import parallel_env
+    from impact_env.transport.pettingzoo_env import parallel_env
 
     par = parallel_env(**env_kwargs)
     venv = ss.pettingzoo_env_to_vec_env_v1(par)

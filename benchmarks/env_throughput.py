@@ -22,13 +22,13 @@ import numpy as np
 import pymunk
 
 import impact_env  # noqa: F401  (registers the environments)
-from impact_env.envs.tether import TetherEnv
-from impact_env.envs.tether_parallel import TetherParallelEnv
-from impact_env.envs.transport import TransportEnv
-from impact_env.envs.transport_parallel import TransportParallelEnv
-from impact_env.physics import World
-from impact_env.scenario import load_scenario
-from impact_env.station import load_station
+from impact_env.tether.gym_env import TetherEnv
+from impact_env.tether.pettingzoo_env import TetherParallelEnv
+from impact_env.tether.station import load_station
+from impact_env.transport.gym_env import TransportEnv
+from impact_env.transport.pettingzoo_env import TransportParallelEnv
+from impact_env.transport.physics import World
+from impact_env.transport.scenario import load_scenario
 
 TETHER_EPISODE_STEPS = 60  # a fresh world this often, so that both tethers pull through every measured step
 

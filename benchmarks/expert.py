@@ -50,9 +50,9 @@ _WORKER: dict = {}
 
 def _episode(args: tuple[str, dict, int, bool]) -> dict:
     scenario_name, plan_dict, seed, mismatch = args
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import robot_object_impacts, run_episode
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.scenario import load_scenario
     from planners.expert import Expert
     from planners.plan import Plan
 
@@ -73,8 +73,8 @@ def _episode(args: tuple[str, dict, int, bool]) -> dict:
 
 
 def rows(scenario_name: str, episodes: int, engine: Engine) -> list[str]:
-    from impact_env.scenario import load_scenario
-    from planners.offline.sr_planner import plan_spatially_robust
+    from impact_env.transport.scenario import load_scenario
+    from planners.offline.spatially_robust import plan_spatially_robust
 
     scenario = load_scenario(scenario_name)
     plan = plan_spatially_robust(scenario)
@@ -109,9 +109,9 @@ def _timed_episode(args: tuple) -> dict:
 
 def timed_act(scenario_name: str, plan_dict: dict, stack: str, seed: int, mismatch: bool) -> dict:
     """One episode of ``stack`` (``baseline``: the tree's default expert), the time of every ``Expert.act``."""
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.scenario import load_scenario
     from planners.expert import Expert
     from planners.plan import Plan
 
@@ -138,8 +138,8 @@ def timed_act(scenario_name: str, plan_dict: dict, stack: str, seed: int, mismat
 
 
 def timing(scenarios: list[str], episodes: int, workers: int, ref: str) -> None:
-    from impact_env.scenario import load_scenario
-    from planners.offline.sr_planner import plan_spatially_robust
+    from impact_env.transport.scenario import load_scenario
+    from planners.offline.spatially_robust import plan_spatially_robust
 
     baseline_dir = export_tree(ref, prefix="impact_env_baseline_")
     stacks = ("baseline", "paper", "all")
@@ -184,8 +184,8 @@ def timing(scenarios: list[str], episodes: int, workers: int, ref: str) -> None:
 
 def main() -> None:
     from benchmarks import open_engine
-    from impact_env.scenario import scenario_names
     from impact_env.sweep import add_engine_arguments, engine_config
+    from impact_env.transport.scenario import scenario_names
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scenarios", default=",".join(scenario_names()))

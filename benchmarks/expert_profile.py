@@ -199,9 +199,9 @@ def profiled_episode(args: tuple) -> dict:
     tree, scenario_name, plan_dict, seed, mismatch, variant = args
     import numpy as np
 
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.scenario import load_scenario
     from planners.expert import Expert
     from planners.plan import Plan
 
@@ -249,8 +249,8 @@ def main() -> None:
     parser.add_argument("--ablation", action="store_true",
                         help="instead: the act time of this tree with each ExpertConfig part switched off")
     args = parser.parse_args()
-    from impact_env.scenario import load_scenario
-    from planners.offline.sr_planner import plan_spatially_robust
+    from impact_env.transport.scenario import load_scenario
+    from planners.offline.spatially_robust import plan_spatially_robust
 
     plan = plan_spatially_robust(load_scenario(args.scenario)).to_dict()
     if args.ablation:

@@ -33,9 +33,9 @@ from planners.online.identification import IdentificationConfig
 
 def _episode(job: tuple) -> tuple:
     scenario_name, plan_dict, stack, velocity_noise, significance, level, seed = job
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.scenario import load_scenario
     from planners.expert import Expert, ExpertConfig
     from planners.online.identification import IdentificationConfig
     from planners.plan import Plan

@@ -69,9 +69,9 @@ def conditions(delta: float, seeds: int) -> list[tuple[str, float, int]]:
 
 def plans_for(name: str, out: Path) -> dict[str, dict]:
     """Both offline plans of a scenario, computed once and cached (the planners are deterministic)."""
-    from impact_env.scenario import load_scenario
-    from planners.offline.ir_planner import IRPlannerConfig, plan_impact_robust
-    from planners.offline.sr_planner import plan_spatially_robust
+    from impact_env.transport.scenario import load_scenario
+    from planners.offline.impact_robust import IRPlannerConfig, plan_impact_robust
+    from planners.offline.spatially_robust import plan_spatially_robust
 
     plans = {}
     for planner in PLANNERS:
@@ -88,11 +88,11 @@ def plans_for(name: str, out: Path) -> dict[str, dict]:
 
 def _episode(args: tuple) -> dict:
     name, planner, stack, plan_dict, axis, level, seed = args
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import robot_object_impacts, run_episode
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.scenario import load_scenario
     from planners.expert import Expert
-    from planners.offline.ir_planner import final_boxes
+    from planners.offline.impact_robust import final_boxes
     from planners.plan import Plan
 
     key = (name, planner, stack)
@@ -219,7 +219,7 @@ def write_table(out: Path, cells: list[dict]) -> Path:
 def estimate(scenarios, stacks, seeds: int) -> float:
     """Seconds of one worker, from each scenario's episode length (about 3 ms of controller and simulation
     per control step and robot, measured here on an idle machine)."""
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.scenario import load_scenario
 
     total = 0.0
     for name in scenarios:

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from impact_env.scenario import load_scenario
+from impact_env.transport.scenario import load_scenario
 from planners.online.mpc import SOLVERS, AvoidSpec, FreeflyerMPC, ImpactSpec, MPCConfig, rk4_step
 
 DT = 0.1

@@ -30,12 +30,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from impact_env.errors import ImpactEnvError
-from impact_env.scenario import load_scenario, scenario_names
+from impact_env.transport.scenario import load_scenario, scenario_names
 from planners.errors import PlanTimeoutError
-from planners.offline.ir_planner import IRPlannerConfig, build_ir_model, plan_impact_robust
+from planners.offline.impact_robust import IRPlannerConfig, build_ir_model, plan_impact_robust
 from planners.offline.solvers import available_solvers
 from planners.offline.solvers.base import SolverOptions
-from planners.offline.sr_planner import PlannerConfig, build_model, plan_spatially_robust
+from planners.offline.spatially_robust import PlannerConfig, build_model, plan_spatially_robust
 
 
 @dataclass

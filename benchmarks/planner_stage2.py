@@ -19,8 +19,8 @@ import subprocess
 import sys
 from contextlib import contextmanager
 
-from impact_env.scenario import load_scenario, scenario_names
-from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
+from impact_env.transport.scenario import load_scenario, scenario_names
+from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
 
 CUTS = {
     "nodes": ("20 nodes (default)", PlannerConfig()),

@@ -80,8 +80,8 @@ def sweep_rows(controllers: list[str], episodes: int, workers: int, plan_path: s
 
 def env_ceiling(steps: int) -> list[str]:
     """In-process env steps/s with random actions: the central Gymnasium env and the PettingZoo env."""
-    from impact_env.envs.transport import TransportEnv
-    from impact_env.envs.transport_parallel import parallel_env
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.pettingzoo_env import parallel_env
 
     env = TransportEnv(SCENARIO, **NOISE)
     env.reset(seed=0)
@@ -110,7 +110,7 @@ def rllib_sampling(env_runners: int, steps: int) -> str:
 
     from baselines import hyperparams
     from baselines.rllib_train import RLlibTrainConfig, build_algorithm, rllib_settings
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.scenario import load_scenario
 
     entry = hyperparams.load("ppo", "impact_env/ThrowAndCatchExp-v0")
     settings = rllib_settings(entry, 10**6)
@@ -142,7 +142,7 @@ def sb3_sampling(n_envs: int, steps: int) -> str:
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
-    from impact_env.envs.transport import TransportEnv
+    from impact_env.transport.gym_env import TransportEnv
 
     class RolloutTimer(BaseCallback):
         def __init__(self) -> None:
@@ -182,8 +182,8 @@ def main() -> None:
     if args.skip_sampling and args.skip_sweeps:
         parser.error("--skip-sampling and --skip-sweeps together leave nothing to measure")
 
-    from impact_env.scenario import load_scenario
-    from planners.offline.sr_planner import plan_spatially_robust
+    from impact_env.transport.scenario import load_scenario
+    from planners.offline.spatially_robust import plan_spatially_robust
 
     print(f"{os.cpu_count()} cores; load average before: {_load()}\n")
     if not args.skip_sweeps:

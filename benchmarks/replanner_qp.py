@@ -80,9 +80,9 @@ def counted_episode(args: tuple) -> dict:
     """One episode with the replanner's QPs counted, in this process's packages (the env options come with
     the job: the robustness benchmark's combined condition for its seed)."""
     tree, scenario_name, plan_dict, seed, options = args
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.scenario import load_scenario
     from planners.expert import Expert, ExpertConfig
     from planners.plan import Plan
 
@@ -106,7 +106,7 @@ def main() -> None:
                         help="the robustness benchmark's --out, whose plans/ are used (default: %(default)s)")
     args = parser.parse_args()
     from benchmarks.robustness import env_options, plan_for
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.scenario import load_scenario
 
     names = args.scenarios.split(",")
     plans = {name: plan_for(name, Path(args.plans)) for name in names}

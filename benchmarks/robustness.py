@@ -81,7 +81,7 @@ def add_cell_arguments(parser: argparse.ArgumentParser, seed: bool = False) -> N
 
 
 def has_impact_noise() -> bool:
-    from impact_env.envs.core import TransportCore
+    from impact_env.transport.core import TransportCore
 
     return "impact_velocity_noise_mps" in inspect.signature(TransportCore).parameters
 
@@ -142,9 +142,9 @@ def cell_seeds(axis: str, seeds: int) -> int:
 
 def _episode(args: tuple) -> dict:
     scenario_name, stack, plan_dict, axis, level, seed = args
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import robot_object_impacts, run_episode
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.scenario import load_scenario
     from planners.expert import Expert
     from planners.plan import Plan
 
@@ -207,8 +207,8 @@ def load_cell(out: Path, scenario: str, stack: str, axis: str, level: float) -> 
 def plan_for(scenario_name: str, out: Path) -> dict:
     """The offline plan of a scenario, computed once and cached beside the cells (deterministic planner). A
     folder of the layout before cells.jsonl (``<scenario>__plan.json`` beside the cells) is read as it is."""
-    from impact_env.scenario import load_scenario
-    from planners.offline.sr_planner import plan_spatially_robust
+    from impact_env.transport.scenario import load_scenario
+    from planners.offline.spatially_robust import plan_spatially_robust
 
     path = plan_path(out, scenario_name)
     old = out / f"{scenario_name}__plan.json"
@@ -350,7 +350,7 @@ def plot(cells: list[dict], scenarios, path: str) -> None:
 def estimate(scenarios, stacks, axes, seeds_shipped, seeds_new, levels=None) -> float:
     """Seconds of one worker for the selected grid, from each scenario's episode length (a rough cost of
     2.5 ms of controller and 0.5 ms of simulation per control step and robot pair, measured here)."""
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.scenario import load_scenario
 
     total = 0.0
     for name in scenarios:

@@ -304,8 +304,8 @@ def plot(scenario, record: EpisodeRecord, expert, result, path: str, title: str 
     """xy view (planned vs flown, contacts, re-plans) and each object's distance to its region over time."""
     from matplotlib.figure import Figure
 
-    from impact_env.plotting import DPI, draw_scenario
-    from planners.plotting import _colours
+    from impact_env.transport.plotting import DPI, draw_scenario
+    from planners.plan.plotting import _colours
 
     colours = _colours(scenario)
     names = [b.name for b in scenario.bodies]
@@ -403,9 +403,9 @@ def plot(scenario, record: EpisodeRecord, expert, result, path: str, title: str 
 def fly(scenario_name: str, stack: str, axis: str, level: float, seed: int, plan_file: Path | None = None,
         config=None):
     """Fly one cell's episode with recording; returns (scenario, expert, record, result, env options)."""
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.scenario import load_scenario
     from planners.expert import Expert
     from planners.online.bookkeeping import ImpactBook
     from planners.online.reference import PlanContact

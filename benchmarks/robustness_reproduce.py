@@ -26,9 +26,9 @@ from benchmarks.robustness import RESULTS, add_cell_arguments, env_options, expe
 def reproduce(scenario_name: str, stack: str, axis: str, level: float, order: str = "fresh",
               allow_side_switches: bool = False, results: Path = RESULTS) -> list[tuple[int, float, float]]:
     """(seed, the cell's robustness, the re-flown robustness) for every episode of the cell."""
-    from impact_env.envs.transport import TransportEnv
     from impact_env.rollout import run_episode
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.scenario import load_scenario
     from planners.expert import Expert
     from planners.plan import Plan
 

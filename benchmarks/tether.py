@@ -34,10 +34,10 @@ import time
 import numpy as np
 
 from benchmarks import open_engine
-from impact_env.envs.tether import TetherEnv
 from impact_env.rollout import run_episode
-from impact_env.station import load_station, station_names
 from impact_env.sweep import add_engine_arguments, engine_config
+from impact_env.tether.gym_env import TetherEnv
+from impact_env.tether.station import load_station, station_names
 from planners.errors import PlannerError
 from planners.tether.automaton import build_thesis_map
 from planners.tether.expert import TetherExpert

@@ -1,7 +1,7 @@
 """MkDocs hooks of the documentation site: environment pages from the docstrings, the CLI's help, the CHANGELOG.
 
 - ``on_files`` adds one page per environment (``environments/<slug>.md``), written from the environment
-  class's docstring (:mod:`impact_env.envs.docstrings`) and from the environment itself (spaces, episode length,
+  class's docstring (:mod:`impact_env.env_docstrings`) and from the environment itself (spaces, episode length,
   agents), so a page cannot drift from the code: id, GIF, a summary table, the docstring's sections and the
   arguments table (types and defaults from the constructor's signature).
 - ``on_page_markdown`` replaces ``<!-- cli-help -->`` by every subcommand's ``--help``, ``<!-- changelog -->``
@@ -91,7 +91,7 @@ def render_page(page: EnvPage) -> str:
 
     import impact_env
     from impact_env import envs
-    from impact_env.envs.docstrings import arguments, sections
+    from impact_env.env_docstrings import arguments, sections
 
     cls = getattr(envs, page.cls)
     kwargs = dict(page.kwargs)

@@ -26,7 +26,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from impact_env.scenario import MAX_PLANNER_INTERVALS, MAX_ROBOT_DEGREE, MIN_ROBOT_DEGREE
+from impact_env.transport.scenario import MAX_PLANNER_INTERVALS, MAX_ROBOT_DEGREE, MIN_ROBOT_DEGREE
 from planners.errors import PlannerError, PlanTimeoutError
 from planners.offline.solvers import SOLVERS as SOLVER_NAMES
 
@@ -85,8 +85,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
-    from impact_env.scenario import load_scenario
-    from impact_env.station import is_station_file
+    from impact_env.tether.station import is_station_file
+    from impact_env.transport.scenario import load_scenario
     from planners.offline.config import IRPlannerConfig, PlannerConfig, SolverOptions
     from planners.offline.impact_robust import build_ir_model, plan_impact_robust
     from planners.offline.spatially_robust import build_model, plan_spatially_robust
@@ -153,8 +153,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 def _plan_list(args: argparse.Namespace) -> int:
     """``impact-env plan a,b,c [--out DIR] [--plot DIR] [--engine ray]``: one job per scenario; exit 0 if every
     plan was found, 3 if one hit the time limit (its best plan kept), 2 if one has none."""
-    from impact_env.station import is_station_file
     from impact_env.sweep import engine_config, open_engine
+    from impact_env.tether.station import is_station_file
     from planners.offline.batch import plan_scenarios
     from planners.offline.config import IRPlannerConfig, PlannerConfig, SolverOptions
 
@@ -188,7 +188,7 @@ def _plan_list(args: argparse.Namespace) -> int:
         if args.out:
             print(f"wrote {o.plan.save(Path(args.out) / f'{o.scenario}.json')}")
         if args.plot:
-            from impact_env.scenario import load_scenario
+            from impact_env.transport.scenario import load_scenario
             from planners.plan.plotting import plot_plan
 
             Path(args.plot).mkdir(parents=True, exist_ok=True)
@@ -206,7 +206,7 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.copy_intervals is not None and args.copy_intervals < 1:
         raise PlannerError(f"--copy-intervals must be >= 1, got {args.copy_intervals}")
     if args.solver not in SOLVER_NAMES:
-        from impact_env.names import suggestion
+        from impact_env.catalogue import suggestion
 
         raise PlannerError(f"unknown solver {args.solver!r}{suggestion(args.solver, SOLVER_NAMES)}; choose one of: "
                            f"{', '.join(SOLVER_NAMES)}")

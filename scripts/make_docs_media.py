@@ -160,7 +160,7 @@ def impact_media(name: str, out: Path, max_steps: int | None, plans: Path) -> No
     from impact_env import GYM_IDS
     from planners.expert import Expert
     from planners.plan import Plan
-    from planners.plotting import plot_execution, plot_plan
+    from planners.plan.plotting import plot_execution, plot_plan
 
     env_id = next(i for i, s in GYM_IDS.items() if s == name)
     env = gym.make(env_id, render_mode="rgb_array", render_width_px=GIF_WIDTH_PX)

@@ -9,10 +9,10 @@ from impact_env.rollout import run_episode
 from impact_env.transport.gym_env import TransportEnv
 from impact_env.transport.scenario import load_scenario
 from planners.expert import Expert
-from planners.funnels import box_coordinates, copy_targets
-from planners.offline.ir_planner import plan_impact_robust
+from planners.offline.impact_robust import plan_impact_robust
 from planners.online.contingency import CopyContact, copies_of, feedback_velocity
 from planners.online.reference import ContactQuery, PlanContact
+from planners.plan.funnels import box_coordinates, copy_targets
 
 
 @pytest.fixture(scope="module")

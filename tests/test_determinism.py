@@ -38,7 +38,7 @@ from planners.offline.milp.model import Model
 from planners.offline.milp.stl_encoding import STLEncoder
 from planners.offline.milp.trajectories import Grid
 from planners.offline.solvers import solve
-from planners.offline.sr_planner import PlannerConfig, build_model
+from planners.offline.spatially_robust import PlannerConfig, build_model
 from planners.plan import Plan
 from tests.helpers import two_body_dict
 
@@ -262,7 +262,7 @@ def test_seeds_fly_alike_whatever_flew_the_plan_before(name, config):
 def test_an_impact_robust_plan_is_left_as_it_was_given_by_the_contingency_path_and_mission_replanning():
     """The corridor's IR plan flown by its copies (CopyContact) under impact noise beyond its delta, restitution
     mismatch and start offsets, so that a mission re-plan splices the plan: same episodes, plan unchanged."""
-    from planners.offline.ir_planner import plan_impact_robust
+    from planners.offline.impact_robust import plan_impact_robust
     from planners.online.contingency import CopyContact
 
     plan = plan_impact_robust(load_scenario("corridor"))

@@ -19,8 +19,10 @@ import glob
 import importlib
 import importlib.util
 import re
+import sys
 import shlex
 import sys
+import types
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -85,7 +87,9 @@ def _python_blocks() -> list:
 @pytest.mark.parametrize("block", _python_blocks())
 def test_python_block_runs(block, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # a block that writes files writes them here
-    exec(compile(block.code, block.where, "exec"), {"__name__": "__docs__"})
+    module = types.ModuleType("__docs__")  # a real module, as a reader's script is: dataclasses look it up
+    monkeypatch.setitem(sys.modules, module.__name__, module)
+    exec(compile(block.code, block.where, "exec"), module.__dict__)
 
 
 def test_code_blocks_reads_fences_and_marks(tmp_path, monkeypatch):

@@ -12,8 +12,8 @@ from impact_env.cli import main
 from impact_env.transport.gym_env import TransportEnv
 from impact_env.transport.scenario import load_scenario
 from planners.expert import Expert
-from planners.offline.sr_planner import plan_spatially_robust
-from planners.wrappers import ExpertActionInfo
+from planners.expert.wrappers import ExpertActionInfo
+from planners.offline.spatially_robust import plan_spatially_robust
 
 
 @pytest.fixture(scope="module")

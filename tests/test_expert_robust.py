@@ -17,7 +17,7 @@ from impact_env.stl import parse
 from impact_env.transport.gym_env import TransportEnv
 from impact_env.transport.scenario import load_scenario
 from planners.expert import Expert, ExpertConfig
-from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
+from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
 from planners.online.bookkeeping import ImpactBook
 from planners.online.keep_off import robot_keep_off
 from planners.online.mission import resample_plan, splice

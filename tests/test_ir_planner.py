@@ -13,7 +13,7 @@ import tomllib
 from impact_env.transport.scenario import load_scenario, scenario_from_dict
 from planners.errors import InfeasiblePlanError, PlanCheckError
 from planners.offline.guarantee import rollout, worst_case_errors
-from planners.offline.ir_planner import IRPlannerConfig, plan_impact_robust
+from planners.offline.impact_robust import IRPlannerConfig, plan_impact_robust
 from planners.plan import Plan
 
 
@@ -223,7 +223,7 @@ def test_a_trimming_impact_raises_delta_on_the_long_throw():
 def test_cli_plans_with_the_ir_planner_and_plots_the_funnel(tmp_path, capsys):
     """``impact-env plan throw_and_catch_exp --planner ir`` writes a checked IR plan and a Fig. 5 plot."""
     from impact_env.cli import main
-    from planners.plotting import plot_plan
+    from planners.plan.plotting import plot_plan
 
     out, png = tmp_path / "ir.json", tmp_path / "ir.png"
     assert main(["plan", "throw_and_catch_exp", "--planner", "ir", "--quiet", "--out", str(out),

@@ -54,7 +54,8 @@ def changelog_moves() -> dict[str, str]:
     """The table of moves in the CHANGELOG's "Unreleased" section: ``| `old.path` | `new.path` |`` rows."""
     text = (ROOT / "CHANGELOG.md").read_text()
     unreleased = text[text.index("## Unreleased"):text.index("\n## ", text.index("## Unreleased") + 1)]
-    return dict(re.findall(r"^\| `(impact_env[\w.]*)` \| `(impact_env[\w.]*)` \|", unreleased, flags=re.M))
+    path = r"`((?:impact_env|planners)[\w.]*)`"
+    return dict(re.findall(rf"^\| {path} \| {path}", unreleased, flags=re.M))
 
 
 OLD_PATHS = changelog_moves()
@@ -97,7 +98,7 @@ def import_afresh(name: str):
 
 
 def test_every_old_path_is_registered_and_listed_in_the_changelog():
-    assert len(OLD_PATHS) == 23 and "impact_env.envs.transport" in OLD_PATHS  # the table was found
+    assert len(OLD_PATHS) == 30 and "impact_env.envs.transport" in OLD_PATHS and "planners.funnels" in OLD_PATHS  # the table was found
     assert moved_modules.moves() == OLD_PATHS
 
 
@@ -207,7 +208,7 @@ def test_the_shipped_ppo_model_still_flies_as_it_did_in_0_2():
     from impact_env.rollout import run_episode
 
     scenario = load_scenario("corridor")
-    controller = make_controller(str(ROOT / "baselines" / "results" / "models" / "ppo_corridor" / "model.zip"),
+    controller = make_controller(str(ROOT / "tests" / "data" / "models" / "ppo_corridor" / "model.zip"),
                                  scenario)
     result = run_episode(TransportEnv(scenario, thrust_noise=0.05, initial_position_noise_m=0.05), controller, seed=0)
     assert result.steps == 1000

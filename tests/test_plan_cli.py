@@ -19,7 +19,7 @@ from planners.cli import format_progress, progress_printer
 from planners.errors import PlanTimeoutError
 from planners.offline.solvers.base import Progress
 from planners.plan import Plan
-from planners.plotting import plot_plan
+from planners.plan.plotting import plot_plan
 
 SCENARIO = "throw_and_catch_exp"
 IMPACT_KEYS = {"time", "robot", "object", "position", "object_velocity_before", "object_velocity_after",
@@ -94,7 +94,7 @@ def test_time_limit_with_a_plan_keeps_it_and_exits_3(planned, tmp_path, monkeypa
     def times_out(scenario, config):
         raise PlanTimeoutError("time limit reached", plan=best, mip_gap=0.25)
 
-    monkeypatch.setattr("planners.offline.sr_planner.plan_spatially_robust", times_out)
+    monkeypatch.setattr("planners.offline.spatially_robust.plan_spatially_robust", times_out)
     again = tmp_path / "best.json"
     assert main(["plan", SCENARIO, "--time-limit", "1", "--quiet", "--out", str(again)]) == 3
     err = capsys.readouterr().err
@@ -133,7 +133,7 @@ def test_missing_gurobi_says_how_to_install_it(monkeypatch, capsys):
 
 
 def test_infeasible_user_scenario_names_the_conflicting_groups(tmp_path, capsys):
-    from planners.offline.sr_planner import PlannerConfig, build_model
+    from planners.offline.spatially_robust import PlannerConfig, build_model
 
     text = files("impact_env.transport.scenarios").joinpath(f"{SCENARIO}.toml").read_text()
     text = text.replace("tf_s = 20.0", "tf_s = 2.0").replace("F[0,20]", "F[0,2]")

@@ -1,4 +1,4 @@
-"""Plan files (planners/plan_files.py): both plan types are written and read back the same way, and a file that
+"""Plan files (planners/plan/files.py): both plan types are written and read back the same way, and a file that
 cannot be read or parsed is the plan type's own typed error naming the file, never a raw traceback."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 
 from planners.errors import PlanCheckError, PlannerError
 from planners.plan import Plan
-from planners.plan_files import read_plan_json, write_plan_json
+from planners.plan.files import read_plan_json, write_plan_json
 from planners.tether.plan import FORMAT, Pull, TetherPlan, is_tether_plan_file
 
 BROKEN = [  # file bytes, what the message says

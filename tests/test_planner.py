@@ -13,7 +13,7 @@ import pytest
 
 from impact_env.transport.scenario import load_scenario, scenario_from_dict
 from planners.errors import InfeasiblePlanError, PlanCheckError, PlannerError, PlanTimeoutError, UnsupportedSpecError
-from planners.offline.sr_planner import PlannerConfig, plan_spatially_robust
+from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
 from planners.plan import Plan
 from tests.replay import replay
 

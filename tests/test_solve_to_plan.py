@@ -11,9 +11,9 @@ import pytest
 from impact_env.transport.scenario import load_scenario
 from planners.errors import PlanTimeoutError
 from planners.offline import stages
-from planners.offline.ir_planner import plan_impact_robust
+from planners.offline.impact_robust import plan_impact_robust
 from planners.offline.solvers.base import Status
-from planners.offline.sr_planner import plan_spatially_robust
+from planners.offline.spatially_robust import plan_spatially_robust
 
 PLANNERS = {
     "sr": (plan_spatially_robust, lambda plan: f"best robustness {plan.robustness:.4f} m"),

@@ -17,7 +17,7 @@ import planners.online.mission as mission
 from impact_env.transport.scenario import load_scenario
 from planners.errors import PlannerError
 from planners.offline.batch import plan_scenarios
-from planners.offline.sr_planner import PlannerConfig
+from planners.offline.spatially_robust import PlannerConfig
 from planners.online.bookkeeping import ImpactBook
 from planners.online.mission import MissionConfig, MissionPlanner
 from planners.plan import Plan

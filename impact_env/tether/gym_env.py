@@ -114,7 +114,7 @@ class TetherEnv(GymShell):
         return frame_of(self.core)
 
 
-# impact_env.envs.tether's names (0.2), kept for that old path's release
+# impact_env.tether.gym_env's names (0.2), kept for that old path's release
 def render_tether(env: GymShell) -> Any:
     """``env.render()``'s drawing."""
     return env._draw()

@@ -23,8 +23,8 @@ if TYPE_CHECKING:
 
     from impact_env.tether.station import Station
 
-# names of impact_env.tether_plotting (0.2), for that path's release (planners' tether figures import them)
-DPI, _png_path = figures.DPI, figures.png_path
+# names of impact_env.tether.plotting (0.2), for that path's release (planners' tether figures import them)
+DPI, _png_path = figures.DPI, figures.png_path  # 0.2 names, kept for the old module path
 
 WALL_COLOUR = "0.15"
 ANCHOR_COLOUR = "tab:blue"
@@ -39,7 +39,7 @@ def draw_station(station: Station, ax: Axes | None = None, fan: bool = True) -> 
     with ``fan``, the line-of-sight fan from the start to every visible anchor. Returns the axes."""
     if ax is None:
         ax = _figure(station).add_subplot()
-    handles = _draw(station, ax, fan)
+    handles = draw_station_layers(station, ax, fan)
     ax.set_title(f"station {station.name}  (k = {station.k} of {station.n_robots} robots, "
                  f"w = {station.pull_speed_mps:g} m/s, {station.n_anchors} anchors)")
     figures.legend_beside(ax, handles)
@@ -68,7 +68,7 @@ def plot_tether_run(station: Station, positions: np.ndarray, events: Sequence[di
     path = figures.png_path(path)
     fig = _figure(station)
     ax = fig.add_subplot()
-    handles = _draw(station, ax, fan=False)
+    handles = draw_station_layers(station, ax, fan=False)
     (line,) = ax.plot(p[:, 0], p[:, 1], color=OBJECT_COLOUR, lw=1.8, label="cargo path")
     handles.append(line)
     dt = station.control_period_s
@@ -88,7 +88,9 @@ def _figure(station: Station) -> Figure:
     return figures.new_figure(max(2.5, (xmax - xmin) * scale) + 2.5, max(2.5, (ymax - ymin) * scale) + 0.6)
 
 
-def _draw(station: Station, ax: Axes, fan: bool) -> list:
+def draw_station_layers(station: Station, ax: Axes, fan: bool) -> list:
+    """Draw the station's walls, free space, anchors (and their line-of-sight fans) and goal on ``ax``; returns
+    the legend handles, for figures that draw more on top (the tether planners' plan figure)."""
     handles: list = []
     ax.add_patch(PolygonPatch(station.polygon, closed=True, facecolor="0.94", edgecolor=WALL_COLOUR, lw=2.0))
     handles.append(Line2D([], [], color=WALL_COLOUR, lw=2.0, label="walls"))
@@ -120,3 +122,6 @@ def _draw(station: Station, ax: Axes, fan: bool) -> list:
     handles.append(Patch(facecolor=OBJECT_COLOUR, edgecolor="k", label="cargo at its start"))
     figures.world_axes(ax, station.bounds, pad=0.5)
     return handles
+
+
+_draw = draw_station_layers  # the 0.2 name, kept for the old module path (impact_env.tether_plotting)

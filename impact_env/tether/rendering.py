@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from impact_env.canvas import (  # noqa: F401 - RENDER_MODES: a name of impact_env.tether_rendering (0.2)
+from impact_env.canvas import (  # noqa: F401 - RENDER_MODES: a name of impact_env.tether.rendering (0.2)
     BACKGROUND,
     BODY_EDGE,
     OBJECT,

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 
     from impact_env.transport.scenario import Scenario
 
-DPI, _png_path = figures.DPI, figures.png_path  # names of impact_env.plotting (0.2), for that path's release
+DPI, _png_path = figures.DPI, figures.png_path  # names of impact_env.transport.plotting (0.2), for that path's release
 # trajectory colours per body: blues for robots, oranges/browns for objects, cycled
 ROBOT_TRACE_COLOURS = ("tab:blue", "tab:cyan", "tab:purple", "navy", "steelblue")
 OBJECT_TRACE_COLOURS = ("tab:orange", "tab:brown", "goldenrod", "tab:red", "chocolate")
@@ -71,7 +71,7 @@ def plot_run(scenario: Scenario, times_s: np.ndarray, positions: np.ndarray, imp
              robustness: float, path: str | Path) -> Path:
     """Save a three-panel PNG of one run: the xy view (left), positions and velocities over time (right).
 
-    The same layout and colours as the expert's figure (:func:`planners.plotting.plot_execution`): each body
+    The same layout and colours as the expert's figure (:func:`planners.plan.plotting.plot_execution`): each body
     keeps its colour (robots blues, objects oranges) in every panel; velocities are finite differences of the
     sampled positions.
 

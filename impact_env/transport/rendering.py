@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from impact_env.canvas import (  # noqa: F401 - the colours and layout of impact_env.rendering (0.2)
+from impact_env.canvas import (  # noqa: F401 - the colours and layout of impact_env.transport.rendering (0.2)
     BACKGROUND,
     BODY_EDGE,
     BORDER,
@@ -98,17 +98,17 @@ def frame_of(core: TransportCore) -> RenderFrame:
     )
 
 
-# impact_env.envs.render_support's names (0.2), for that old path's release
+# impact_env.transport.rendering's names (0.2), for that old path's release
 make_frame = frame_of
 
 
 def render(env: Any) -> np.ndarray | None:
-    """``env.render()``'s drawing, as ``impact_env.envs.render_support.render`` (0.2) named it."""
+    """``env.render()``'s drawing, as ``impact_env.transport.rendering.render`` (0.2) named it."""
     return env._draw()
 
 
 def close(env: Any) -> None:
-    """``env.close()``, as ``impact_env.envs.render_support.close`` (0.2) named it."""
+    """``env.close()``, as ``impact_env.transport.rendering.close`` (0.2) named it."""
     env.close()
 
 

@@ -30,7 +30,7 @@ from impact_env.toml_fields import (
     with_source,
 )
 
-# the private names 0.2 code imported from impact_env.scenario (station.py did), kept for that path's release
+# the private names 0.2 code imported from impact_env.transport.scenario (station.py did), kept for that path's release
 _Fields, _check, _finite, _positive, _short = Fields, check, is_finite, positive, brief
 
 _STATION_GIVEN = ("{name!r} is a tether station, not an impact scenario: load it with impact_env.load_station (or "
@@ -164,7 +164,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
 
 
 def _read_source(name_or_path: str | Path) -> tuple[str, str]:
-    """(text, source) of a scenario name or path (the name 0.2 code imported from ``impact_env.scenario``)."""
+    """(text, source) of a scenario name or path (the name 0.2 code imported from ``impact_env.transport.scenario``)."""
     return read_source(name_or_path, "scenario", {"station": _STATION_GIVEN})
 
 

@@ -30,8 +30,8 @@ from impact_env.config_checks import (
     fail,
     warn_deprecated,
 )
-from impact_env.envs.core import ACTION_PER_ROBOT, OBS_PER_BODY
-from impact_env.scenario import Body, Scenario, load_scenario
+from impact_env.transport.core import ACTION_PER_ROBOT, OBS_PER_BODY
+from impact_env.transport.scenario import Body, Scenario, load_scenario
 from planners.errors import PlannerError
 from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
 from planners.online.bookkeeping import ImpactBook
@@ -406,7 +406,7 @@ def make_expert(scenario: Scenario, plan: str | None = None, **_: Any) -> Expert
     """Factory of the ``impact_env.controllers`` entry point: ``impact-env run SCENARIO --controller expert``.
 
     For a tether station it builds the tether expert (:mod:`planners.tether.expert`)."""
-    from impact_env.station import Station
+    from impact_env.tether.station import Station
 
     if isinstance(scenario, Station):
         from planners.tether.expert import make_tether_expert

@@ -36,7 +36,7 @@ class PlanOutcome:
 def plan_job(job: tuple[str, str, dict[str, Any]]) -> dict[str, Any]:
     """A sweep job: plan one scenario (name, "sr" or "ir", config fields); JSON data back (a plan travels as
     its dict)."""
-    from impact_env.scenario import load_scenario
+    from impact_env.transport.scenario import load_scenario
     from planners.offline.impact_robust import IRPlannerConfig, plan_impact_robust
     from planners.offline.spatially_robust import plan_spatially_robust
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from impact_env.scenario import Scenario
+from impact_env.transport.scenario import Scenario
 from planners.errors import PlannerError
 from planners.offline.config import PlannerConfig
 from planners.offline.milp.model import LinExpr, Model

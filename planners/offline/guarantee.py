@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from impact_env.scenario import Scenario
+from impact_env.transport.scenario import Scenario
 from planners.impact_law import mass_fractions
 from planners.plan import BodyPlan, Plan, Segment
 from planners.plan.funnels import box_coordinates

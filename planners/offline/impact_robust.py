@@ -22,7 +22,7 @@ from functools import partial
 
 import numpy as np
 
-from impact_env.scenario import Scenario
+from impact_env.transport.scenario import Scenario
 from planners.errors import PlannerError
 from planners.offline.common import add_obstacle_clearance, check_common_options, encode_task
 from planners.offline.config import DEFAULT_COPY_INTERVALS, DEFAULT_FINAL_BOX, IRPlannerConfig, PlannerConfig

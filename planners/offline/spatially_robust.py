@@ -18,7 +18,7 @@ from functools import partial
 
 import numpy as np
 
-from impact_env.scenario import Scenario
+from impact_env.transport.scenario import Scenario
 from planners.offline.common import DEFAULT_DEGREE, DEFAULT_INTERVALS, add_obstacle_clearance, check_common_options
 from planners.offline.common import encode_task as _encode_task
 from planners.offline.config import PlannerConfig

@@ -32,7 +32,7 @@ from planners.offline.solvers import solve
 from planners.offline.solvers.base import SolveResult, SolverOptions, Status
 
 if TYPE_CHECKING:
-    from impact_env.scenario import Scenario
+    from impact_env.transport.scenario import Scenario
     from planners.plan import Plan
 
 DIAGNOSE_NODES = 100  # branch-and-bound nodes per check of the infeasibility diagnosis

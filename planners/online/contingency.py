@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from impact_env.scenario import Body, Scenario
+from impact_env.transport.scenario import Body, Scenario
 from planners import bezier
 from planners.online.impact_model import ContactPlan, required_contact
 from planners.online.reference import ContactQuery, ContactStrategy, PlanContact

@@ -8,7 +8,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from impact_env.scenario import Body
+from impact_env.transport.scenario import Body
 from planners.online.mpc_specs import NU, NX, MPCInputError, _vector
 
 

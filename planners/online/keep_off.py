@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from impact_env.scenario import Body, Scenario
+from impact_env.transport.scenario import Body, Scenario
 from planners.online.mpc import AvoidSpec, HalfPlaneSpec
 from planners.online.replanner import SegmentLimits, obstacle_half_planes
 from planners.plan import PlannedImpact

@@ -34,8 +34,8 @@ from impact_env.config_checks import (
     check_value,
     moved_into,
 )
-from impact_env.scenario import Body, Scenario
 from impact_env.stl import progress, robustness, without_constants
+from impact_env.transport.scenario import Body, Scenario
 from planners import bezier
 from planners.errors import PlannerError
 from planners.offline.solvers.base import SolverOptions

@@ -22,7 +22,7 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 
-from impact_env.scenario import Body
+from impact_env.transport.scenario import Body
 from planners.online.freeflyer import _rk4_sx, rk4_step, state_from_sim
 from planners.online.mpc_specs import (
     _NSI,
@@ -47,7 +47,7 @@ class FreeflyerMPC:
     """Nonlinear MPC of one freeflyer robot; build once, then call :meth:`solve` every control period.
 
     Args:
-        robot: the robot's :class:`~impact_env.scenario.Body` (mass, inertia, thrust and torque limits).
+        robot: the robot's :class:`~impact_env.transport.scenario.Body` (mass, inertia, thrust and torque limits).
         config: horizon, dt, weights, solver; default :class:`MPCConfig`.
         heading_ref: heading (rad) the robot is held at, e.g. its initial heading; measured headings that
             wrapped around (theta + 2 pi k) are tracked to the nearest equivalent of it.

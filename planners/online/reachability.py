@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from impact_env.config_checks import check_value
-from impact_env.scenario import Body
+from impact_env.transport.scenario import Body
 from planners.errors import ReplanInputError
 from planners.online.impact_model import ContactPlan
 from planners.online.reference import ContactQuery, PlanContact

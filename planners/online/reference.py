@@ -19,7 +19,7 @@ from typing import Protocol
 
 import numpy as np
 
-from impact_env.scenario import Body
+from impact_env.transport.scenario import Body
 from planners.online.impact_model import ContactPlan, required_contact
 from planners.online.mpc import ImpactSpec
 from planners.online.replanner import SegmentLimits, replan_around_impact, replan_segment

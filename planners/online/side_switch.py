@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from impact_env.scenario import Body, Scenario
+from impact_env.transport.scenario import Body, Scenario
 from planners.plan import Plan
 
 

@@ -20,7 +20,7 @@ from planners.plan.schema import MAX_DEGREE
 from planners.plan.types import BodyPlan, PlanLike, PlannedImpact
 
 if TYPE_CHECKING:
-    from impact_env.scenario import Scenario
+    from impact_env.transport.scenario import Scenario
 
 __all__ = ["PLAN_CHECKS", "check_plan"]
 

@@ -23,7 +23,7 @@ from planners.impact_law import mass_fractions
 from planners.plan.types import BodyPlan, ImpactCopies, ObjectFunnel, PlanLike
 
 if TYPE_CHECKING:
-    from impact_env.scenario import Scenario
+    from impact_env.transport.scenario import Scenario
 
 __all__ = ["ImpactCopies", "ObjectFunnel", "box_coordinates", "check_impact_robust", "copy_targets", "feedback",
            "pre_velocity_of", "propagate"]

@@ -23,7 +23,7 @@ from planners.plan.files import read_plan_json, write_plan_json
 from planners.plan.types import BodyPlan, ImpactCopies, ObjectFunnel, PlannedImpact, Segment
 
 if TYPE_CHECKING:
-    from impact_env.scenario import Scenario
+    from impact_env.transport.scenario import Scenario
 
 __all__ = ["Plan"]
 

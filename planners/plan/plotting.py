@@ -2,8 +2,8 @@
 positions and velocities over time. An impact-robust plan adds the objects' funnels (their state boxes swept
 along the path, and bands around their positions and velocities over time) and the robots' copies.
 
-Only the object-oriented matplotlib API is used (no pyplot), like :mod:`impact_env.plotting`, whose
-:func:`~impact_env.plotting.draw_scenario` draws the world underneath the planned paths.
+Only the object-oriented matplotlib API is used (no pyplot), like :mod:`impact_env.transport.plotting`, whose
+:func:`~impact_env.transport.plotting.draw_scenario` draws the world underneath the planned paths.
 """
 
 from __future__ import annotations
@@ -16,12 +16,12 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.transforms import blended_transform_factory
 
-from impact_env.plotting import DPI, IMPACT_COLOUR, OBJECT_TRACE_COLOURS, ROBOT_TRACE_COLOURS, draw_scenario
+from impact_env.transport.plotting import DPI, IMPACT_COLOUR, OBJECT_TRACE_COLOURS, ROBOT_TRACE_COLOURS, draw_scenario
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-    from impact_env.scenario import Scenario
+    from impact_env.transport.scenario import Scenario
     from planners.plan import BodyPlan, Plan
 
 ROBOT_LW = 1.3
@@ -301,7 +301,7 @@ def plot_execution(scenario: Scenario, plan: Plan, times_s: np.ndarray, position
     ax_v.set_xlabel("time (s); impacts: planned red dotted, executed black")
     for a in (ax_p, ax_v):
         a.grid(alpha=0.3)
-    from impact_env.plotting import impacts_text
+    from impact_env.transport.plotting import impacts_text
 
     fig.suptitle(f"{scenario.name}: executed robustness {robustness:+.3f} m (planned {plan.robustness:.3f} m); "
                  f"{impacts_text(scenario, impacts)} ({len(plan.impacts)} planned)")

@@ -25,7 +25,7 @@ import shapely
 from shapely.geometry import Point, Polygon
 from shapely.geometry.base import BaseGeometry
 
-from impact_env.station import Station
+from impact_env.tether.station import Station
 from planners.errors import PlannerError
 from planners.tether.decomposition import mp3_decompose
 from planners.tether.extension import ExtendedRegion, extend_regions

@@ -27,7 +27,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def plan_station(args: argparse.Namespace) -> int:
-    from impact_env.station import load_station
+    from impact_env.tether.station import load_station
     from planners.tether.errors import TetherInfeasibleError
     from planners.tether.reachability import ReachabilityPlanner
 

@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 import shapely
 
-from impact_env.envs.tether_core import ATTACH0, KEEP, RELEASE
-from impact_env.station import Station, load_station
+from impact_env.tether.core import ATTACH0, KEEP, RELEASE
+from impact_env.tether.station import Station, load_station
 from planners.errors import PlannerError
 from planners.tether.errors import TetherInfeasibleError
 from planners.tether.plan import TetherPlan

@@ -22,7 +22,7 @@ import shapely
 from shapely.geometry import MultiPolygon, Polygon
 from shapely.geometry.base import BaseGeometry
 
-from impact_env.station import Station
+from impact_env.tether.station import Station
 
 AREA_EPS_M2 = 1e-9  # pieces smaller than this are numerical slivers, not regions
 _MITRE_LIMIT = 1e6  # never bevel: a bevel at a notch would cut inside the arc

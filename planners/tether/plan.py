@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from impact_env.station import Station
+from impact_env.tether.station import Station
 from planners.errors import PlannerError
 from planners.plan.files import read_plan_json, write_plan_json
 from planners.tether.errors import TetherPlanCheckError

@@ -1,6 +1,6 @@
 """Figures of tether plans: the reachable levels or the thesis's regions, the anchors used, the path.
 
-Built on :mod:`impact_env.tether_plotting` (the station drawing); object-oriented matplotlib, headless.
+Built on :mod:`impact_env.tether.plotting` (the station drawing); object-oriented matplotlib, headless.
 """
 
 from __future__ import annotations
@@ -14,9 +14,10 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.patches import Polygon as PolygonPatch
 
-from impact_env.plotting import DPI
-from impact_env.station import Station
-from impact_env.tether_plotting import _draw, _png_path
+from impact_env.figures import png_path
+from impact_env.tether.plotting import draw_station_layers
+from impact_env.tether.station import Station
+from impact_env.transport.plotting import DPI
 from planners.tether.geometry import polygons_of
 from planners.tether.plan import TetherPlan
 
@@ -40,13 +41,13 @@ def _draw_plan(ax, station: Station, plan: TetherPlan, handles: list) -> None:
 def plot_tether_plan(station: Station, plan: TetherPlan, path: str | Path, levels=None, regions=None) -> Path:
     """PNG of ``plan``: the backward-reachable levels (``levels``, from the exact planner) or the thesis's
     extended regions (``regions``), the anchors used with their tethers, and the path."""
-    path = _png_path(path)
+    path = png_path(path)
     xmin, xmax, ymin, ymax = station.bounds
     scale = 8.0 / max(xmax - xmin, ymax - ymin)
     fig = Figure(figsize=(max(2.5, (xmax - xmin) * scale) + 3.0, max(2.5, (ymax - ymin) * scale) + 0.6),
                  layout="constrained")
     ax = fig.add_subplot()
-    handles = _draw(station, ax, fan=False)
+    handles = draw_station_layers(station, ax, fan=False)
     if levels:
         cmap = colormaps["Greens_r"]
         for n in range(len(levels) - 1, -1, -1):

@@ -13,7 +13,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon, box
 
-from impact_env.station import Station, station_from_dict
+from impact_env.tether.station import Station, station_from_dict
 
 
 def orthogonal_polygon(rng: np.random.Generator, notches: int, cell_m: float = 3.0, max_tries: int = 200

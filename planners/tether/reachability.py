@@ -22,7 +22,7 @@ from shapely.geometry import Point
 from shapely.geometry.base import BaseGeometry
 
 from impact_env.config_checks import check_integer, check_number
-from impact_env.station import Station
+from impact_env.tether.station import Station
 from planners.errors import PlannerError
 from planners.tether.errors import TetherInfeasibleError
 from planners.tether.geometry import (

@@ -22,7 +22,7 @@ import shapely
 from shapely.geometry import Point, Polygon
 
 from impact_env.config_checks import check_choice, check_integer, check_number
-from impact_env.station import Station
+from impact_env.tether.station import Station
 from planners.errors import PlannerError, SmtNoPlanError
 from planners.tether.automaton import RULES, ThesisMap, build_thesis_map, half_planes
 from planners.tether.geometry import AREA_EPS_M2, clean, polygons_of, visibility_polygon

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
-from impact_env.station import Station
+from impact_env.tether.station import Station
 from planners.errors import PlannerError
 from planners.tether.automaton import half_planes
 from planners.tether.geometry import free_space_polygon, visibility_polygon

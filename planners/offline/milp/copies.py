@@ -12,7 +12,7 @@ feedback to be affine, t = t_c + A xi_p + B xi_v, so that the post-impact state 
 
 from __future__ import annotations
 
-from impact_env.scenario import Body
+from impact_env.transport.scenario import Body
 from planners.impact_law import mass_fractions, point_mass_law
 from planners.offline.milp.boxes import ObjectBox
 from planners.offline.milp.impacts import ImpactVars, add_robot_smoothness, equal_unless, law_big_m

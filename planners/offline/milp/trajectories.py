@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from impact_env.scenario import Body, Scenario
+from impact_env.transport.scenario import Body, Scenario
 from planners.offline.milp.model import LinExpr, Model
 
 Point = tuple[LinExpr, LinExpr]
