@@ -19,7 +19,6 @@ import glob
 import importlib
 import importlib.util
 import re
-import sys
 import shlex
 import sys
 import types
