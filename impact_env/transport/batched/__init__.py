@@ -1,0 +1,1 @@
+"""Batched (torch) backend of the impact-transport world; see impact_env.transport.batched.world."""
