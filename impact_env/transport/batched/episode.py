@@ -45,7 +45,8 @@ def wrenches(actions: torch.Tensor, limits: torch.Tensor, thrust_noise: float, k
     ``limits`` is [3, R, 1]: Fx, Fy and torque limits per robot.
     """
     n, dims = actions.shape
-    a = torch.clamp(actions, -1.0, 1.0).reshape(n, dims // 3, 3).permute(2, 1, 0)
+    # batch-last and contiguous over the envs, so that what follows runs as vectorised loops
+    a = torch.clamp(actions, -1.0, 1.0).t().contiguous().reshape(dims // 3, 3, n).transpose(0, 1)
     w = a * limits
     if thrust_noise > 0.0:
         z = _normals(key, step, episode, philox.STREAM_THRUST, dims, w.dtype).reshape(dims // 3, 3, n)

@@ -89,9 +89,12 @@ def headings(ang: torch.Tensor, omg: torch.Tensor, dtorque: torch.Tensor, subste
 
 
 def world_forces(start_headings: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor) -> torch.Tensor:
-    """Body-frame forces [R, N] rotated by the robots' headings [substeps, R, N]: [substeps, 2, R, N] (N)."""
+    """Body-frame forces [R, N] rotated by the robots' headings [substeps, R, N]: [2, substeps, R, N] (N).
+
+    (x, y) is the leading axis so that each part is computed contiguously over the envs (a vectorised loop).
+    """
     c, s = torch.cos(start_headings), torch.sin(start_headings)
-    return torch.stack((c * fx - s * fy, s * fx + c * fy), dim=1)
+    return torch.stack((c * fx - s * fy, s * fx + c * fy))
 
 
 class ReferenceKernel:
@@ -287,7 +290,7 @@ class ReferenceKernel:
         return bool(ok)
 
     def free_flight(self, rows: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
-        """All substeps of a period without contacts (``force`` [substeps, 2, R, N]); see clear_of_contacts."""
+        """All substeps of a period without contacts (``force`` [2, substeps, R, N]); see clear_of_contacts."""
         sc = self.scene
         B, R, N = sc.n_bodies, sc.n_robots, rows.shape[1]
         pos = rows[: 2 * B].reshape(2, B, N)
@@ -302,7 +305,7 @@ class ReferenceKernel:
             if k:
                 pos_r = pos_r + robots * sc.dt_s
                 pos_o = pos_o + objects * sc.dt_s
-            robots = robots + (force[k] * minv) * sc.dt_s
+            robots = robots + (force[:, k] * minv) * sc.dt_s
         out = rows.clone()
         out[: 2 * B] = torch.cat((pos_r, pos_o), dim=1).reshape(2 * B, N)
         out[2 * B: 4 * B] = torch.cat((robots, objects), dim=1).reshape(2 * B, N)

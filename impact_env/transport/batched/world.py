@@ -184,6 +184,7 @@ class BatchedTransportWorld:
                 self.seeds = torch.where(fresh, drawn, self.seeds)
             self.episodes = torch.where(m & self._seeded, self.episodes + 1, self.episodes)
             self._seeded = self._seeded | m
+        self._key = (self.seeds & 0xFFFFFFFF, (self.seeds >> 32) & 0xFFFFFFFF)  # Philox key words
         rows = torch.where(m, self._init_rows, self.rows)
         if self.initial_position_noise_m > 0 and self.scenario.objects:
             idx = m.nonzero().squeeze(1)
@@ -233,35 +234,32 @@ class BatchedTransportWorld:
         if self._obs is None:
             raise ImpactEnvError("call reset() before step()")
         a = self._check_actions(actions)
-        bad_action = ~torch.isfinite(a).all(1)
-        ended_envs = self.step_count >= self.horizon_steps
-        flags = torch.stack((bad_action.any(), ended_envs.any())).tolist()
-        if flags[0]:
-            envs = bad_action.nonzero().squeeze(1).tolist()
+        w, fuel, force, ang, omg, noise, flags = self._prologue(a, self.ang, self.omg, self._key[0], self._key[1],
+                                                                self.step_count, self.episodes)
+        bad_action, ended_envs = flags.tolist()  # the step's one synchronisation (besides the redo check)
+        if bad_action:
+            envs = (~torch.isfinite(a).all(1)).nonzero().squeeze(1).tolist()
             raise ActionError(f"actions of envs {envs[:10]}{' ...' if len(envs) > 10 else ''} contain NaN or infinite "
                               "values; actions must be finite numbers in [-1, 1]")
-        if flags[1]:
-            envs = ended_envs.nonzero().squeeze(1).tolist()
+        if ended_envs:
+            envs = (self.step_count >= self.horizon_steps).nonzero().squeeze(1).tolist()
             raise ImpactEnvError(f"envs {envs[:10]}{' ...' if len(envs) > 10 else ''} reached the task's horizon "
                                  f"({self.horizon_steps} steps); reset them first: reset(mask=terminated)")
-        key = (self.seeds & 0xFFFFFFFF, (self.seeds >> 32) & 0xFFFFFFFF)
-        w, fuel, force, ang, omg, noise = self._prologue(a, self.ang, self.omg, key[0], key[1], self.step_count,
-                                                         self.episodes)
         rows = self.rows
         ended = torch.zeros(self.layout.n_contacts, self.num_envs, device=self.device, dtype=self.dtype)
         if self._substep is None and self.reference.clear_of_contacts(
                 rows, torch.sqrt(w[0] * w[0] + w[1] * w[1]), self.dt_s):
             rows = self.reference.free_flight(rows, force)  # eager only: saves the detection ops of a calm period
-            force = force[:0]
-        for s in range(force.shape[0]):
+            force = force[:, :0]
+        for s in range(force.shape[1]):
             noise_s = None if noise is None else noise[s]
             if self._substep is None:
-                rows, ended = self.reference.substep(rows, ended, force[s], noise_s)
+                rows, ended = self.reference.substep(rows, ended, force[:, s], noise_s)
                 continue
-            new_rows, new_ended, redo = self._substep(rows, ended, force[s], noise_s)
+            new_rows, new_ended, redo = self._substep(rows, ended, force[:, s], noise_s)
             if bool(redo.any()):  # rare: a body with two contacts, a centre inside an obstacle (see fused.py)
                 idx = redo.nonzero().squeeze(1)
-                r_rows, r_ended = self.reference.substep(rows[:, idx], ended[:, idx], force[s][:, :, idx],
+                r_rows, r_ended = self.reference.substep(rows[:, idx], ended[:, idx], force[:, s][:, :, idx],
                                                          None if noise_s is None else noise_s[..., idx])
                 new_rows[:, idx], new_ended[:, idx] = r_rows, r_ended
             rows, ended = new_rows, new_ended
@@ -287,7 +285,8 @@ class BatchedTransportWorld:
         if self.impact_velocity_noise_mps > 0 and sc.robot_object_pairs:
             noise = episode.impact_noise(self.impact_velocity_noise_mps, len(sc.robot_object_pairs), sc.substeps,
                                          (key0, key1), k, ep, self.dtype)
-        return w, fuel, force, ang, omg, noise
+        flags = torch.stack((~torch.isfinite(a).all(), (k >= self.horizon_steps).any()))
+        return w, fuel, force, ang, omg, noise, flags
 
     def _epilogue_impl(self, rows: torch.Tensor, ang: torch.Tensor, omg: torch.Tensor, k: torch.Tensor,
                        monitor_state: tuple[torch.Tensor, ...], potential: torch.Tensor, fuel_total: torch.Tensor,
