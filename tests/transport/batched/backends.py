@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
+import torch
 
 from impact_env.physics import World
 from impact_env.scenario import Scenario
-
-torch = pytest.importorskip("torch")
-
-from impact_env.transport.batched import BatchedTransportWorld  # noqa: E402
+from impact_env.transport.batched import BatchedTransportWorld
 
 BACKENDS = ("pymunk", "batched")
 

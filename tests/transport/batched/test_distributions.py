@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 from scipy import stats
 
 from impact_env.envs import TransportEnv
 from impact_env.scenario import scenario_names
-from tests.transport.batched.backends import torch
-
-from impact_env.transport.batched import BatchedTransportWorld  # noqa: E402
+from impact_env.transport.batched import BatchedTransportWorld
 
 ALPHA = 0.01
 NOISE = {"thrust_noise": 0.05, "initial_position_noise_m": 0.05}

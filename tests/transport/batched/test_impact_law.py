@@ -6,12 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from impact_env.scenario import load_scenario
-from tests.transport.batched.backends import torch
-
-from impact_env.transport.batched.physics import ReferenceKernel, headings, world_forces  # noqa: E402
-from impact_env.transport.batched.scene import BoxShape, build_scene  # noqa: E402
+from impact_env.transport.batched.physics import ReferenceKernel, headings, world_forces
+from impact_env.transport.batched.scene import BoxShape, build_scene
 
 
 def closest_on_box(shape: BoxShape, p: np.ndarray) -> np.ndarray:

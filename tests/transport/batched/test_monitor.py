@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from impact_env.errors import STLUnsupportedError
 from impact_env.scenario import load_scenario, scenario_names
 from impact_env.stl import OnlineMonitor, conjuncts, parse
-from tests.transport.batched.backends import torch
-
-from impact_env.transport.batched.monitor import BatchedMonitor  # noqa: E402
+from impact_env.transport.batched.monitor import BatchedMonitor
 
 TOLERANCE = {torch.float64: 1e-12, torch.float32: 1e-5}
 

@@ -7,10 +7,9 @@ import math
 
 import numpy as np
 import pytest
+import torch
 
-torch = pytest.importorskip("torch")
-
-from impact_env.transport.batched import philox  # noqa: E402
+from impact_env.transport.batched import philox
 
 KAT = [  # (counter, key, output), philox4x32_10
     ((0, 0, 0, 0), (0, 0), (0x6627E8D5, 0xE169C58D, 0xBC57AC4C, 0x9B00DBD8)),

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from impact_env.envs import TransportEnv
 from impact_env.envs.core import TransportCore
 from impact_env.scenario import scenario_from_dict, scenario_names
+from impact_env.transport.batched import BatchedTransportWorld
 from tests.helpers import two_body_dict
-from tests.transport.batched.backends import torch
-
-from impact_env.transport.batched import BatchedTransportWorld  # noqa: E402
 
 
 def far_apart():

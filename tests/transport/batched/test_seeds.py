@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
-from tests.transport.batched.backends import torch
-
-from impact_env.transport.batched import BatchedTransportWorld  # noqa: E402
+from impact_env.transport.batched import BatchedTransportWorld
 
 NOISE = {"thrust_noise": 0.05, "initial_position_noise_m": 0.05, "impact_velocity_noise_mps": 0.02}
 

@@ -7,16 +7,15 @@ import sys
 
 import numpy as np
 import pytest
+import torch
 
 from impact_env.envs import TransportEnv
 from impact_env.envs.core import TransportCore
 from impact_env.errors import ActionError, EnvConfigError, ImpactEnvError
 from impact_env.scenario import load_scenario, scenario_from_dict
 from impact_env.stl import conjuncts, robustness
+from impact_env.transport.batched import BatchedTransportWorld
 from tests.helpers import two_body_dict
-from tests.transport.batched.backends import torch
-
-from impact_env.transport.batched import BatchedTransportWorld  # noqa: E402
 
 
 def random_actions(world, seed: int) -> torch.Tensor:
