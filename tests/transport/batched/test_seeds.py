@@ -63,3 +63,10 @@ def test_unseeded_envs_get_different_seeds():
     obs = world.reset()
     assert len(set(world.seeds.tolist())) == 16
     assert len({tuple(np.round(o.numpy(), 6)) for o in obs}) == 16
+
+
+@pytest.mark.slow
+def test_compiled_world_is_slot_independent_too():
+    a = trajectory(8, 0, 42, 100, compile=True)
+    b = trajectory(64, 5, 42, 100, compile=True)
+    assert all(torch.equal(x, y) for x, y in zip(a, b))
