@@ -132,12 +132,10 @@ class BatchedTransportWorld:
         self._obs: torch.Tensor | None = None
         self._renderers: dict[int, Any] = {}
         self.compiled = bool(compile)
-        self._prologue, self._epilogue, self._substep = self._prologue_impl, self._epilogue_impl, None
+        self._epilogue, self._fused_period = self._epilogue_impl, None
         if self.compiled:
-            self.reference.eager_skips = True  # the reference only redoes the flagged envs, in eager
-            fused = FusedKernel(self.scene, dtype)
-            self._substep = torch.compile(fused.substep, fullgraph=True, dynamic=False)
-            self._prologue = torch.compile(self._prologue_impl, fullgraph=True, dynamic=False)
+            self._fused = FusedKernel(self.scene, dtype)
+            self._fused_period = torch.compile(self._fused_period_impl, fullgraph=True, dynamic=False)
             self._epilogue = torch.compile(self._epilogue_impl, fullgraph=True, dynamic=False)
 
     # ------------------------------------------------------------------------------------------- reset
@@ -234,8 +232,11 @@ class BatchedTransportWorld:
         if self._obs is None:
             raise ImpactEnvError("call reset() before step()")
         a = self._check_actions(actions)
-        w, fuel, force, ang, omg, noise, flags = self._prologue(a, self.ang, self.omg, self._key[0], self._key[1],
-                                                                self.step_count, self.episodes)
+        args = (a, self.ang, self.omg, self._key[0], self._key[1], self.step_count, self.episodes)
+        if self._fused_period is None:
+            w, fuel, force, ang, omg, noise, flags = self._prologue_impl(*args)
+        else:
+            w, fuel, force, ang, omg, noise, flags, rows, ended, redo = self._fused_period(*args, self.rows)
         bad_action, ended_envs = flags.tolist()  # the step's one synchronisation (besides the redo check)
         if bad_action:
             envs = (~torch.isfinite(a).all(1)).nonzero().squeeze(1).tolist()
@@ -245,24 +246,13 @@ class BatchedTransportWorld:
             envs = (self.step_count >= self.horizon_steps).nonzero().squeeze(1).tolist()
             raise ImpactEnvError(f"envs {envs[:10]}{' ...' if len(envs) > 10 else ''} reached the task's horizon "
                                  f"({self.horizon_steps} steps); reset them first: reset(mask=terminated)")
-        rows = self.rows
-        ended = torch.zeros(self.layout.n_contacts, self.num_envs, device=self.device, dtype=self.dtype)
-        if self._substep is None and self.reference.clear_of_contacts(
-                rows, torch.sqrt(w[0] * w[0] + w[1] * w[1]), self.dt_s):
-            rows = self.reference.free_flight(rows, force)  # eager only: saves the detection ops of a calm period
-            force = force[:, :0]
-        for s in range(force.shape[1]):
-            noise_s = None if noise is None else noise[s]
-            if self._substep is None:
-                rows, ended = self.reference.substep(rows, ended, force[:, s], noise_s)
-                continue
-            new_rows, new_ended, redo = self._substep(rows, ended, force[:, s], noise_s)
-            if bool(redo.any()):  # rare: a body with two contacts, a centre inside an obstacle (see fused.py)
-                idx = redo.nonzero().squeeze(1)
-                r_rows, r_ended = self.reference.substep(rows[:, idx], ended[:, idx], force[:, s][:, :, idx],
-                                                         None if noise_s is None else noise_s[..., idx])
-                new_rows[:, idx], new_ended[:, idx] = r_rows, r_ended
-            rows, ended = new_rows, new_ended
+        if self._fused_period is None:
+            rows, ended = self._reference_period(self.rows, w, force, noise)
+        elif bool(redo.any()):  # rare: a body with two contacts, a centre inside an obstacle (see fused.py)
+            idx = redo.nonzero().squeeze(1)
+            r_rows, r_ended = self._reference_period(self.rows[:, idx], w[..., idx], force[..., idx],
+                                                     None if noise is None else noise[..., idx])
+            rows[:, idx], ended[:, idx] = r_rows, r_ended
         self.rows, self.ang, self.omg, self.last_wrenches = rows, ang, omg, w
         out = self._epilogue(rows, ang, omg, self.step_count + 1, self.monitor.state, self._potential, self.fuel_Ns,
                              fuel, ended, self.last_impact_step)
@@ -272,6 +262,30 @@ class BatchedTransportWorld:
         info = {"robustness": self.robustness, "is_success": self.robustness > 0.0, "fuel_Ns": self.fuel_Ns,
                 "time_s": self.step_count.to(self.dtype) * self.dt_s, "impacts": impacts}
         return obs, reward, terminated, torch.zeros_like(terminated), info
+
+    def _reference_period(self, rows: torch.Tensor, w: torch.Tensor, force: torch.Tensor,
+                          noise: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+        """The period's substeps by the reference kernel (eager), for all envs or the ones the fused kernel
+        flagged: (rows after, contacts ended per contact)."""
+        ended = torch.zeros(self.layout.n_contacts, rows.shape[1], device=self.device, dtype=self.dtype)
+        if self.reference.clear_of_contacts(rows, torch.sqrt(w[0] * w[0] + w[1] * w[1]), self.dt_s):
+            return self.reference.free_flight(rows, force), ended  # saves the detection ops of a calm period
+        for s in range(self.scene.substeps):
+            rows, ended = self.reference.substep(rows, ended, force[:, s], None if noise is None else noise[s])
+        return rows, ended
+
+    def _fused_period_impl(self, a: torch.Tensor, ang: torch.Tensor, omg: torch.Tensor, key0: torch.Tensor,
+                           key1: torch.Tensor, k: torch.Tensor, ep: torch.Tensor,
+                           rows: torch.Tensor) -> tuple[Any, ...]:
+        """The prologue and every substep by the fused kernel (one pass of impulses): what torch.compile fuses.
+        ``redo`` [N] marks the envs whose period the reference kernel must redo."""
+        w, fuel, force, ang, omg, noise, flags = self._prologue_impl(a, ang, omg, key0, key1, k, ep)
+        ended = torch.zeros(self.layout.n_contacts, rows.shape[1], device=rows.device, dtype=rows.dtype)
+        redo = torch.zeros(rows.shape[1], device=rows.device, dtype=torch.bool)
+        for s in range(self.scene.substeps):
+            rows, ended, flagged = self._fused.substep(rows, ended, force[:, s], None if noise is None else noise[s])
+            redo = redo | flagged
+        return w, fuel, force, ang, omg, noise, flags, rows, ended, redo
 
     def _prologue_impl(self, a: torch.Tensor, ang: torch.Tensor, omg: torch.Tensor, key0: torch.Tensor,
                        key1: torch.Tensor, k: torch.Tensor, ep: torch.Tensor) -> tuple[Any, ...]:
