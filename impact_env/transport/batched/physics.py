@@ -124,6 +124,15 @@ class ReferenceKernel:
         for p, (a, b) in enumerate(scene.pairs):
             self.incidence[a, p] = self.incidence[b, p] = 1.0
         self.wall_normals = torch.tensor(WALL_NORMALS, **opts).reshape(4, 2, 1, 1)
+        xmin, xmax, ymin, ymax = scene.world_box
+        self.wall_axis = torch.tensor([1, 1, 0, 0], device=device)
+        self.wall_sign = torch.tensor([1.0, -1.0, 1.0, -1.0], **opts).reshape(4, 1, 1)
+        self.wall_offset = torch.tensor([-ymin, ymax, -xmin, xmax], **opts).reshape(4, 1, 1)
+        boxes = [o for o in scene.obstacles if isinstance(o, BoxShape)]
+        self.box_index = torch.tensor([k for k, o in enumerate(scene.obstacles) if isinstance(o, BoxShape)],
+                                      dtype=torch.int64)
+        self.box_lo = torch.tensor([[o.x0, o.y0] for o in boxes], **opts).reshape(-1, 2, 1, 1)
+        self.box_hi = torch.tensor([[o.x1, o.y1] for o in boxes], **opts).reshape(-1, 2, 1, 1)
         self.eager_skips = True
 
     # --------------------------------------------------------------------------------------- detection
@@ -146,55 +155,53 @@ class ReferenceKernel:
         tgt = torch.stack((-(vrn * self.scene.restitution), self._bias(dist - self.pair_rsum)))
         return n, torch.where(on, tgt, -_INF), on
 
-    def _static(self, dist: torch.Tensor, vn: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(targets [2, B, N], on [B, N]) from the centre-to-shape distance and the normal relative velocity."""
-        on = dist <= self.radius
-        tgt = torch.stack((-(vn * self.scene.restitution), self._bias(dist - self.radius)))
-        return torch.where(on, tgt, -_INF), on
-
-    def _obstacle(self, shape: BoxShape | PolygonShape, pos: torch.Tensor,
-                  vel: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        x, y = pos[0], pos[1]
-        if isinstance(shape, BoxShape):
-            dx = torch.clamp(x, shape.x0, shape.x1) - x
-            dy = torch.clamp(y, shape.y0, shape.y1) - y
+    def _obstacles(self, pos: torch.Tensor, vel: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """Normals [O, 2, B, N], centre-to-shape distances [O, B, N] (< 0 inside) and normal relative
+        velocities [O, B, N] of the obstacles, in scenario order: boxes all at once (a clamp), polygons one by one."""
+        sc = self.scene
+        if self.box_index.numel() == len(sc.obstacles):  # only boxes (every shipped scenario)
+            d = torch.minimum(torch.maximum(pos, self.box_lo), self.box_hi) - pos  # [O, 2, B, N]
+            dx, dy = d[:, 0], d[:, 1]
             d2 = dx * dx + dy * dy
         else:
-            dx, dy, d2 = polygon_closest(shape, x, y)
+            parts = [polygon_closest(o, pos[0], pos[1]) if isinstance(o, PolygonShape) else None for o in sc.obstacles]
+            if self.box_index.numel():
+                d = torch.minimum(torch.maximum(pos, self.box_lo), self.box_hi) - pos
+                for i, k in enumerate(self.box_index.tolist()):
+                    parts[k] = (d[i, 0], d[i, 1], d[i, 0] * d[i, 0] + d[i, 1] * d[i, 1])
+            dx, dy, d2 = (torch.stack([p[m] for p in parts]) for m in range(3))
         outside = d2 > 0.0
         dist = torch.sqrt(d2)
         inv = torch.where(outside, 1.0 / dist, 0.0)
         nx, ny = dx * inv, dy * inv
         if not (self.eager_skips and bool(outside.all())):
-            in_nx, in_ny, depth = inside_normal(shape, x, y)
-            nx, ny = torch.where(outside, nx, in_nx), torch.where(outside, ny, in_ny)
-            dist = torch.where(outside, dist, -depth)
-        tgt, on = self._static(dist, -(vel[0] * nx + vel[1] * ny))
-        return torch.stack((nx, ny)), tgt, on
+            inside = [inside_normal(o, pos[0], pos[1]) for o in sc.obstacles]
+            nx = torch.where(outside, nx, torch.stack([i[0] for i in inside]))
+            ny = torch.where(outside, ny, torch.stack([i[1] for i in inside]))
+            dist = torch.where(outside, dist, -torch.stack([i[2] for i in inside]))
+        return torch.stack((nx, ny), dim=1), dist, -(vel[0] * nx + vel[1] * ny)
 
     def detect(self, pos: torch.Tensor, vel: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """Contacts at positions ``pos`` [2, B, N] with targets from the pre-thrust velocities ``vel``:
-        (pair normals, pair targets, pair on, static normals [S, 2, B, N], static targets, static on)."""
+        (pair normals, pair targets, pair on, static normals [S, 2, B, N], static targets [S, 2, B, N],
+        static on [S, B, N])."""
         N = pos.shape[2]
         if self.scene.pairs:
             pair_n, pair_tgt, pair_on = self._pairs(pos, vel)
         else:
             pair_n, pair_tgt = pos.new_zeros(2, 0, N), pos.new_zeros(2, 0, N)
             pair_on = torch.zeros(0, N, dtype=torch.bool, device=pos.device)
-        xmin, xmax, ymin, ymax = self.scene.world_box
-        x, y, vx, vy = pos[0], pos[1], vel[0], vel[1]
-        normals = [self.wall_normals[k].expand_as(pos) for k in range(4)]
-        tgts, ons = [], []
-        for dist, vn in ((y - ymin, vy), (ymax - y, -vy), (x - xmin, vx), (xmax - x, -vx)):
-            tgt, on = self._static(dist, vn)
-            tgts.append(tgt)
-            ons.append(on)
-        for shape in self.scene.obstacles:
-            n, tgt, on = self._obstacle(shape, pos, vel)
-            normals.append(n)
-            tgts.append(tgt)
-            ons.append(on)
-        return pair_n, pair_tgt, pair_on, torch.stack(normals), torch.stack(tgts), torch.stack(ons)
+        # walls: distance from the centre to the face and normal relative velocity, all four at once:
+        # y - ymin, ymax - y, x - xmin, xmax - x (exactly: x * -1 + c is c - x) and vy, -vy, vx, -vx
+        dist = pos.index_select(0, self.wall_axis) * self.wall_sign + self.wall_offset  # [4, B, N]
+        vn = vel.index_select(0, self.wall_axis) * self.wall_sign
+        normals = self.wall_normals.expand(4, 2, *pos.shape[1:])
+        if self.scene.obstacles:
+            obs_n, obs_dist, obs_vn = self._obstacles(pos, vel)
+            dist, vn, normals = torch.cat((dist, obs_dist)), torch.cat((vn, obs_vn)), torch.cat((normals, obs_n))
+        on = dist <= self.radius
+        tgt = torch.stack((-(vn * self.scene.restitution), self._bias(dist - self.radius)), dim=1)
+        return pair_n, pair_tgt, pair_on, normals, torch.where(on.unsqueeze(1), tgt, -_INF), on
 
     # ---------------------------------------------------------------------------------------- impulses
     def solve(self, v: torch.Tensor, contacts: tuple[torch.Tensor, ...]) -> torch.Tensor:
