@@ -7,9 +7,9 @@ an ``index_select`` or a slice assignment splits that loop. So this module write
 the same order and with the same constants (bit-identical results, tested), once per body and contact.
 
 One pass of impulses is done here. An env in which a body has two contacts at once, a disc centre is inside
-an obstacle or two disc centres coincide is flagged in the returned ``redo`` mask; the caller redoes that
-env's substep with the reference kernel (all passes, inside-shape normals), which happens in a few envs per
-thousand at most, so the fused loop never pays for the rare cases.
+an obstacle or two disc centres coincide is flagged in the returned ``redo`` mask, and the world redoes that
+env's control period with the reference kernel (all passes, inside-shape normals). With random actions that
+is a handful of envs per million substeps, so the fused loop never pays for the rare cases.
 """
 
 from __future__ import annotations

@@ -4,7 +4,8 @@ The semantics are those of :class:`~impact_env.envs.core.TransportCore` (the pym
 the same options, checked by it, the same observation and action layout, rewards, termination and info,
 for ``num_envs`` envs at once on any torch device, in float32 (default) or float64. Physics: the kernels
 of :mod:`~impact_env.transport.batched.physics` (eager reference) and :mod:`~impact_env.transport.batched.fused`
-(``compile=True``: torch.compile fuses a substep into one loop over the envs). Noise: counter-based
+(``compile=True``: torch.compile fuses a whole control period into one loop over the envs; the rare envs it
+flags are redone by the reference). Noise: counter-based
 Philox streams keyed by each env's seed (:mod:`~impact_env.transport.batched.philox`), so an env's
 trajectory depends on its seed only, never on ``num_envs`` or its slot.
 
@@ -55,8 +56,9 @@ class BatchedTransportWorld:
         reward_mode, fuel_penalty, restitution, thrust_noise, initial_position_noise_m,
             impact_velocity_noise_mps: as :class:`~impact_env.envs.core.TransportCore`, which checks them.
         contact_iterations: impulse passes per substep where a body has several contacts (chipmunk: 10).
-        compile: run the substep and the step's bookkeeping through torch.compile (CPU: inductor's C++;
-            the first step then takes some 20 to 60 s per scenario and dtype, later processes reuse the cache).
+        compile: run each control period and the step's bookkeeping through torch.compile (CPU: inductor's
+            C++). The first step compiles, about 2.5 minutes per scenario, num_envs, dtype and thread count on a
+            2-core machine; later processes load inductor's cache in about 10 s.
 
     Shapes: N envs, B bodies, R robots, obs_size = 7 B + 1, action_size = 3 R.
     """
