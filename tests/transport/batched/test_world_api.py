@@ -11,7 +11,7 @@ import torch
 
 from impact_env.envs import TransportEnv
 from impact_env.envs.core import TransportCore
-from impact_env.errors import ActionError, EnvConfigError, ImpactEnvError
+from impact_env.errors import ActionError, EnvConfigError, ImpactEnvError, STLUnsupportedError
 from impact_env.scenario import load_scenario, scenario_from_dict
 from impact_env.stl import conjuncts, robustness
 from impact_env.transport.batched import BatchedTransportWorld
@@ -187,3 +187,12 @@ def test_scenario_objects_and_files_are_accepted():
     sc = load_scenario("relay")
     world = BatchedTransportWorld(sc, 2)
     assert world.scenario is sc and world.horizon_steps == 600
+
+
+def test_a_task_outside_the_monitors_class_is_refused_when_the_world_is_built():
+    data = two_body_dict()
+    data["task"] = "F[0,10] G[0,5] in(O1, goal)"
+    sc = scenario_from_dict(data)
+    TransportCore(sc)  # the scalar monitor handles nesting
+    with pytest.raises(STLUnsupportedError, match="nests"):
+        BatchedTransportWorld(sc, 2)
