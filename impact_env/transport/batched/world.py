@@ -43,6 +43,42 @@ from impact_env.transport.batched.starts import draw_object_starts
 DTYPES = (torch.float32, torch.float64)
 MAX_CONTACT_ITERATIONS = 100
 _NEVER = -(2 ** 62)  # "no impact yet" in the last-impact steps
+# compiled kernels run on blocks of at most this many envs: measured on the 2-core machine, one thread, the
+# fused period costs twice as much per env at 16,384 envs as at 4,096 (its buffers no longer fit the caches)
+CHUNK_ENVS = 4096
+
+
+def _slice(x: Any, lo: int, hi: int, batch_first: bool) -> Any:
+    if isinstance(x, tuple):
+        return tuple(_slice(v, lo, hi, batch_first) for v in x)
+    if not isinstance(x, torch.Tensor):
+        return x
+    return (x[lo:hi] if batch_first else x[..., lo:hi]).contiguous()
+
+
+def _merge(parts: list[Any], batch_first: bool) -> Any:
+    if isinstance(parts[0], tuple):
+        return tuple(_merge([p[i] for p in parts], batch_first) for i in range(len(parts[0])))
+    if not isinstance(parts[0], torch.Tensor):
+        return parts[0]
+    return torch.cat(parts, dim=0 if batch_first else -1)
+
+
+def in_chunks(fn: Any, args: tuple[Any, ...], num_envs: int, batch_first_in: tuple[int, ...] = (),
+              batch_first_out: tuple[int, ...] = (), chunk: int = CHUNK_ENVS) -> tuple[Any, ...]:
+    """``fn(*args)`` over blocks of at most ``chunk`` envs, as equal as possible (so at most two shapes are
+    compiled), with the results joined. Tensors have the env axis last, except the arguments and results whose
+    positions are in ``batch_first_in`` / ``batch_first_out``; tuples are split element by element."""
+    if num_envs <= chunk:
+        return fn(*args)
+    n_blocks = -(-num_envs // chunk)
+    size, extra = divmod(num_envs, n_blocks)
+    outs, lo = [], 0
+    for block in range(n_blocks):
+        hi = lo + size + (block < extra)
+        outs.append(fn(*(_slice(x, lo, hi, i in batch_first_in) for i, x in enumerate(args))))
+        lo = hi
+    return tuple(_merge([o[i] for o in outs], i in batch_first_out) for i in range(len(outs[0])))
 
 
 class BatchedTransportWorld:
@@ -135,8 +171,8 @@ class BatchedTransportWorld:
         self._renderers: dict[int, Any] = {}
         self.compiled = bool(compile)
         self._epilogue, self._fused_period = self._epilogue_impl, None
+        self._fused = FusedKernel(self.scene, dtype)
         if self.compiled:
-            self._fused = FusedKernel(self.scene, dtype)
             self._fused_period = torch.compile(self._fused_period_impl, fullgraph=True, dynamic=False)
             self._epilogue = torch.compile(self._epilogue_impl, fullgraph=True, dynamic=False)
 
@@ -238,8 +274,9 @@ class BatchedTransportWorld:
         if self._fused_period is None:
             w, fuel, force, ang, omg, noise, flags = self._prologue_impl(*args)
         else:
-            w, fuel, force, ang, omg, noise, flags, rows, ended, redo = self._fused_period(*args, self.rows)
-        bad_action, ended_envs = flags.tolist()  # the step's one synchronisation (besides the redo check)
+            w, fuel, force, ang, omg, noise, flags, rows, ended, redo = in_chunks(
+                self._fused_period, (*args, self.rows), self.num_envs, batch_first_in=(0,))
+        bad_action, ended_envs = flags.any(1).tolist()  # the step's one synchronisation (besides the redo check)
         if bad_action:
             envs = (~torch.isfinite(a).all(1)).nonzero().squeeze(1).tolist()
             raise ActionError(f"actions of envs {envs[:10]}{' ...' if len(envs) > 10 else ''} contain NaN or infinite "
@@ -256,8 +293,12 @@ class BatchedTransportWorld:
                                                      None if noise is None else noise[..., idx])
             rows[:, idx], ended[:, idx] = r_rows, r_ended
         self.rows, self.ang, self.omg, self.last_wrenches = rows, ang, omg, w
-        out = self._epilogue(rows, ang, omg, self.step_count + 1, self.monitor.state, self._potential, self.fuel_Ns,
-                             fuel, ended, self.last_impact_step)
+        epilogue_args = (rows, ang, omg, self.step_count + 1, self.monitor.state, self._potential, self.fuel_Ns, fuel,
+                         ended, self.last_impact_step)
+        if self.compiled:
+            out = in_chunks(self._epilogue, epilogue_args, self.num_envs, batch_first_out=(0,))
+        else:
+            out = self._epilogue(*epilogue_args)
         (obs, reward, self.robustness, self._potential, self.fuel_Ns, self.monitor.state, terminated, impacts,
          self.last_impact_step, self.step_count) = out
         self._obs = obs
@@ -301,7 +342,7 @@ class BatchedTransportWorld:
         if self.impact_velocity_noise_mps > 0 and sc.robot_object_pairs:
             noise = episode.impact_noise(self.impact_velocity_noise_mps, len(sc.robot_object_pairs), sc.substeps,
                                          (key0, key1), k, ep, self.dtype)
-        flags = torch.stack((~torch.isfinite(a).all(), (k >= self.horizon_steps).any()))
+        flags = torch.stack((~torch.isfinite(a).all(1), k >= self.horizon_steps))  # [2, N]
         return w, fuel, force, ang, omg, noise, flags
 
     def _epilogue_impl(self, rows: torch.Tensor, ang: torch.Tensor, omg: torch.Tensor, k: torch.Tensor,

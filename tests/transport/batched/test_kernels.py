@@ -123,3 +123,25 @@ def test_compiled_world_follows_the_eager_world():
     diverged = (eager.body_state() - compiled.body_state()).abs().amax(dim=(1, 2)) > 1e-6
     assert impacts > 100 and int(diverged.sum()) <= 2  # chaotic amplification of rounding in a rare env
     np.testing.assert_allclose(i1["robustness"][~diverged].numpy(), i2["robustness"][~diverged].numpy(), atol=1e-6)
+
+
+def test_blocks_of_envs_give_the_whole_batchs_results():
+    """The compiled world runs its kernels on blocks of envs (world.in_chunks); here in eager, blocks of 7."""
+    from impact_env.transport.batched.world import in_chunks
+
+    world = BatchedTransportWorld("two_objects", 30, dtype=torch.float64, thrust_noise=0.1,
+                                  impact_velocity_noise_mps=0.02)
+    world.reset(seeds=0)
+    for k in range(4):
+        a = torch.rand(30, world.action_size, generator=torch.Generator().manual_seed(k)) * 2.4 - 1.2
+        args = (a, world.ang, world.omg, world._key[0], world._key[1], world.step_count, world.episodes, world.rows)
+        whole = world._fused_period_impl(*args)
+        blocks = in_chunks(world._fused_period_impl, args, 30, batch_first_in=(0,), chunk=7)
+        for x, y in zip(whole, blocks):
+            assert torch.equal(x, y)
+        epilogue = (whole[7], whole[3], whole[4], world.step_count + 1, world.monitor.state, world._potential,
+                    world.fuel_Ns, whole[1], whole[8], world.last_impact_step)
+        for x, y in zip(world._epilogue_impl(*epilogue), in_chunks(world._epilogue_impl, epilogue, 30,
+                                                                   batch_first_out=(0,), chunk=7)):
+            assert all(torch.equal(u, v) for u, v in zip(x, y)) if isinstance(x, tuple) else torch.equal(x, y)
+        world.step(a)
