@@ -22,6 +22,8 @@ from impact_env.transport.gym_env import SCENARIO_HINT
 from impact_env.transport.rendering import Renderer, RenderFrame, frame_of
 from impact_env.transport.scenario import Scenario
 
+_AGENT_SHAPE = (ACTION_PER_ROBOT,)
+
 
 class TransportParallelEnv(ParallelShell):
     """The transport task with one agent per robot (agent names are the robots' names).
@@ -102,22 +104,29 @@ class TransportParallelEnv(ParallelShell):
                              name=f"transport_{self.scenario.name}_v0")
         self._set_agents([r.name for r in self.scenario.robots],
                          spaces.Box(-1.0, 1.0, shape=(ACTION_PER_ROBOT,), dtype=np.float32))
-        self._zero_list = [0.0] * ACTION_PER_ROBOT
         self._agent_set = frozenset(self.possible_agents)
 
     def _joint_action(self, actions: dict[str, Any]) -> np.ndarray:
         if not isinstance(actions, Mapping):
             raise ActionError(f"actions must be a dict from agent name to action, got {type(actions).__name__}")
-        unknown = [a for a in actions if a not in self._agent_set]
-        if unknown:
+        if not self._agent_set.issuperset(actions):
+            unknown = [a for a in actions if a not in self._agent_set]
             raise ActionError(f"actions for unknown agents {sorted(map(repr, unknown))}; agents are "
                               f"{self.possible_agents}")
-        joint: list[float] = []
-        for a in self.possible_agents:
+        joint = np.zeros(len(self.possible_agents) * ACTION_PER_ROBOT)  # a missing agent: zero thrust
+        for i, a in enumerate(self.possible_agents):
             action = actions.get(a)
-            joint += self._zero_list if action is None else numbers_of(action, ((ACTION_PER_ROBOT,),),
-                                                                        f"actions[{a!r}]", "Fx, Fy, torque")
-        return np.array(joint)
+            if action is None:
+                continue
+            if not (type(action) is np.ndarray and action.shape == _AGENT_SHAPE and action.dtype.char in "fd"):
+                action = numbers_of(action, (_AGENT_SHAPE,), f"actions[{a!r}]", "Fx, Fy, torque")
+            joint[ACTION_PER_ROBOT * i: ACTION_PER_ROBOT * (i + 1)] = action
+        return joint
+
+    def _observations(self) -> dict[str, np.ndarray]:
+        """Every live agent's observation, each a permutation of one central observation."""
+        agents = self.agents
+        return {a: obs for a, obs in zip(self.possible_agents, self.core.agent_observations()) if a in agents}
 
     def _new_renderer(self) -> Renderer:
         return Renderer(self.scenario, self.render_mode, width_px=self.render_width_px, fps=self.metadata["render_fps"])
