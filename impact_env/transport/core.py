@@ -27,7 +27,6 @@ REWARD_MODES = ("dense", "sparse", "conjuncts")
 OBS_PER_BODY = 7  # x, y, vx, vy, cos(heading), sin(heading), angular velocity
 ACTION_PER_ROBOT = 3  # body-frame Fx, Fy, torque, each in [-1, 1]
 _FLOAT32_LIMIT = float(np.finfo(np.float32).max) / 2  # observation bounds stay finite in float32
-_FAST_ACTION_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))  # what native.scale_action reads
 MAX_THRUST_NOISE = 10.0  # std of the multiplicative noise; beyond, 0 * (1 + noise * z) overflows to NaN
 MAX_FUEL_PENALTY = 1e6  # reward per N s; beyond, a step's penalty can overflow to -inf
 MAX_IMPACT_NOISE_MPS = 1.0  # post-impact velocity error (m/s per axis); beyond, it dwarfs the planned speeds
@@ -153,7 +152,6 @@ class TransportCore:
         self._action_shapes = ((n,), (self.n_robots, ACTION_PER_ROBOT))
         self.wrench_limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in sc.robots], dtype=float)
         self._limits_py = [tuple(float(x) for x in row) for row in self.wrench_limits]
-        self._limits_flat = np.ascontiguousarray(self.wrench_limits.reshape(-1))
 
         xmin, xmax, ymin, ymax = sc.world_box
         v_max, w_max = speed_bounds(sc, self.horizon_steps * self.dt_s)
@@ -174,6 +172,7 @@ class TransportCore:
                                         for c in range(OBS_PER_BODY)] + [OBS_PER_BODY * self.n_bodies])
                               for i in range(self.n_robots)]
         self._prev_estimate = 0.0
+        self._set_action = self._set_agent_actions = None  # the world's compiled action readers
 
     def _new_monitor(self, formula) -> CompiledMonitor | OnlineMonitor:
         """The compiled monitor reading :attr:`state` if the formula is of its class, else OnlineMonitor."""
@@ -214,6 +213,9 @@ class TransportCore:
         self.world = World(self.scenario, restitution=self.restitution, initial_positions_m=overrides,
                            impact_velocity_noise_mps=self.impact_velocity_noise_mps, rng=rng)
         self._rng = rng
+        loop = self.world._loop
+        self._set_action = None if loop is None else loop.set_action
+        self._set_agent_actions = None if loop is None else loop.set_agent_actions
         self.step_count = 0
         self.log = EpisodeLog()
         self._last_wrenches = [[0.0, 0.0, 0.0] for _ in range(self.n_robots)]
@@ -264,14 +266,20 @@ class TransportCore:
         return wrenches
 
     def _set_wrenches(self, action: Any) -> list[list[float]]:
-        """Write the action's wrenches (:meth:`wrenches_from_action`) into the world's buffer; return its rows."""
-        wrench = self.world.wrench
-        scale = native.scale_action
-        if not (scale is not None and type(action) is np.ndarray and action.dtype in _FAST_ACTION_DTYPES
-                and action.shape == self._action_shapes[0] and action.flags.c_contiguous
-                and scale(action, self._limits_flat, wrench.reshape(-1))):
-            wrench[...] = self.wrenches_from_action(action)  # also the error for a non-finite action
-        elif self.thrust_noise > 0:  # as wrenches_from_action, on the buffer
+        """Write the action's wrenches (:meth:`wrenches_from_action`) into the world's buffer; return its rows.
+
+        The compiled loop reads float32/float64 arrays of an accepted shape and lists of one (3,) array per
+        robot; anything else, and a non-finite action (for its error), takes the Python path.
+        """
+        if self._set_action is None or self._set_action(action) is not True:
+            wrench = self.world.wrench
+            wrench[...] = self.wrenches_from_action(action)
+            return wrench.tolist()
+        return self._with_thrust_noise(self.world.wrench)
+
+    def _with_thrust_noise(self, wrench: np.ndarray) -> list[list[float]]:
+        """The thrust noise of :meth:`wrenches_from_action` applied to ``wrench`` in place; its rows."""
+        if self.thrust_noise > 0:
             noisy = wrench * (1.0 + self.thrust_noise * self._rng.standard_normal((self.n_robots, 3)))
             np.clip(noisy, -self.wrench_limits, self.wrench_limits, out=noisy)
             wrench[...] = noisy
@@ -282,7 +290,24 @@ class TransportCore:
         world = self.world
         if world is None or self.step_count >= self.horizon_steps:
             check_can_step(self)
-        wrenches = self._last_wrenches = self._set_wrenches(action)
+        self._last_wrenches = self._set_wrenches(action)
+        return self._advance(world)
+
+    def step_agents(self, actions: Any, agents: tuple[str, ...], joint_action: Any) -> tuple[float, bool, dict]:
+        """:meth:`step` with the PettingZoo env's actions: a dict from agent (robot i is ``agents[i]``) to its
+        (3,) action. The compiled loop reads a dict of float arrays; anything else takes ``joint_action(actions)``
+        (the env's Python path, with its errors) and :meth:`step`."""
+        world, fast = self.world, self._set_agent_actions
+        if world is None or fast is None or fast(actions, agents, np.ndarray) is not True:
+            return self.step(joint_action(actions))
+        if self.step_count >= self.horizon_steps:
+            check_can_step(self)
+        self._last_wrenches = self._with_thrust_noise(world.wrench)
+        return self._advance(world)
+
+    def _advance(self, world: World) -> tuple[float, bool, dict[str, Any]]:
+        """The rest of a step once the wrenches are set: physics, STL, fuel, reward, info."""
+        wrenches = self._last_wrenches
         events = world.step()
         self.step_count += 1
         world.read_state_into(self.state)
@@ -332,6 +357,12 @@ class TransportCore:
         """:meth:`agent_observation` of every robot, from one central observation."""
         central = self.observation()
         return [central[order] for order in self._agent_orders]
+
+    def agent_observation_dict(self, names: tuple[str, ...]) -> dict[str, np.ndarray]:
+        """``{names[i]: agent_observation(i)}``, each a row (view) of one new array."""
+        if self._observer is not None:
+            return self._observer.agents(time_left(self), np.empty((self.n_robots, self.obs_size), np.float32), names)
+        return dict(zip(names, self.agent_observations()))
 
     def _observe(self, order) -> np.ndarray:
         out = []

@@ -1,5 +1,6 @@
-"""The impact world's per-step kernels in C: one call runs a control period's substeps, two more scale the action
-and write the observation (``_substeps.c``); None here means the pure-Python path runs (same bits, slower).
+"""The impact world's per-step kernels in C (``_substeps.c``): one call runs a control period's substeps, others
+scale the action, write the observations and build the PettingZoo env's per-agent dicts (from row views of one
+new array); None here means the pure-Python path runs (the same numbers and dicts, slower).
 
 Why this design. At the corridor's size chipmunk's own ``cpSpaceStep`` is a tenth of an env step; the rest was
 Python driving it (angle, sin/cos, force and torque per robot and substep). So the loop goes to C and calls
@@ -59,8 +60,9 @@ def _chipmunk_addresses() -> tuple[int, ...] | None:
 
 
 _ADDRESSES = _chipmunk_addresses()
-scale_action = _substeps.scale_action if _ADDRESSES is not None else None
+# the per-step kernels around the loop (None: the callers' Python paths); see _substeps.c for each
 Observer = _substeps.Observer if _ADDRESSES is not None else None
+parallel_outputs = _substeps.parallel_outputs if _ADDRESSES is not None else None
 
 
 def available() -> bool:
@@ -68,11 +70,13 @@ def available() -> bool:
     return _ADDRESSES is not None
 
 
-def substep_loop(space: Any, bodies: list[Any], n_robots: int, dt_s: float, separated: list, wrench: Any) -> Any:
+def substep_loop(space: Any, bodies: list[Any], n_robots: int, dt_s: float, separated: list, wrench: Any,
+                 limits: Any) -> Any:
     """A ``SubstepLoop`` over a pymunk Space and its bodies (scenario order, robots first), or None.
 
-    ``wrench`` is the (n_robots, 3) float64 array it reads the body-frame wrenches from; ``separated`` the
-    World's list that the separate callback appends to (a non-empty list ends a ``run``).
+    ``wrench`` is the (n_robots, 3) float64 array it reads the body-frame wrenches from (and its ``set_action``
+    writes, scaled by ``limits``, the same shape); ``separated`` the World's list that the separate callback
+    appends to (a non-empty list ends a ``run``).
     """
     if _ADDRESSES is None:
         return None
@@ -81,4 +85,5 @@ def substep_loop(space: Any, bodies: list[Any], n_robots: int, dt_s: float, sepa
         body_addresses = [int(_ffi.cast("uintptr_t", b._body)) for b in bodies]
     except AttributeError:  # pragma: no cover - pymunk internals moved: the Python path
         return None
-    return _substeps.SubstepLoop(_ADDRESSES, space_address, body_addresses, n_robots, dt_s, space, separated, wrench)
+    return _substeps.SubstepLoop(_ADDRESSES, space_address, body_addresses, n_robots, dt_s, space, separated, wrench,
+                                  limits)

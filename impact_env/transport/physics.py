@@ -202,6 +202,8 @@ class World:
         self._shape_rank = {s: k for k, s in enumerate(self._shape_names)}  # bodies in scenario order, walls, obstacles
         space.on_collision(None, None, begin=_on_begin, post_solve=_on_post_solve, separate=_on_separate, data=self)
         self.wrench = np.zeros((len(self.robots), 3))  # body-frame (Fx, Fy, torque) per robot, N and N m
+        # the robots' (Fx, Fy, torque) limits: what the compiled loop's set_action scales a normalised action by
+        self.wrench_limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in scenario.robots], dtype=float)
         self._fast = None
         if _cp is not None and fast:
             try:
@@ -210,7 +212,7 @@ class World:
             except AttributeError:  # pragma: no cover - pymunk internals moved: use the public API
                 self._fast = None
         self._loop = None if self._fast is None else native.substep_loop(
-            space, self.bodies, len(self.robots), self.dt_s, self._separated, self.wrench)
+            space, self.bodies, len(self.robots), self.dt_s, self._separated, self.wrench, self.wrench_limits)
 
     def _add_shape(self, shape: pymunk.Shape, name: str, elasticity: float) -> None:
         shape.elasticity = elasticity
