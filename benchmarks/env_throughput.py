@@ -14,7 +14,10 @@ way (two attaches, then keeps), and every loop starts a fresh world every 60 ste
 packages only inside its functions, so that the reference tree's process can run them. Usage:
 
     python -m benchmarks.env_throughput [--scenario corridor] [--station L] [--steps 20000] [--repeats 3]
-                                        [--ref 0378a64 | --ref ""]
+                                        [--ref 0378a64 | --ref ""] [--wall]
+
+Every rate is steps per second of the process's CPU time (``--wall``: of the wall clock): on a shared machine the
+other jobs' share of the cores then does not enter, and each loop is one thread.
 """
 
 from __future__ import annotations
@@ -29,6 +32,10 @@ import time
 import numpy as np
 
 from benchmarks.git_tree import ROOT, export_tree, run_in_tree
+
+# "cpu": the process's CPU time (time.process_time), so that the other jobs of a shared machine do not enter a
+# loop's rate (every loop here is one thread); "wall": time.perf_counter
+CLOCKS = {"cpu": time.process_time, "wall": time.perf_counter}
 
 TETHER_EPISODE_STEPS = 60  # a fresh world this often, so that both tethers pull through every measured step
 
@@ -52,7 +59,7 @@ def _actions(n_robots: int) -> np.ndarray:
     return np.random.default_rng(0).uniform(-1, 1, (1000, 3 * n_robots)).astype(np.float32)
 
 
-def bare_pymunk(scenario_name: str, steps: int) -> float:
+def bare_pymunk(scenario_name: str, steps: int, clock: str = "cpu") -> float:
     """Steps/s of the pymunk loop alone: body forces, substeps, read every body's state (public API)."""
     _, _, World, load_scenario = _transport_api()
     scenario = load_scenario(scenario_name)
@@ -62,7 +69,8 @@ def bare_pymunk(scenario_name: str, steps: int) -> float:
     dt, substeps = world.dt_s, world.substeps
     limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in scenario.robots])
     wrenches = [[tuple(w) for w in (a.reshape(len(robots), 3) * limits)] for a in actions]
-    start = time.perf_counter()
+    now = CLOCKS[clock]
+    start = now()
     for k in range(steps):
         w = wrenches[k % len(wrenches)]
         for _ in range(substeps):
@@ -71,24 +79,25 @@ def bare_pymunk(scenario_name: str, steps: int) -> float:
                 body.torque = tau
             space.step(dt)
         [(b.position, b.velocity, b.angle, b.angular_velocity) for b in bodies]
-    return steps / (time.perf_counter() - start)
+    return steps / (now() - start)
 
 
-def gym_env(scenario_name: str, steps: int, reward_mode: str) -> float:
+def gym_env(scenario_name: str, steps: int, reward_mode: str, clock: str = "cpu") -> float:
     TransportEnv, _, _, load_scenario = _transport_api()
     scenario = load_scenario(scenario_name)
     actions = _actions(len(scenario.robots))
     env = TransportEnv(scenario, reward_mode=reward_mode)
     env.reset(seed=0)
-    start = time.perf_counter()
+    now = CLOCKS[clock]
+    start = now()
     for k in range(steps):
         _, _, terminated, truncated, _ = env.step(actions[k % len(actions)])
         if terminated or truncated:
             env.reset()
-    return steps / (time.perf_counter() - start)
+    return steps / (now() - start)
 
 
-def pettingzoo_env(scenario_name: str, steps: int) -> float:
+def pettingzoo_env(scenario_name: str, steps: int, clock: str = "cpu") -> float:
     _, TransportParallelEnv, _, load_scenario = _transport_api()
     scenario = load_scenario(scenario_name)
     actions = _actions(len(scenario.robots))
@@ -96,21 +105,22 @@ def pettingzoo_env(scenario_name: str, steps: int) -> float:
     env.reset(seed=0)
     agents = env.possible_agents
     joint = [{a: act[3 * i: 3 * i + 3] for i, a in enumerate(agents)} for act in actions]
-    start = time.perf_counter()
+    now = CLOCKS[clock]
+    start = now()
     for k in range(steps):
         env.step(joint[k % len(joint)])
         if not env.agents:
             env.reset()
-    return steps / (time.perf_counter() - start)
+    return steps / (now() - start)
 
 
 ENV_LOOPS = ("Gymnasium env, dense reward", "Gymnasium env, sparse reward", "PettingZoo parallel env, dense reward")
 
 
-def transport_rates(scenario_name: str, steps: int) -> list[float]:
+def transport_rates(scenario_name: str, steps: int, clock: str = "cpu") -> list[float]:
     """Steps/s of the ENV_LOOPS, in their order, in this process."""
-    return [gym_env(scenario_name, steps, "dense"), gym_env(scenario_name, steps, "sparse"),
-            pettingzoo_env(scenario_name, steps)]
+    return [gym_env(scenario_name, steps, "dense", clock), gym_env(scenario_name, steps, "sparse", clock),
+            pettingzoo_env(scenario_name, steps, clock)]
 
 
 def stl_trace(scenario_name: str, steps: int) -> np.ndarray:
@@ -128,7 +138,8 @@ def stl_trace(scenario_name: str, steps: int) -> np.ndarray:
     return np.array(out)
 
 
-def stl_update_cost(scenario_name: str, trace: np.ndarray, repeats: int) -> tuple[float, list[float]]:
+def stl_update_cost(scenario_name: str, trace: np.ndarray, repeats: int,
+                    clock: str = "cpu") -> tuple[float, list[float]]:
     """(us per update, median of ``repeats`` passes; the values) of the task's monitor fed ``trace`` as the env of
     the tree on the path feeds it: the compiled monitor on the state array where the tree has one, else
     OnlineMonitor on a positions dict (built before the clock starts)."""
@@ -154,12 +165,12 @@ def stl_update_cost(scenario_name: str, trace: np.ndarray, repeats: int) -> tupl
         monitor = OnlineMonitor(scenario.formula, regions, dt)
         samples = [{n: (float(x), float(y)) for n, (x, y) in zip(names, xy)} for xy in trace]
         update = monitor.update
-    costs = []
+    costs, now = [], CLOCKS[clock]
     for _ in range(repeats):
         monitor.reset()
-        start = time.perf_counter()
+        start = now()
         values = [update(sample) for sample in samples]
-        costs.append((time.perf_counter() - start) / len(samples) * 1e6)
+        costs.append((now() - start) / len(samples) * 1e6)
     return statistics.median(costs), values
 
 
@@ -203,14 +214,15 @@ def _two_visible_anchors(station) -> tuple[int, int]:
     return int(far[0]), int(far[1])
 
 
-def bare_tether_loop(station, steps: int) -> float:
+def bare_tether_loop(station, steps: int, clock: str = "cpu") -> float:
     """Steps/s of pymunk alone: cargo disc, wall segments, two slide joints whose length shrinks every substep."""
     import pymunk
 
     anchors = [tuple(station.anchor_positions[j]) for j in _two_visible_anchors(station)]
     dt = station.control_period_s / station.substeps
     w = station.pull_speed_mps
-    start = time.perf_counter()
+    now = CLOCKS[clock]
+    start = now()
     for k in range(steps):
         if k % TETHER_EPISODE_STEPS == 0:
             space = pymunk.Space()
@@ -236,35 +248,37 @@ def bare_tether_loop(station, steps: int) -> float:
             space.step(dt)
         state = (cargo.position, cargo.velocity)  # read the body, as the env does
     del state
-    return steps / (time.perf_counter() - start)
+    return steps / (now() - start)
 
 
-def tether_gym(station, steps: int, fidelity: str) -> float:
+def tether_gym(station, steps: int, fidelity: str, clock: str = "cpu") -> float:
     from impact_env.tether.gym_env import TetherEnv
 
     env = TetherEnv(station, fidelity=fidelity, max_active=2)
     a, b = _two_visible_anchors(station)
     attach, keep = [2 + a, 2 + b] + [0] * (station.n_robots - 2), [0] * station.n_robots
-    start = time.perf_counter()
+    now = CLOCKS[clock]
+    start = now()
     for k in range(steps):
         if k % TETHER_EPISODE_STEPS == 0:
             env.reset(seed=k)
         env.step(attach if k % TETHER_EPISODE_STEPS == 0 else keep)
-    return steps / (time.perf_counter() - start)
+    return steps / (now() - start)
 
 
-def tether_pettingzoo(station, steps: int, fidelity: str) -> float:
+def tether_pettingzoo(station, steps: int, fidelity: str, clock: str = "cpu") -> float:
     from impact_env.tether.pettingzoo_env import TetherParallelEnv
 
     env = TetherParallelEnv(station, fidelity=fidelity, max_active=2)
     a, b = _two_visible_anchors(station)
     attach = {"robot_0": 2 + a, "robot_1": 2 + b}
-    start = time.perf_counter()
+    now = CLOCKS[clock]
+    start = now()
     for k in range(steps):
         if k % TETHER_EPISODE_STEPS == 0:
             env.reset(seed=k)
         env.step(attach if k % TETHER_EPISODE_STEPS == 0 else {})
-    return steps / (time.perf_counter() - start)
+    return steps / (now() - start)
 
 
 def _table(cases, repeats: int) -> None:
@@ -286,7 +300,7 @@ def _pure_python(function: str, *args):
         del os.environ["IMPACT_ENV_PURE_PYTHON"]
 
 
-def transport_tables(scenario_name: str, steps: int, repeats: int, ref: str) -> None:
+def transport_tables(scenario_name: str, steps: int, repeats: int, ref: str, clock: str = "cpu") -> None:
     """The transport tables: this tree (compiled and pure Python) against ``ref`` (none if empty)."""
     from impact_env.transport.scenario import load_scenario
 
@@ -297,17 +311,20 @@ def transport_tables(scenario_name: str, steps: int, repeats: int, ref: str) -> 
         order = ["this", "pure", "ref"] if r % 2 == 0 else ["ref", "pure", "this"]
         for who in order:
             if who == "this":
-                runs[who].append(run_in_tree(ROOT, "benchmarks.env_throughput:transport_rates", scenario_name, steps))
+                runs[who].append(run_in_tree(ROOT, "benchmarks.env_throughput:transport_rates", scenario_name, steps,
+                                               clock))
             elif who == "pure":
-                runs[who].append(_pure_python("benchmarks.env_throughput:transport_rates", scenario_name, steps))
+                runs[who].append(_pure_python("benchmarks.env_throughput:transport_rates", scenario_name, steps,
+                                               clock))
             elif tree:
-                runs[who].append(run_in_tree(tree, "benchmarks.env_throughput:transport_rates", scenario_name, steps))
-    bare = statistics.median(run_in_tree(ROOT, "benchmarks.env_throughput:bare_pymunk", scenario_name, steps)
+                runs[who].append(run_in_tree(tree, "benchmarks.env_throughput:transport_rates", scenario_name, steps,
+                                               clock))
+    bare = statistics.median(run_in_tree(ROOT, "benchmarks.env_throughput:bare_pymunk", scenario_name, steps, clock)
                              for _ in range(repeats))
     med = {who: [statistics.median(col) for col in zip(*rows)] for who, rows in runs.items() if rows}
     ref_label = ref or "-"
     print(f"scenario {scenario.name}: {len(scenario.bodies)} bodies, {scenario.substeps} substeps per env step, "
-          f"{steps} steps x {repeats} repeats (median), each tree in its own process\n")
+          f"{steps} steps x {repeats} repeats (median), each tree in its own process, {clock} time\n")
     print(f"| loop | {ref_label} env-steps/s | this tree, pure Python | this tree | this tree vs {ref_label} "
           "| vs bare pymunk |")
     print("|---|---:|---:|---:|---:|---:|")
@@ -325,12 +342,12 @@ def transport_tables(scenario_name: str, steps: int, repeats: int, ref: str) -> 
           f"{max(5, repeats)} passes:\n")
     print(f"| tree | us/update | vs {ref_label} |\n|---|---:|---:|")
     this_cost, this_values = run_in_tree(ROOT, "benchmarks.env_throughput:stl_update_cost", scenario_name, trace,
-                                         max(5, repeats))
+                                         max(5, repeats), clock)
     pure_cost, pure_values = _pure_python("benchmarks.env_throughput:stl_update_cost", scenario_name, trace,
-                                          max(5, repeats))
+                                          max(5, repeats), clock)
     if tree:
         ref_cost, ref_values = run_in_tree(tree, "benchmarks.env_throughput:stl_update_cost", scenario_name, trace,
-                                           max(5, repeats))
+                                           max(5, repeats), clock)
         print(f"| {ref_label} (OnlineMonitor, positions dict) | {ref_cost:.2f} | 1.00 |")
     else:
         ref_cost, ref_values = math.nan, this_values
@@ -359,21 +376,24 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--ref", default="0378a64", help="reference commit of the transport table ('' for none)")
     parser.add_argument("--station", default="L", help="tether station of the last table")
+    parser.add_argument("--wall", action="store_true", help="time by the wall clock, not the processes' CPU time")
     args = parser.parse_args()
-    transport_tables(args.scenario, args.steps, args.repeats, args.ref)
+    clock = "wall" if args.wall else "cpu"
+    transport_tables(args.scenario, args.steps, args.repeats, args.ref, clock)
 
     from impact_env.tether.station import load_station
 
     station = load_station(args.station)
     tether_steps = max(TETHER_EPISODE_STEPS, args.steps // 4)
     cases = [
-        ("bare pymunk loop (cargo, walls, 2 slide joints reeled in)", lambda: bare_tether_loop(station, tether_steps)),
-        *[(f"Tether Gymnasium env, {fid}, 2 tethers", lambda fid=fid: tether_gym(station, tether_steps, fid))
+        ("bare pymunk loop (cargo, walls, 2 slide joints reeled in)",
+         lambda: bare_tether_loop(station, tether_steps, clock)),
+        *[(f"Tether Gymnasium env, {fid}, 2 tethers", lambda fid=fid: tether_gym(station, tether_steps, fid, clock))
           for fid in ("kinematic", "reel", "force")],
-        ("Tether PettingZoo env, reel, 2 tethers", lambda: tether_pettingzoo(station, tether_steps, "reel")),
+        ("Tether PettingZoo env, reel, 2 tethers", lambda: tether_pettingzoo(station, tether_steps, "reel", clock)),
     ]
     print(f"\nstation {station.name}: {station.n_anchors} anchors, {station.n_robots} robots, {station.substeps} "
-          f"substeps per env step, {tether_steps} steps x {args.repeats} repeats (median)\n")
+          f"substeps per env step, {tether_steps} steps x {args.repeats} repeats (median), {clock} time\n")
     _table(cases, args.repeats)
 
 

@@ -497,7 +497,7 @@ static PyObject *Monitor_update(Monitor *self, PyObject *const *args, Py_ssize_t
     Py_buffer view;
     if (PyObject_GetBuffer(args[0], &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) return NULL;
     if (view.format == NULL || strcmp(view.format, "d") != 0 || stride < 2 ||
-        view.len / 8 < self->max_row * stride + 2) {
+        (self->n_rows > 0 && view.len / 8 < self->max_row * stride + 2)) {
         PyBuffer_Release(&view);
         PyErr_SetString(PyExc_ValueError, "xy must be C-contiguous float64 holding every row the formula reads");
         return NULL;
