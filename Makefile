@@ -21,8 +21,10 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# The base install: what the simulator, planner and expert need.
-$(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml
+# The base install: what the simulator, planner and expert need. The editable install compiles the two C
+# helpers in place (setup.py; a change to their sources rebuilds them here).
+$(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml setup.py impact_env/transport/_substeps.c \
+		impact_env/stl/_cmonitor.c
 	$(BIN)/pip install --quiet -e .
 	touch $@
 
@@ -108,4 +110,5 @@ lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check impact_env planners baselines tests benchmarks
 
 clean:
-	rm -rf $(VENV) $(OUT) *.egg-info site
+	rm -rf $(VENV) $(OUT) *.egg-info site build
+	find impact_env -name "_*.so" -delete
