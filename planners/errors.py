@@ -99,7 +99,8 @@ class SmtNoPlanError(PlannerError):
 
 
 PLANNER_ERRORS: tuple[type[ImpactEnvError], ...] = (
-    PlannerError, UnsupportedSpecError, SolverNotAvailableError, InfeasiblePlanError, PlanTimeoutError, MPCInputError,
-    ReplanInputError, PlanCheckError, DecompositionError, TetherInfeasibleError, TetherPlanCheckError, SmtNoPlanError,
+    PlannerError, UnsupportedSpecError, SolverNotAvailableError, InfeasiblePlanError, UnflyableHandoverError,
+    PlanTimeoutError, MPCInputError, ReplanInputError, PlanCheckError, DecompositionError, TetherInfeasibleError,
+    TetherPlanCheckError, SmtNoPlanError,
 )
 
