@@ -21,8 +21,8 @@ from impact_env.transport.gym_env import TransportEnv
 from impact_env.transport.scenario import load_scenario
 from planners.errors import PlannerError
 from planners.expert import Expert, ExpertConfig
-from planners.online.bookkeeping import ImpactBook
 from planners.offline.config import PlannerConfig
+from planners.online.bookkeeping import ImpactBook
 from planners.online.mission import MissionConfig, MissionPlanner
 from planners.online.side_switch import side_switches, unflyable_side_switches
 from planners.plan import Plan, PlannedImpact
