@@ -68,7 +68,8 @@ bench-expert: $(VENV)/.base-installed
 	$(BIN)/python -m benchmarks.expert --episodes 50
 
 # the expert flying spatially robust against impact-robust plans under impact noise and restitution offsets
-# (results/impact_robust: cells.jsonl, resumable, and table.md; about 1.5 h with 2 workers on an idle machine)
+# (results/impact_robust: cells.jsonl, resumable, and table.md; with long_throw_trim about 1.7 h with 2 workers
+# on an idle machine, by python -m benchmarks.impact_robust --estimate)
 bench-ir: $(VENV)/.base-installed
 	$(BIN)/python -m benchmarks.impact_robust --workers 2
 
