@@ -83,13 +83,15 @@ def unflyable_side_switches(plan: Plan, scenario: Scenario, after_s: float = -ma
     With ``robot_states`` (name -> observed ``[x, y, theta, vx, vy, omega]`` at ``after_s``) and ``model``
     (``model(robot, object)`` -> (restitution, (m_robot, m_object))), also those whose way from the first
     contact to the second has no segment within ``margin`` of the robot's thrust and within its speed bound
-    (:func:`switch_segment_feasible`, the closed form of :mod:`planners.online.segment_feasibility`)."""
+    (:func:`switch_segment_feasible`, the closed form of :mod:`planners.online.segment_feasibility`), when the
+    first contact is still ahead (once it is past, the second is the robot's next contact, which the mission
+    layer tests from the observed state, :func:`planners.online.reachability.next_contacts`)."""
     out = []
     for sw in side_switches(plan, after_s):
         robot, obj = scenario.body(sw.robot), scenario.body(sw.object)
         if sw.time_to_get_round_s(robot, obj) > margin * (sw.t2_s - max(sw.t1_s, after_s)):
             out.append(sw)
-        elif robot_states is not None and not switch_segment_feasible(
+        elif robot_states is not None and sw.t1_s > after_s and not switch_segment_feasible(
                 sw, plan, robot, obj, after_s, robot_states[sw.robot], model, margin, tolerances):
             out.append(sw)
     return out
