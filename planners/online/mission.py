@@ -49,6 +49,7 @@ from planners.online.reachability import (
 )
 from planners.online.sampling import PlanSampler
 from planners.online.side_switch import SideSwitch, side_switches, unflyable_side_switches
+from planners.online.station_keeping import StationKeeper, StationKeepingConfig, held_goals
 from planners.plan import BodyPlan, Plan, Segment
 
 
@@ -97,6 +98,9 @@ class MissionConfig:
     """A re-plan is accepted only if every robot can fly its next segment with this share (in (0, 1]) of its
     thrust, within its speed bound, and every side switch with this share of the time between its impacts
     (:func:`planners.online.reachability.next_contacts`, :func:`unflyable_side_switches`)."""
+    station_keeping: StationKeepingConfig | None = field(default_factory=StationKeepingConfig)
+    """Trim a stopped object's drift during a held goal with a small re-plan of the nearest free robot
+    (:mod:`planners.online.station_keeping`); None: off."""
     impact_robust_replans: bool = True
     """Re-plan an impact-robust plan with the impact-robust planner (under the same node budget), falling back
     to the spatially robust one, with the reason in the record, when that finds no delta > 0; False: always
@@ -130,6 +134,8 @@ class MissionConfig:
         for name in ("reach_tolerance_m", "reach_tolerance_mps"):
             check_number(self, name, PlannerError, low=0)
         check_number(self, "flyability_margin", PlannerError, low=0, low_open=True, high=1)
+        check_instance(self, "station_keeping", PlannerError, StationKeepingConfig, what="a StationKeepingConfig",
+                       none="off")
         check_flag(self, "impact_robust_replans", PlannerError)
 
 
@@ -270,6 +276,10 @@ class MissionPlanner:
         self.degree = int(plan.stats.get("robot_degree") or
                           len(plan.bodies[scenario.robots[0].name].segments[0].control_points) - 1)
         self.grid_dt = scenario.tf_s / self.intervals
+        keeping = self.config.station_keeping
+        self.station = (StationKeeper(scenario, keeping, self._solve, self.grid_dt)
+                        if keeping is not None and held_goals(self.formula, {o.name for o in scenario.objects})
+                        else None)
         self.reset(plan)
 
     def reset(self, plan: Plan) -> None:
@@ -283,6 +293,8 @@ class MissionPlanner:
         self._last_check = -math.inf
         self._sampler: PlanSampler | None = None
         self._sampler_plan: Plan | None = None
+        if self.station is not None:
+            self.station.reset()
 
     # ------------------------------------------------------------------------------------ monitor
     def reachability(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan, done: set[int],
@@ -367,10 +379,18 @@ class MissionPlanner:
         if not impact_observed and t - self._last_check < cfg.check_period_s - 1e-9:
             return None
         self._last_check = t
-        if len(self.records) >= cfg.max_replans or self.scenario.tf_s - t < cfg.min_remaining_s:
+        if self.scenario.tf_s - t < cfg.min_remaining_s:
             return None
         pending = [i for k, i in enumerate(plan.impacts) if k not in book.done]
         if any(abs(i.time_s - t) < cfg.quiet_s for i in pending):
+            return None
+        if self.station is not None:
+            trimmed = self.station.step(t, states, index, plan, book.done, self.trace, self.names,
+                                        lambda new, at, robots: self.unflyable(new, at, states, index, model,
+                                                                               robots))
+            if trimmed is not None:
+                return trimmed
+        if len(self.records) >= cfg.max_replans:
             return None
         self.checks += 1
         predicted = self.predicted_robustness(t, states, index, plan, book.done, model)
@@ -526,10 +546,11 @@ class MissionPlanner:
             return f"the impact-robust planner found delta {remainder.delta_mps} m/s"
         return remainder
 
-    def unflyable(self, plan: Plan, t: float, states: np.ndarray, index: dict[str, int], model) -> list[str]:
-        """Why the robots cannot fly ``plan`` from the observed states at ``t`` (empty: they can): a robot whose
-        next contact is out of reach with ``flyability_margin`` of its thrust within its speed bound, a side
-        switch without the time or the thrust (unless ``allow_side_switches``)."""
+    def unflyable(self, plan: Plan, t: float, states: np.ndarray, index: dict[str, int], model,
+                  robots: set[str] | None = None) -> list[str]:
+        """Why the robots (or only ``robots``) cannot fly ``plan`` from the observed states at ``t`` (empty: they
+        can): a robot whose next contact is out of reach with ``flyability_margin`` of its thrust within its
+        speed bound, a side switch without the time or the thrust (unless ``allow_side_switches``)."""
         cfg = self.config
         sc = self.scenario
         by_name = {name: states[index[name]] for name in self.names}
@@ -540,8 +561,11 @@ class MissionPlanner:
         if cfg.allow_side_switches is False:
             for sw in unflyable_side_switches(plan, sc, t, cfg.flyability_margin, by_name, model,
                                               (cfg.reach_tolerance_m, cfg.reach_tolerance_mps)):
-                reasons.append(f"side switch {sw.robot} round {sw.object} between {sw.t1_s:.1f} and {sw.t2_s:.1f} s")
-        for verdict in next_contacts(t, plan, sc.robots, sc.body, by_name, model, self.aim_final_position,
+                if robots is None or sw.robot in robots:
+                    reasons.append(f"side switch {sw.robot} round {sw.object} between {sw.t1_s:.1f} and "
+                                   f"{sw.t2_s:.1f} s")
+        chosen = [r for r in sc.robots if robots is None or r.name in robots]
+        for verdict in next_contacts(t, plan, chosen, sc.body, by_name, model, self.aim_final_position,
                                      cfg.flyability_margin, cfg.reach_tolerance_m, cfg.reach_tolerance_mps):
             if not verdict.reachable:
                 reasons.append(f"next contact {verdict.impact.robot}-{verdict.impact.object} at "
@@ -550,9 +574,13 @@ class MissionPlanner:
         return reasons
 
     def report(self) -> dict[str, Any]:
-        return {"checks": self.checks, "replans": sum(r.status.startswith("accepted") for r in self.records),
-                "attempts": len(self.records), "timeouts": self.timeouts, "unreachable": self.unreachable,
-                "records": [dataclasses.asdict(r) for r in self.records]}
+        out = {"checks": self.checks, "replans": sum(r.status.startswith("accepted") for r in self.records),
+               "attempts": len(self.records), "timeouts": self.timeouts, "unreachable": self.unreachable,
+               "records": [dataclasses.asdict(r) for r in self.records]}
+        if self.station is not None:
+            out["trims"] = self.station.trims()
+            out["trim_records"] = self.station.report()
+        return out
 
 
 __all__ = ["MissionConfig", "MissionPlanner", "ReplanRecord", "SideSwitch", "resample_plan", "side_switches", "splice",
