@@ -131,8 +131,9 @@ def timed_act(scenario_name: str, plan_dict: dict, stack: str, seed: int, mismat
                    "initial_position_noise_m": 0.05, "thrust_noise": 0.05}
     res = run_episode(TransportEnv(scenario, **options), expert, seed=seed)
     replan_steps = []
-    if stack == "all":
-        records = expert.report().get("mission", {}).get("records", [])
+    if stack == "all":  # mission re-plans and station keeping's trims: a MILP solve inside one act
+        mission = expert.report().get("mission", {})
+        records = mission.get("records", []) + mission.get("trim_records", [])
         replan_steps = [round(r["time_s"] / scenario.control_period_s) for r in records]
     return {"stack": stack, "act_ms": res.controller_ms, "replan_steps": replan_steps, "success": res.success}
 

@@ -48,7 +48,7 @@ from planners.expert.stacks import STACKS
 from planners.expert.stacks import stack_config as expert_config
 
 SHIPPED = ("corridor", "obstacle_avoidance", "throw_and_catch_exp", "long_throw_trim")
-NEW = ("ping_pong_stop", "relay", "two_objects")
+NEW = ("ping_pong_stop", "relay", "two_objects", "held_drift")
 AXES = {"e": (0.1, 0.2, 0.3), "offset": (0.05, 0.10, 0.15), "thrust": (0.05, 0.10, 0.20),
         "impact": (0.005, 0.01, 0.02, 0.03)}
 COMBINED = {"e": 0.2, "offset": 0.10, "thrust": 0.10}

@@ -11,8 +11,8 @@ from tests.helpers import DELETE, modified, two_body_dict
 
 
 def test_shipped_scenarios_are_listed_and_load():
-    assert scenario_names() == ["corridor", "long_throw_trim", "obstacle_avoidance", "ping_pong_stop", "relay",
-                                "throw_and_catch_exp", "two_objects"]
+    assert scenario_names() == ["corridor", "held_drift", "long_throw_trim", "obstacle_avoidance", "ping_pong_stop",
+                                "relay", "throw_and_catch_exp", "two_objects"]
     for name in scenario_names():
         sc = load_scenario(name)
         assert sc.name == name

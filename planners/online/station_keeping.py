@@ -26,7 +26,6 @@ from impact_env.transport.scenario import Body, Scenario
 from planners.errors import PlannerError
 from planners.plan import BodyPlan, Plan, Segment
 
-
 MIN_TRIM_INTERVAL_S = 1.0  # the finest grid a trim is planned on (s)
 
 
