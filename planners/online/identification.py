@@ -8,10 +8,14 @@ and along it the point-mass law (Eq. 5) gives
 
 with v_R+ from momentum (the robot thrusts during the contact). Each is a Gaussian estimate per pair, updated
 by the conjugate rule, pooled over the pairs until a pair is observed, and the scenario file's value before
-any impact. With ``IdentificationConfig.significance = k`` an estimate replaces the file's value only when
-the measurements alone put it more than k standard errors away (:func:`significance_test`).
+any impact. Which value the contact inverse uses is ``IdentificationConfig.estimator``'s: by default
+(``bounded``) the file's until the robot's readings, each within the error its thrust limit allows during
+the contact (:func:`robot_side_bound`), refute it (:func:`bounded_verdict`): post-impact noise moves only the
+object's reading. ``significance`` uses a test at k standard errors (:func:`significance_test`), ``gaussian``
+every estimate at once.
 
-Why each step, and the significance test's derivation: ``docs/expert_design.md#identification``.
+Why each step, the estimators' derivations and the measurement that chose the default:
+``docs/expert_design.md#identification``.
 """
 
 from __future__ import annotations

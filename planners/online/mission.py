@@ -7,8 +7,10 @@ robot-object impact and every ``check_period_s``, (1) the rest of the episode is
 states as the local layer will fly it, without the impacts the robot provably cannot reach
 (:mod:`planners.online.reachability`); (2) when the task's predicted robustness fails the test of
 :class:`MissionConfig`, (3) the offline planner re-plans the rest from the current state (a derived scenario
-with the task progressed to now) and the new plan is spliced after the executed part, unless it is no better
-or has a side switch the robot has no time for (:mod:`planners.online.side_switch`).
+with the task progressed to now; an impact-robust plan with the impact-robust planner) and the new plan is
+spliced after the executed part, unless it is no better than the prediction or the robots cannot fly it with
+a margin (next contacts, side switches: :mod:`planners.online.side_switch`). A stopped object drifting out
+of a held goal is trimmed by a smaller re-plan (:mod:`planners.online.station_keeping`).
 
 The compute budget is a node count and the solver's threads are pinned (``MissionConfig.solver_options``), so
 the same observations give the same re-plan on any machine; a re-plan cut by the time limit is discarded.
