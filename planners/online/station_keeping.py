@@ -24,6 +24,7 @@ from impact_env.config_checks import check_integer, check_number
 from impact_env.stl import Always, And, Formula, InRegion, conjuncts, progress, without_constants
 from impact_env.transport.scenario import Body, Scenario
 from planners.errors import PlannerError
+from planners.online.splicing import initial_state, splice, without_end_states
 from planners.plan import BodyPlan, Plan, Segment
 
 MIN_TRIM_INTERVAL_S = 1.0  # the finest grid a trim is planned on (s)
@@ -143,8 +144,6 @@ class StationKeeper:
 
     def _trim(self, t, goal: HeldGoal, robot: Body, margin: float, leaves: float, states, index, plan: Plan,
               done: set[int], trace, names, unflyable) -> tuple[Plan, set[int]] | None:
-        from planners.online.mission import _initial_state, _without_end_states, splice
-
         record = TrimRecord(t, f"G[{goal.a_s:g},{goal.b_s:g}] in({goal.body}, {goal.region})", robot.name, margin,
                             "kept")
         self.records.append(record)
@@ -162,12 +161,12 @@ class StationKeeper:
 
         def moved(body: Body) -> Body:
             s = states[index[body.name]]
-            return _initial_state(body, s[:2], s[3:5], sc)
+            return initial_state(body, s[:2], s[3:5], sc)
 
         derived = dataclasses.replace(sc, tf_s=remaining, task=str(task), robots=(moved(robot),),
                                       objects=(moved(obj),), planner_intervals=intervals)
         pair = _two_bodies(plan, robot.name, obj.name)
-        for scenario in (derived, _without_end_states(derived)):
+        for scenario in (derived, without_end_states(derived)):
             solved = self.solve(scenario, t, pair, intervals, record)
             if isinstance(solved, str):
                 record.status = solved
