@@ -148,6 +148,20 @@ def test_the_identification_error_column():
     assert robustness.config_fingerprint("paper") != robustness.config_fingerprint("all")
 
 
+def test_cells_flown_with_another_config_are_marked():
+    """A cell without a config counts as flown with its stack's config on main before cells recorded it: the
+    paper's stack's is today's (unmarked), the full stack's is not (marked, with the note)."""
+    episodes = [{"seed": 0, "success": True, "robustness": 0.5, "robot_contacts": 0, "mission_replans": 0,
+                 "replan_solve_s": []}]
+    stamped = {"config": robustness.config_fingerprint("+id")}
+    cells = [{"scenario": "relay", "stack": stack, "axis": "nominal", "level": 0.0, "episodes": episodes, **extra}
+             for stack, extra in (("paper", {}), ("all", {}), ("+id", stamped))]
+    text = robustness.table(cells, ["relay"])
+    assert "| relay | nominal | paper | 1 |" in text and "| relay | nominal | all * | 1 |" in text
+    assert "| relay | nominal | +id | 1 |" in text and text.endswith("flies it again)")
+    assert robustness.flown_with(cells[0]) == robustness.config_fingerprint("paper")
+
+
 def test_benchmarks_run_as_modules(tmp_path):
     out = tmp_path / "cells"
     convert_cells.convert("robustness", old_folder(tmp_path, "robustness"), out)
@@ -156,7 +170,8 @@ def test_benchmarks_run_as_modules(tmp_path):
                            "corridor", "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[2].startswith("| corridor | e +-0.1 | paper | 2 | 100% |")
-    assert (out / "table.md").read_text().count("\n") == 5  # header, rule, the three cells
+    # header, rule, the three cells; the two that are not the paper's stack's were flown with its 0.3 config
+    assert (out / "table.md").read_text().count("\n") == 7 and "flies it again)" in (out / "table.md").read_text()
     done = subprocess.run([sys.executable, "-m", "benchmarks.robustness_reproduce", "--help"], cwd=ROOT,
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0 and "--results" in done.stdout, done.stderr
