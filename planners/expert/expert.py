@@ -171,7 +171,9 @@ class Expert:
         self.book = ImpactBook(plan.impacts, tolerance_s=0.5 * self.grid_dt)
         self.identifier = ImpactIdentifier(sc.restitution, {b.name: b.mass_kg for b in sc.bodies},
                                            frozenset(self._robot_names), frozenset(self._object_names),
-                                           cfg.identification or IdentificationConfig())
+                                           cfg.identification or IdentificationConfig(),
+                                           {r.name: float(np.hypot(*r.thrust_limit_N)) / r.mass_kg
+                                            for r in self.robots})
         strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
         if plan.planner == "ir" and isinstance(strategy, PlanContact):
             from planners.online.contingency import CopyContact
