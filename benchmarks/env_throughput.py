@@ -133,7 +133,8 @@ def tether_gym(station, steps: int, fidelity: str) -> float:
 def tether_pettingzoo(station, steps: int, fidelity: str) -> float:
     env = TetherParallelEnv(station, fidelity=fidelity, max_active=2)
     a, b = _two_visible_anchors(station)
-    attach = {"robot_0": 2 + a, "robot_1": 2 + b}
+    agents = env.possible_agents
+    attach = {agents[0]: 2 + a, agents[1]: 2 + b}
     start = time.perf_counter()
     for k in range(steps):
         if k % TETHER_EPISODE_STEPS == 0:

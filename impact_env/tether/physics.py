@@ -22,6 +22,7 @@ import numpy as np
 import pymunk
 
 from impact_env.errors import TetherError
+from impact_env.tether.sight import distance_to_rays, shadow_rays
 from impact_env.tether.station import Station
 
 try:  # the C functions behind pymunk's properties, for the hot loop (see TetherWorld.step)
@@ -153,12 +154,10 @@ class TetherWorld:
         self._winch_N = station.winch_force_limit_N
         self._stop2 = station.stop_radius_m ** 2
         self._stop = station.stop_radius_m
-        self._anchors = [tuple(map(float, a.position_m)) for a in station.anchors]
-        ends = np.array(station.walls, dtype=float)  # (n_walls, 2, 2)
-        self._wall_a = ends[:, 0]
-        self._wall_e = ends[:, 1] - ends[:, 0]
-        self._wall_ee = np.einsum("ij,ij->i", self._wall_e, self._wall_e)
+        self._anchors = station.anchor_points
+        self._wall_a, self._wall_e, self._wall_ee = station.wall_arrays
         self._notches = station.notches
+        self._notch_rays: dict[int, tuple | None] = {}
         self._cache = bool(cache_checks)
         self._wall_seen_at, self._wall_margin = (math.nan, math.nan), -1.0
         self.failed_anchors: set[int] = set()
@@ -328,7 +327,7 @@ class TetherWorld:
         kind = None
         if t.anchor in self.failed_anchors:
             kind = "refused"
-        elif not self.station.line_of_sight((x, y), [t.anchor])[0]:
+        elif not self.station.sees(x, y, [t.anchor])[0]:
             kind = "blocked"
         elif (t.ax - x) ** 2 + (t.ay - y) ** 2 <= self._stop2:
             kind = "arrived"
@@ -351,11 +350,151 @@ class TetherWorld:
     # ----------------------------------------------------------------------------------------- step
     def step(self) -> list[TetherEvent]:
         """Advance one control period (``substeps`` physics steps); returns the tether events in it."""
-        substep = self._substep
-        for _ in range(self.substeps):
-            substep()
+        if self._fast:
+            if self.fidelity == "reel":
+                self._step_reel_fast()
+            elif self.fidelity == "force":
+                self._step_force_fast()
+            else:
+                self._step_kinematic_fast()
+        else:
+            substep = self._substep
+            for _ in range(self.substeps):
+                substep()
         events, self._events = self._events, []
         return events
+
+    # The three loops below are _substep() for one fidelity each, written out with the C calls and with the
+    # cargo's state carried from one substep to the next (nothing between two physics steps moves it), the same
+    # arithmetic in the same order: the trajectories are bit-identical to _substep's. pymunk's own step() would
+    # also lock the space for its callbacks; the one callback here (a contact count) adds and removes nothing.
+
+    def _begin_fast(self) -> tuple:
+        if self._active is None:
+            self._active = [t for t in self._tethers if t is not None and t.pulling]
+            self._budget = -1.0
+        p, v = _cp.cpBodyGetPosition(self._body_ptr), _cp.cpBodyGetVelocity(self._body_ptr)
+        return p.x, p.y, v.x, v.y
+
+    def _after_substep_fast(self, active: list[_Tether], x: float, y: float) -> None:
+        """The tether checks and the attachments that become ready after a physics step, cargo at (x, y)."""
+        if active:
+            cx, cy = self._checked_at
+            if not math.hypot(x - cx, y - cy) < self._budget:
+                self._check_tethers(active)
+        if self._next_ready <= self.n_substeps_done * self.dt_s + 1e-9:
+            self._activate_ready()
+
+    def _step_reel_fast(self) -> None:
+        cp, body, space, dt, hypot = _cp, self._body_ptr, self._space_ptr, self.dt_s, math.hypot
+        get_pos, get_vel, set_max, step, impulse = (cp.cpBodyGetPosition, cp.cpBodyGetVelocity, cp.cpSlideJointSetMax,
+                                                    cp.cpSpaceStep, cp.cpConstraintGetImpulse)
+        x, y, vx0, vy0 = self._begin_fast()
+        for _ in range(self.substeps):
+            active = self._active
+            if active is None:
+                active = self._active = [t for t in self._tethers if t is not None and t.pulling]
+                self._budget = -1.0
+            px, py = x + vx0 * dt, y + vy0 * dt
+            units = []
+            for t in active:
+                ax, ay = t.ax, t.ay
+                d = hypot(ax - px, ay - py)
+                units.append(((ax - px) / d, (ay - py) / d))
+                if not t.held:
+                    set_max(t.jptr, max(0.0, d - t.w * dt))
+            step(space, dt)
+            v = get_vel(body)
+            vx1, vy1 = v.x, v.y
+            if active:
+                mx, my = 0.5 * (vx0 + vx1), 0.5 * (vy0 + vy1)
+                for t, (ux, uy) in zip(active, units):
+                    work = impulse(t.jptr) * (ux * mx + uy * my)
+                    if work > 0.0:
+                        self.winch_work_J += work
+            self.n_substeps_done += 1
+            p = get_pos(body)
+            x, y, vx0, vy0 = p.x, p.y, vx1, vy1
+            self._after_substep_fast(active, x, y)
+
+    def _step_force_fast(self) -> None:
+        cp, body, space, dt, hypot = _cp, self._body_ptr, self._space_ptr, self.dt_s, math.hypot
+        get_pos, get_vel, set_force, step = cp.cpBodyGetPosition, cp.cpBodyGetVelocity, cp.cpBodySetForce, cp.cpSpaceStep
+        winch = self._winch_N
+        x, y, vx0, vy0 = self._begin_fast()
+        for _ in range(self.substeps):
+            active = self._active
+            if active is None:
+                active = self._active = [t for t in self._tethers if t is not None and t.pulling]
+                self._budget = -1.0
+            fx = fy = 0.0
+            tensions = []
+            for t in active:
+                ax, ay = t.ax, t.ay
+                d = hypot(ax - x, ay - y)
+                ux, uy = (ax - x) / d, (ay - y) / d
+                shortfall = (0.0 if t.held else 1.0) - (vx0 * ux + vy0 * uy) / t.w
+                tension = winch * (0.0 if shortfall < 0.0 else (1.0 if shortfall > 1.0 else shortfall))
+                tensions.append((tension, ux, uy))
+                fx += tension * ux
+                fy += tension * uy
+            set_force(body, (fx, fy))
+            step(space, dt)
+            v = get_vel(body)
+            vx1, vy1 = v.x, v.y
+            if active:
+                mx, my = 0.5 * (vx0 + vx1), 0.5 * (vy0 + vy1)
+                for tension, ux, uy in tensions:
+                    work = tension * dt * (ux * mx + uy * my)
+                    if work > 0.0:
+                        self.winch_work_J += work
+            self.n_substeps_done += 1
+            p = get_pos(body)
+            x, y, vx0, vy0 = p.x, p.y, vx1, vy1
+            self._after_substep_fast(active, x, y)
+
+    def _step_kinematic_fast(self) -> None:
+        cp, body, space, dt, hypot = _cp, self._body_ptr, self._space_ptr, self.dt_s, math.hypot
+        get_pos, set_vel, step = cp.cpBodyGetPosition, cp.cpBodySetVelocity, cp.cpSpaceStep
+        winch, cache = self._winch_N, self._cache
+        x, y, _, _ = self._begin_fast()
+        for _ in range(self.substeps):
+            active = self._active
+            if active is None:
+                active = self._active = [t for t in self._tethers if t is not None and t.pulling]
+                self._budget = -1.0
+            if active:
+                reeling = [t for t in active if not t.held] if len(active) > 1 or active[0].held else active
+            else:
+                reeling = active
+            if reeling:
+                w = reeling[0].w
+                if len(reeling) == 1:
+                    nx, ny = _rk4_one(x, y, reeling[0].ax, reeling[0].ay, w, dt)
+                else:
+                    ws = None if all(t.w == w for t in reeling) else [t.w for t in reeling]
+                    nx, ny = _rk4_eq5(x, y, [(t.ax, t.ay) for t in reeling], w, dt, ws)
+                vx, vy = (nx - x) / dt, (ny - y) / dt
+                if len(reeling) < len(active):
+                    vx, vy = _keep_lengths(x, y, vx, vy, [t for t in active if t.held])
+                sx, sy = self._wall_seen_at
+                if not (cache and hypot(x - sx, y - sy) < self._wall_margin):
+                    vx, vy = self._slide_along_walls(x, y, vx, vy)
+                work = 0.0
+                for t in reeling:
+                    ux, uy = t.ax - x, t.ay - y
+                    rate = (vx * ux + vy * uy) / hypot(ux, uy)
+                    if rate > 0.0:
+                        work += winch * rate * dt
+                self.winch_work_J += work
+            else:
+                vx = vy = 0.0
+            set_vel(body, (vx, vy))
+            step(space, dt)
+            self.n_substeps_done += 1
+            p = get_pos(body)
+            x, y = p.x, p.y
+            self._after_substep_fast(active, x, y)
 
     def _substep(self) -> None:
         """One physics step of ``dt_s``: the tethers pull, pymunk steps, then the tether checks and attachments."""
@@ -512,10 +651,10 @@ class TetherWorld:
 
         A visible tether can only lose its line of sight when the segment from the cargo to the anchor sweeps
         over a notch (a reflex vertex): touching an edge's inside, or a convex corner, from the interior means
-        crossing it, so the first contact is at a notch. Every point of that segment moves at most as far as the
-        cargo does (the anchor end is fixed), so while the cargo stays within the segment's distance to the
-        nearest notch, measured at the last exact test, the tether is still in sight and the shapely test is
-        skipped. One budget covers every pulling tether: how far the cargo may move before any tether could
+        crossing it, so the first contact is at a notch, and the segment passes through a notch exactly when the
+        cargo is on the ray from the anchor through that notch, beyond it. So while the cargo stays closer to
+        where it was last tested exactly than to any such ray, the tether is still in sight and the shapely test
+        is skipped. One budget covers every pulling tether: how far the cargo may move before any tether could
         reach its stop radius or need an exact test, so most substeps check one distance.
         """
         x, y = self.state()[:2]
@@ -535,11 +674,11 @@ class TetherWorld:
                 held.append((robot, t))
                 exact.append(t.anchor)
         if held:
-            for (robot, t), visible in zip(held, self.station.line_of_sight((x, y), exact)):
+            for (robot, t), visible in zip(held, self.station.sees(x, y, exact)):
                 if not visible:
                     self.release(robot, "snagged")
                 elif self._cache:
-                    t.seen_at, t.clearance = (x, y), self._notch_clearance(x, y, t.ax, t.ay)
+                    t.seen_at, t.clearance = (x, y), self._notch_clearance(x, y, t.anchor)
         self._checked_at = (x, y)
         budget = math.inf if self._cache else -1.0
         for t in self._tethers:
@@ -550,15 +689,13 @@ class TetherWorld:
                 budget = min(budget, stop, sight)
         self._budget = budget - _CHECK_MARGIN_M
 
-    def _notch_clearance(self, x: float, y: float, ax: float, ay: float) -> float:
-        """Distance (m) from the segment cargo-anchor to the nearest notch (inf without notches)."""
-        notches = self._notches
-        if len(notches) == 0:
-            return math.inf
-        ex, ey = ax - x, ay - y
-        rx, ry = notches[:, 0] - x, notches[:, 1] - y
-        s = np.clip((rx * ex + ry * ey) / (ex * ex + ey * ey), 0.0, 1.0)
-        return float(np.hypot(rx - s * ex, ry - s * ey).min())
+    def _notch_clearance(self, x: float, y: float, anchor: int) -> float:
+        """How far (m) the cargo may move from (x, y) before its tether to ``anchor`` could touch a notch: the
+        distance to the rays from the notches away from the anchor (:mod:`impact_env.tether.sight`)."""
+        rays = self._notch_rays.get(anchor, ...)
+        if rays is ...:
+            rays = self._notch_rays[anchor] = shadow_rays(np.asarray(self._anchors[anchor]), self._notches)
+        return distance_to_rays(x, y, rays)
 
 
 def _keep_lengths(x: float, y: float, vx: float, vy: float, held: list[_Tether]) -> tuple[float, float]:
@@ -592,6 +729,25 @@ def eq5_velocity(x: float, y: float, anchors: list[tuple[float, float]], w: floa
         vx += wi * dx / d
         vy += wi * dy / d
     return vx, vy
+
+
+def _rk4_one(x: float, y: float, ax: float, ay: float, w: float, dt: float) -> tuple[float, float]:
+    """:func:`_rk4_eq5` for one anchor, written out (the same operations in the same order)."""
+    dx, dy = ax - x, ay - y
+    d = math.hypot(dx, dy)
+    k1x, k1y = w * (0.0 + dx / d), w * (0.0 + dy / d)
+    h = 0.5 * dt
+    dx, dy = ax - (x + h * k1x), ay - (y + h * k1y)
+    d = math.hypot(dx, dy)
+    k2x, k2y = w * (0.0 + dx / d), w * (0.0 + dy / d)
+    dx, dy = ax - (x + h * k2x), ay - (y + h * k2y)
+    d = math.hypot(dx, dy)
+    k3x, k3y = w * (0.0 + dx / d), w * (0.0 + dy / d)
+    dx, dy = ax - (x + dt * k3x), ay - (y + dt * k3y)
+    d = math.hypot(dx, dy)
+    k4x, k4y = w * (0.0 + dx / d), w * (0.0 + dy / d)
+    sixth = dt / 6.0
+    return (x + sixth * (k1x + 2.0 * k2x + 2.0 * k3x + k4x), y + sixth * (k1y + 2.0 * k2y + 2.0 * k3y + k4y))
 
 
 def _rk4_eq5(x: float, y: float, anchors: list[tuple[float, float]], w: float, dt: float,

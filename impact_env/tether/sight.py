@@ -2,15 +2,19 @@
 
 The exact test (:meth:`Station.line_of_sight`, a shapely ``covers`` of one segment per anchor) costs more than
 a control step of the physics, and the environments need the whole mask every step. Whether the segment from
-a point inside the station to an anchor on its boundary leaves the station changes only when the segment
-sweeps over a vertex of the polygon: it meets the boundary transversally or not at all, and moving from one
-to the other means touching it first, which a segment from an interior point to a boundary point can do only
-at a vertex (a point inside the anchor's own wall is never touched from inside, and a cargo centre on the
-line of that wall makes the segment pass through the wall's end vertex). Every point of the segment moves at
-most as far as its cargo end, so while the cargo stays within the segment's distance to the nearest vertex,
-measured at the last exact test, the anchor's entry of the mask is unchanged. :class:`SightCache` keeps one
-such radius for the whole mask (the smallest over the anchors) and recomputes exactly when the cargo leaves
-it: the same masks as the exact test, bit for bit (``tests/test_tether_sight.py``).
+a point ``x`` inside the station to an anchor ``a`` on its boundary leaves the station can only change when
+the segment passes through a notch (a reflex vertex) or ``x`` crosses the line of the anchor's own wall. The
+set of ``x`` that see ``a`` is closed, and open except where the segment touches the boundary away from ``a``:
+touching a wall's inside from the interior means running along it, and a segment through a convex corner
+leaves the station on one side of it, so the touch is at a notch; a cargo centre on the line of the anchor's
+wall makes the segment pass through that wall's end. The segment contains such a point ``v`` exactly when
+``x`` lies on the ray from ``a`` through ``v``, beyond ``v`` (an anchor on a vertex is tested exactly every
+time). So the mask entry of ``a`` is unchanged while the cargo stays closer to
+its last exactly tested position than to any of ``a``'s rays: :class:`SightCache` keeps that radius per anchor,
+tests exactly only the anchors whose radius the cargo has left, and skips even that check while the cargo is
+within the smallest remaining radius of all. The masks are those of the exact test, bit for bit
+(``tests/test_tether_sight.py``). The tethers' snag check uses the same bound over the notches only (a visible
+tether can lose sight only at a reflex vertex).
 """
 
 from __future__ import annotations
@@ -18,46 +22,130 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import shapely
 
 from impact_env.tether.station import Station
 
-MARGIN_M = 1e-7  # the cache ends this much before the distance it relies on (the exact test's 1 nm and rounding)
+MARGIN_M = 1e-7  # a radius ends this much early (the exact test's 1 nm tolerance, and rounding)
+
+
+def shadow_rays(anchor: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Origins and unit directions (each (m, 2)) of the rays on which a segment from a cargo centre to ``anchor``
+    passes through one of ``points``: from each point away from the anchor. None when the anchor sits on one of
+    the points (its segments always touch it: no radius holds)."""
+    rel = points - anchor
+    dist = np.hypot(rel[:, 0], rel[:, 1])
+    if len(points) and dist.min() <= 1e-9:
+        return None
+    return points.copy(), rel / dist[:, None]
+
+
+def distance_to_rays(x: float, y: float, rays: tuple[np.ndarray, np.ndarray] | None) -> float:
+    """The smallest distance (m) from (x, y) to the rays (inf without rays, 0 for None)."""
+    if rays is None:
+        return 0.0
+    origins, directions = rays
+    if not len(origins):
+        return math.inf
+    rx, ry = x - origins[:, 0], y - origins[:, 1]
+    s = np.maximum(rx * directions[:, 0] + ry * directions[:, 1], 0.0)
+    return float(np.hypot(rx - s * directions[:, 0], ry - s * directions[:, 1]).min())
 
 
 class SightCache:
-    """``mask(x, y)``: :meth:`Station.line_of_sight` of every anchor, recomputed only when it may have changed.
+    """``mask(x, y)``: :meth:`Station.line_of_sight` of every anchor, re-tested only where it may have changed.
 
-    A station with an anchor on a vertex of its polygon is never cached (that anchor's segments touch it).
+    Per anchor it keeps a lower bound on the distance from the reference point to the anchor's rays. While the
+    cargo stays within the smallest of them nothing can have changed. Past it, an anchor whose bound the cargo
+    has left is checked against the last move (from the previous point, where the mask is known, to the new
+    one): a move that crosses none of its rays leaves its entry as it was, and only a move that crosses one (or
+    a move too long to be a straight path inside the station) is tested exactly.
     """
 
     def __init__(self, station: Station) -> None:
         self.station = station
-        self._anchors = station.anchor_positions
-        vertices = np.array(station.polygon, dtype=float)
-        self._vertices = vertices
-        self._seen_at = (math.nan, math.nan)
-        self._radius = -1.0
-        self._mask = np.zeros(station.n_anchors, dtype=bool)
-        self.exact_tests = 0
+        polygon = np.array(station.polygon, dtype=float)
+        self._rays: list[list[tuple[float, float, float, float]] | None] = []
+        for a in station.anchors:
+            ax, ay = (float(c) for c in a.position_m)
+            if np.hypot(polygon[:, 0] - ax, polygon[:, 1] - ay).min() <= 1e-9:
+                self._rays.append(None)  # an anchor on a vertex: always tested exactly
+                continue
+            ends = polygon[[a.wall, (a.wall + 1) % len(polygon)]]
+            rays = []
+            for vx, vy in np.concatenate([station.notches, ends]):
+                d = math.hypot(vx - ax, vy - ay)
+                rays.append((float(vx), float(vy), (vx - ax) / d, (vy - ay) / d))
+            self._rays.append(rays)
+        self._points = station.anchor_points
+        self._sight_polygon = station._sight_polygon
+        self._longest_move = 1.9 * station.cargo.radius_m  # a straight move this short stays inside the station
+        n = station.n_anchors
+        self._mask = np.zeros(n, dtype=bool)
+        self._slack = [-1.0] * n  # per anchor: no ray of it within this distance of the reference point
+        self._ref = (math.nan, math.nan)
+        self._last = (math.nan, math.nan)  # the previous point asked for (its mask is known)
+        self._calm = -1.0  # min of the slacks
+        self.exact_tests = 0  # anchors tested exactly (for the tests and the benchmark)
 
     def mask(self, x: float, y: float) -> np.ndarray:
-        """The line-of-sight mask from the cargo centre (x, y) (bool, n_anchors; do not modify it)."""
-        sx, sy = self._seen_at
-        if math.hypot(x - sx, y - sy) < self._radius:
+        """The line-of-sight mask from the cargo centre (x, y) (bool, n_anchors; updated in place by later calls)."""
+        rx, ry = self._ref
+        moved = math.hypot(x - rx, y - ry)
+        if moved < self._calm:
+            self._last = (x, y)
             return self._mask
-        self._mask = self.station.line_of_sight((x, y))
-        self.exact_tests += 1
-        self._seen_at = (x, y)
-        self._radius = self._clearance(x, y) - MARGIN_M
+        lx, ly = self._last
+        step_ok = math.hypot(x - lx, y - ly) < self._longest_move  # NaN (first call) is not ok
+        slack, rays_of = self._slack, self._rays
+        exact = []
+        for i in range(len(slack)):
+            if moved < slack[i]:
+                slack[i] -= moved
+                continue
+            rays = rays_of[i]
+            if rays is None or not step_ok or _crosses(lx, ly, x, y, rays):
+                exact.append(i)
+            slack[i] = _distance(x, y, rays) - MARGIN_M
+        if exact:
+            points = self._points
+            self._mask[exact] = shapely.covers(self._sight_polygon,
+                                               shapely.linestrings([[points[i], (x, y)] for i in exact]))
+            self.exact_tests += len(exact)
+        self._ref = self._last = (x, y)
+        self._calm = min(slack) if slack else math.inf
         return self._mask
 
-    def _clearance(self, x: float, y: float) -> float:
-        """The smallest distance (m) from a segment (x, y) -> anchor to a vertex of the polygon (inf if none)."""
-        a, v = self._anchors, self._vertices
-        if not len(a):
-            return math.inf
-        ex, ey = a[:, 0] - x, a[:, 1] - y  # (n_anchors,)
-        rx, ry = v[None, :, 0] - x, v[None, :, 1] - y  # (1, n_vertices)
-        ee = ex * ex + ey * ey
-        s = np.clip((rx * ex[:, None] + ry * ey[:, None]) / np.maximum(ee, 1e-300)[:, None], 0.0, 1.0)
-        return float(np.hypot(rx - s * ex[:, None], ry - s * ey[:, None]).min())
+
+def _distance(x: float, y: float, rays: list | None) -> float:
+    """The distance (m) from (x, y) to the nearest of the rays (0 for None)."""
+    if rays is None:
+        return 0.0
+    best = math.inf
+    for ox, oy, dx, dy in rays:
+        px, py = x - ox, y - oy
+        t = px * dx + py * dy
+        if t > 0.0:
+            px, py = px - t * dx, py - t * dy
+        d = math.hypot(px, py)
+        if d < best:
+            best = d
+    return best
+
+
+def _crosses(x0: float, y0: float, x1: float, y1: float, rays: list) -> bool:
+    """Whether the segment (x0, y0) -> (x1, y1) meets one of the rays (within MARGIN_M)."""
+    ex, ey = x1 - x0, y1 - y0
+    for ox, oy, dx, dy in rays:
+        # side of each end against the ray's line, then where the segment meets the line along the ray
+        s0 = (x0 - ox) * dy - (y0 - oy) * dx
+        s1 = (x1 - ox) * dy - (y1 - oy) * dx
+        if (s0 > MARGIN_M and s1 > MARGIN_M) or (s0 < -MARGIN_M and s1 < -MARGIN_M):
+            continue
+        if abs(s0) <= MARGIN_M and abs(s1) <= MARGIN_M:
+            return True  # along the ray's line: let the exact test decide
+        u = s0 / (s0 - s1)
+        px, py = x0 + u * ex - ox, y0 + u * ey - oy
+        if px * dx + py * dy >= -MARGIN_M:
+            return True
+    return False

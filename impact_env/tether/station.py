@@ -136,6 +136,23 @@ class Station:
         return np.array([a.position_m for a in self.anchors], dtype=float).reshape(-1, 2)
 
     @cached_property
+    def anchor_points(self) -> tuple[tuple[float, float], ...]:
+        """The anchor positions as (x, y) float pairs (what the physics' hot loop reads)."""
+        return tuple((float(a.position_m[0]), float(a.position_m[1])) for a in self.anchors)
+
+    @cached_property
+    def wall_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Wall start points, wall vectors (each (n, 2)) and squared lengths (n,): the physics' wall contacts."""
+        ends = np.array(self.walls, dtype=float)
+        starts, vectors = ends[:, 0], ends[:, 1] - ends[:, 0]
+        return starts, vectors, np.einsum("ij,ij->i", vectors, vectors)
+
+    def sees(self, x: float, y: float, anchors: list[int]) -> np.ndarray:
+        """:meth:`line_of_sight` from (x, y) of a few anchors (bool, len(anchors)), without its input handling."""
+        points = self.anchor_points
+        return shapely.covers(self._sight_polygon, shapely.linestrings([[points[a], (x, y)] for a in anchors]))
+
+    @cached_property
     def notches(self) -> np.ndarray:
         """(m, 2) the reflex vertices (interior angle > 180 deg): the only corners a tether can snag on."""
         p = np.array(self.polygon, dtype=float)
