@@ -6,4 +6,9 @@ in 0.4.0; use :mod:`impact_env.tether_v1`): agents ``robot_0 ..``, the "eventual
     env = tether_v0.parallel_env(station="L", fidelity="reel")   # or env() / raw_env() for the AEC form
 """
 
-from impact_env.tether.pettingzoo_env import TetherParallelEnvV0 as TetherParallelEnv, env_v0 as env, parallel_env_v0 as parallel_env, raw_env_v0 as raw_env  # noqa: E501, F401
+from impact_env.tether.pettingzoo_env import TetherParallelEnvV0 as TetherParallelEnv
+from impact_env.tether.pettingzoo_env import env_v0 as env
+from impact_env.tether.pettingzoo_env import parallel_env_v0 as parallel_env
+from impact_env.tether.pettingzoo_env import raw_env_v0 as raw_env
+
+__all__ = ["TetherParallelEnv", "env", "parallel_env", "raw_env"]

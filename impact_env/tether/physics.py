@@ -140,7 +140,8 @@ class TetherWorld:
             raise TetherError(f"pull_speed_mps must be a finite number > 0, got {pull_speed_mps!r}")
         speeds = [w] * station.n_robots if winch_speeds_mps is None else [float(s) for s in winch_speeds_mps]
         if len(speeds) != station.n_robots or not all(math.isfinite(s) and s > 0 for s in speeds):
-            raise TetherError(f"winch_speeds_mps must be {station.n_robots} finite numbers > 0, got {winch_speeds_mps!r}")
+            raise TetherError(f"winch_speeds_mps must be {station.n_robots} finite numbers > 0, got "
+                              f"{winch_speeds_mps!r}")
         self.station = station
         self.fidelity = fidelity
         self.w_mps = w
@@ -419,7 +420,8 @@ class TetherWorld:
 
     def _step_force_fast(self) -> None:
         cp, body, space, dt, hypot = _cp, self._body_ptr, self._space_ptr, self.dt_s, math.hypot
-        get_pos, get_vel, set_force, step = cp.cpBodyGetPosition, cp.cpBodyGetVelocity, cp.cpBodySetForce, cp.cpSpaceStep
+        get_pos, get_vel, set_force = cp.cpBodyGetPosition, cp.cpBodyGetVelocity, cp.cpBodySetForce
+        step = cp.cpSpaceStep
         winch = self._winch_N
         x, y, vx0, vy0 = self._begin_fast()
         for _ in range(self.substeps):
