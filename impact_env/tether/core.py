@@ -29,8 +29,8 @@ from impact_env.stl import parse
 from impact_env.tether.faults import FaultConfig, FaultSchedule
 from impact_env.tether.physics import FIDELITIES, TetherWorld
 from impact_env.tether.sight import SightCache
-from impact_env.tether.station import Station, load_station
-from impact_env.tether.task_monitor import task_monitor
+from impact_env.tether.station import CARGO, DRIFT, Station, load_station
+from impact_env.tether.task_monitor import HoldMonitor, task_monitor
 
 REWARD_MODES = ("dense", "sparse")
 KEEP, RELEASE, ATTACH0 = 0, 1, 2
@@ -112,6 +112,7 @@ class TetherCore:
         self.dt_s = st.control_period_s
         self.monitor = task_monitor(parse(self.task), st.region_map(), self.dt_s)
         self.horizon_steps = self.monitor.horizon_steps
+        self._pair_monitor = isinstance(self.monitor, HoldMonitor)
         # per robot: anchor one-hot, attach time left (fraction), tether length, and in v1 the holding flag
         self.robot_block = self.n_anchors + (3 if version >= 1 else 2)
         xmin, xmax, ymin, ymax = st.bounds
@@ -131,10 +132,15 @@ class TetherCore:
         self.obs_high = np.concatenate([[xmax, ymax, v_max, v_max], np.tile(robot_high, self.n_robots),
                                         np.ones(self.n_anchors), [1.0]]).astype(np.float32)
         self._los0 = 4 + self.n_robots * self.robot_block
+        self._drift_time = st.drift_time_s  # the task's bodies: see Station.task_positions
         self._goal = st.goal_box
         self._rest2 = st.rest_speed_mps ** 2
         self.world: TetherWorld | None = None
         self.sight = SightCache(st)
+        self._buf = np.zeros(self.obs_size, dtype=np.float32)
+        self._buf_changes, self._buf_sight, self._buf_tethers = -1, -1, []
+        self._bounds4 = (self.obs_low[:4].astype(float).tolist(), self.obs_high[:4].astype(float).tolist())
+        self._obs_at = None
         self.step_count = 0
         self.schedule = FaultSchedule([], (1.0,) * self.n_robots)
         self._reset_counters()
@@ -200,20 +206,24 @@ class TetherCore:
         speeds = None
         if self.schedule.winch_factors != (1.0,) * self.n_robots:
             speeds = [self.pull_speed_mps * f for f in self.schedule.winch_factors]
-        self.world = TetherWorld(st, self.fidelity, pull_speed_mps=self.pull_speed_mps, start_m=start,
-                                 winch_speeds_mps=speeds)
+        if self.world is None:
+            self.world = TetherWorld(st, self.fidelity, pull_speed_mps=self.pull_speed_mps, start_m=start,
+                                     winch_speeds_mps=speeds)
+        else:  # the same as a fresh world, bit for bit (TetherWorld.restart), at a fraction of the cost
+            self.world.restart(start, speeds)
         self.step_count = 0
         self._reset_counters()
         self._pending_faults = list(self.schedule.events)
         self.monitor.reset()
         x, y, vx, vy = self.world.state()
-        self._read(x, y, vx, vy)
+        self._read(x, y, vx, vy, jump=True)
+        self._obs_at = None
         self.robustness = self._clip(self.monitor.update(st.task_positions(x, y, vx, vy)))
         self._track_goal(x, y, vx, vy, 0.0)
 
-    def _read(self, x: float, y: float, vx: float, vy: float) -> None:
+    def _read(self, x: float, y: float, vx: float, vy: float, jump: bool = False) -> None:
         self._state = [(x, y, vx, vy, 0.0, 0.0)]  # one body, the layout of the impact world's state
-        self._los = self.sight.mask(x, y)
+        self._los = self.sight.restart(x, y) if jump else self.sight.mask(x, y)
 
     def _clip(self, rho: float) -> float:
         limit = self.robustness_limit_m
@@ -333,9 +343,10 @@ class TetherCore:
 
     def step(self, action: Any) -> tuple[float, bool, dict[str, Any]]:
         """Apply one command per robot and simulate one control period; returns (reward, terminated, info)."""
-        check_can_step(self)
-        commands = self.decode(action)
         world = self.world
+        if world is None or self.step_count >= self.horizon_steps:
+            check_can_step(self)
+        commands = self.decode(action)
         rejected: list[dict] = []
         for robot, command in enumerate(commands):
             if command:
@@ -343,15 +354,16 @@ class TetherCore:
         if self._pending_faults and self._pending_faults[0][0] <= self.time_s + 1e-9:
             self._apply_faults()
         work0 = world.winch_work_J
-        x0, y0 = self._state[0][:2]
+        x0, y0 = self._state[0][0], self._state[0][1]
         events = world.step()  # with the events of the commands above
         self.step_count += 1
         x1, y1, vx, vy = world.state()
-        self._read(x1, y1, vx, vy)
+        self._state = [(x1, y1, vx, vy, 0.0, 0.0)]  # one body, the layout of the impact world's state
+        self._los = self.sight.mask(x1, y1)
         self.path_length_m += math.hypot(x1 - x0, y1 - y0)
         self._track_goal(x1, y1, vx, vy, self.dt_s)
-        step_events = [e.to_dict() for e in events] if events else []
         if events:
+            step_events = [e.to_dict() for e in events]
             self.events.extend(step_events)
             for e in events:
                 if e.kind == "snagged":
@@ -360,8 +372,17 @@ class TetherCore:
                     self.failed_anchors.add(e.anchor)
                 elif e.kind == "dropped_out":
                     self.dropped_robots.add(e.robot)
+        else:
+            step_events = []
         work = world.winch_work_J - work0
-        estimate = self._clip(self.monitor.update(self.station.task_positions(x1, y1, vx, vy)))
+        t = self._drift_time
+        if self._pair_monitor:
+            estimate = self.monitor.update_pair(CARGO, x1, y1, vx * t, vy * t)
+        else:
+            estimate = self.monitor.update({CARGO: (x1, y1), DRIFT: (vx * t, vy * t)})
+        limit = self.robustness_limit_m
+        if not -limit <= estimate <= limit:
+            estimate = self._clip(estimate)
         self.robustness = estimate
         terminated = self.step_count >= self.horizon_steps
         if self.reward_mode == "dense":
@@ -387,41 +408,62 @@ class TetherCore:
             "wall_contacts": world.wall_contacts if world is not None else 0,
             "speed_mps": math.hypot(vx, vy), "time_to_goal_s": self.time_to_goal_s,
             "time_in_goal_s": self.time_in_goal_s, "time_at_rest_in_goal_s": self.time_at_rest_in_goal_s,
-            "failed_anchors": sorted(self.failed_anchors), "dropped_robots": sorted(self.dropped_robots),
+            "failed_anchors": sorted(self.failed_anchors) if self.failed_anchors else [],
+            "dropped_robots": sorted(self.dropped_robots) if self.dropped_robots else [],
             "events": events or [], "rejected": rejected or [],
         }
 
     # ------------------------------------------------------------------------------------- observation
     def observation(self) -> np.ndarray:
         """Central observation (see TetherEnv's docstring for the layout)."""
-        return self._observe(range(self.n_robots))
+        return self._central().copy()
 
     def agent_observation(self, robot: int) -> np.ndarray:
         """A robot's observation: the same layout with its own block first, then the others in order."""
-        return self._observe([robot] + [i for i in range(self.n_robots) if i != robot])
+        out = self._central().copy()
+        if robot:
+            order = [robot] + [i for i in range(self.n_robots) if i != robot]
+            blocks = slice(4, self._los0)
+            out[blocks] = out[blocks].reshape(self.n_robots, self.robot_block)[order].reshape(-1)
+        return out
 
-    def _observe(self, order) -> np.ndarray:
-        world, n = self.world, self.n_anchors
-        out = np.zeros(self.obs_size, dtype=np.float32)
+    def _central(self) -> np.ndarray:
+        """The central observation of this step, kept up to date in one buffer: the robot blocks are rewritten
+        when a tether changed, the mask when the line of sight may have, the rest every step (the same values as
+        building it from zeros)."""
+        world, sight = self.world, self.sight
+        now = (world, self.step_count)
+        if self._obs_at == now:
+            return self._buf
+        buf, n = self._buf, self.n_anchors
+        if self._obs_at is None or self._obs_at[0] is not world or self._buf_changes != world.changes:
+            block, flag = self.robot_block, self.hold_command is not None
+            buf[4: self._los0] = 0.0
+            self._buf_tethers = []
+            for robot, t in enumerate(world._tethers):
+                if t is not None:
+                    base = 4 + robot * block
+                    buf[base + t.anchor] = 1.0
+                    if flag and t.held:
+                        buf[base + n + 2] = 1.0
+                    self._buf_tethers.append((base + n, t))
+            self._buf_changes = world.changes
         x, y, vx, vy = self._state[0][:4]
-        out[:4] = (x, y, vx, vy)
-        t_switch = self.station.switch_time_s
-        block, flag, now = self.robot_block, self.hold_command is not None, world.time_s
-        tethers = world._tethers
-        for slot, robot in enumerate(order):
-            t = tethers[robot]
-            if t is not None:
-                base = 4 + slot * block
-                out[base + t.anchor] = 1.0
-                if not t.pulling and t_switch > 0:
-                    out[base + n] = max(0.0, t.ready_s - now) / t_switch
-                out[base + n + 1] = math.hypot(t.ax - x, t.ay - y)
-                if flag and t.held:
-                    out[base + n + 2] = 1.0
-        los0 = self._los0
-        out[los0: los0 + n] = self._los
-        out[-1] = time_left(self)
-        return clip_to_space(out, self)
+        buf[0], buf[1], buf[2], buf[3] = x, y, vx, vy
+        t_switch, clock = self.station.switch_time_s, world.time_s
+        for at, t in self._buf_tethers:
+            buf[at] = max(0.0, t.ready_s - clock) / t_switch if not t.pulling and t_switch > 0 else 0.0
+            buf[at + 1] = math.hypot(t.ax - x, t.ay - y)
+        if self._buf_sight != sight.version:
+            buf[self._los0: self._los0 + n] = self._los
+            self._buf_sight = sight.version
+        buf[-1] = time_left(self)
+        low, high = self._bounds4
+        if not (low[0] <= x <= high[0] and low[1] <= y <= high[1] and low[2] <= vx <= high[2]
+                and low[3] <= vy <= high[3]):
+            clip_to_space(buf, self)  # the one bound a state could leave (the others hold by construction)
+        self._obs_at = now
+        return buf
 
     def line_of_sight_mask(self) -> np.ndarray:
         """Which anchors a tether from the cargo reaches now (bool, n_anchors)."""

@@ -178,18 +178,23 @@ class TetherWorld:
         cargo = pymunk.Body(self._mass, pymunk.moment_for_circle(self._mass, 0.0, r), body_type=pymunk.Body.DYNAMIC)
         cargo.position = station.cargo.start_m if start_m is None else (float(start_m[0]), float(start_m[1]))
         shape = pymunk.Circle(cargo, r)
-        shape.elasticity, shape.friction = elasticity, 0.0
-        shape.collision_type = 1
-        walls = []
-        for a, b in station.walls:
-            seg = pymunk.Segment(space.static_body, a, b, 0.0)
-            seg.elasticity, seg.friction = elasticity, 0.0
-            walls.append(seg)
+        static = space.static_body
+        walls = [pymunk.Segment(static, a, b, 0.0) for a, b in station.walls]
+        if _cp is not None and fast:  # the C setters behind pymunk's properties (each property set costs more)
+            for s in [shape, *walls]:
+                _cp.cpShapeSetElasticity(s._shape, elasticity)
+                _cp.cpShapeSetFriction(s._shape, 0.0)
+            _cp.cpShapeSetCollisionType(shape._shape, 1)
+        else:
+            for s in [shape, *walls]:
+                s.elasticity, s.friction = elasticity, 0.0
+            shape.collision_type = 1
         space.add(cargo, shape, *walls)
         space.on_collision(1, 0, begin=_count_contact, data=self)
         self.cargo = cargo
         self._tethers: list[_Tether | None] = [None] * station.n_robots
         self._events: list[TetherEvent] = []
+        self.changes = 0  # counts every change of a robot's tether (attach, start, hold, reel, release)
         self._active: list[_Tether] | None = None  # the pulling tethers in robot order; None: to be rebuilt
         self._next_ready = math.inf  # the earliest ready time of an attaching tether
         self._budget = -1.0  # how far the cargo may move from _checked_at before a tether check can change anything
@@ -197,6 +202,51 @@ class TetherWorld:
         self._fast = _cp is not None and bool(fast)
         if self._fast:
             self._body_ptr, self._space_ptr = cargo._body, space._space
+
+    def restart(self, start_m: tuple[float, float] | None = None,
+                winch_speeds_mps: Sequence[float] | None = None) -> TetherWorld:
+        """This world as a fresh one would be (the same trajectories, bit for bit), without rebuilding pymunk.
+
+        What a used space holds beyond a fresh one: the tethers' joints (removed), the cargo's state (set: at
+        rest at the start, no force, no rotation), and chipmunk's cache of contacts, which would warm-start a
+        contact that resumes within three steps and skip its ``begin``: removing the cargo's shape and adding it
+        again drops every cached contact of it, as chipmunk does for any removed shape. The one other difference,
+        the previous step length that chipmunk scales cached impulses by (0 in a fresh space), then multiplies
+        nothing: no contact is cached and a new joint's impulse starts at 0. The static walls are untouched.
+        """
+        for robot, t in enumerate(self._tethers):
+            if t is not None and t.joint is not None:
+                self.space.remove(t.joint)
+        shape = next(iter(self.cargo.shapes))
+        self.space.remove(shape)
+        self.space.add(shape)
+        cargo = self.cargo
+        cargo.position = self.station.cargo.start_m if start_m is None else (float(start_m[0]), float(start_m[1]))
+        cargo.velocity = (0.0, 0.0)
+        cargo.force = (0.0, 0.0)
+        cargo.angle = 0.0
+        cargo.angular_velocity = 0.0
+        cargo.torque = 0.0
+        speeds = [self.w_mps] * self.station.n_robots if winch_speeds_mps is None else \
+            [float(v) for v in winch_speeds_mps]
+        if len(speeds) != self.station.n_robots or not all(math.isfinite(v) and v > 0 for v in speeds):
+            raise TetherError(f"winch_speeds_mps must be {self.station.n_robots} finite numbers > 0, got "
+                              f"{winch_speeds_mps!r}")
+        self.winch_speeds_mps = tuple(speeds)
+        self.n_substeps_done = 0
+        self.winch_work_J = 0.0
+        self.wall_contacts = 0
+        self._wall_seen_at, self._wall_margin = (math.nan, math.nan), -1.0
+        self.failed_anchors = set()
+        self.dropped_robots = set()
+        self._tethers = [None] * self.station.n_robots
+        self._events = []
+        self.changes += 1
+        self._active = None
+        self._next_ready = math.inf
+        self._budget = -1.0
+        self._checked_at = (math.nan, math.nan)
+        return self
 
     # ---------------------------------------------------------------------------------------- state
     @property
@@ -265,6 +315,7 @@ class TetherWorld:
         tether = _Tether(anchor, self._anchors[anchor], self.time_s + max(0.0, float(delay_s)),
                          self.winch_speeds_mps[robot])
         self._tethers[robot] = tether
+        self.changes += 1
         if tether.ready_s <= self.time_s + 1e-12:
             self._activate(robot, tether)
         else:
@@ -279,6 +330,7 @@ class TetherWorld:
             self.space.remove(t.joint)
         self._tethers[robot] = None
         self._active = None
+        self.changes += 1
         self._events.append(TetherEvent(self.time_s, kind, robot, t.anchor))
 
     def hold(self, robot: int) -> bool:
@@ -291,13 +343,17 @@ class TetherWorld:
             x, y = self.state()[:2]
             self._set_max(t, math.hypot(t.ax - x, t.ay - y))
         t.held = True
+        self.changes += 1
+        self._active = None
         return True
 
     def reel(self, robot: int) -> None:
         """The robot's winch reels in again (after :meth:`hold`)."""
         t = self._tethers[robot]
-        if t is not None:
+        if t is not None and t.held:
             t.held = False
+            self.changes += 1
+            self._active = None
 
     # ---------------------------------------------------------------------------------------- faults
     def fail_anchor(self, anchor: int) -> None:
@@ -332,6 +388,7 @@ class TetherWorld:
             kind = "blocked"
         elif (t.ax - x) ** 2 + (t.ay - y) ** 2 <= self._stop2:
             kind = "arrived"
+        self.changes += 1
         if kind is not None:
             self._tethers[robot] = None
             self._events.append(TetherEvent(self.time_s, kind, robot, t.anchor))
@@ -391,6 +448,8 @@ class TetherWorld:
         get_pos, get_vel, set_max, step, impulse = (cp.cpBodyGetPosition, cp.cpBodyGetVelocity, cp.cpSlideJointSetMax,
                                                     cp.cpSpaceStep, cp.cpConstraintGetImpulse)
         x, y, vx0, vy0 = self._begin_fast()
+        total = self.winch_work_J  # the same additions in the same order as _substep's, kept in a local
+        n = self.n_substeps_done
         for _ in range(self.substeps):
             active = self._active
             if active is None:
@@ -407,16 +466,24 @@ class TetherWorld:
             step(space, dt)
             v = get_vel(body)
             vx1, vy1 = v.x, v.y
+            p = get_pos(body)
+            x, y = p.x, p.y
+            n += 1
             if active:
                 mx, my = 0.5 * (vx0 + vx1), 0.5 * (vy0 + vy1)
                 for t, (ux, uy) in zip(active, units):
                     work = impulse(t.jptr) * (ux * mx + uy * my)
                     if work > 0.0:
-                        self.winch_work_J += work
-            self.n_substeps_done += 1
-            p = get_pos(body)
-            x, y, vx0, vy0 = p.x, p.y, vx1, vy1
-            self._after_substep_fast(active, x, y)
+                        total += work
+                cx, cy = self._checked_at
+                if not hypot(x - cx, y - cy) < self._budget:
+                    self.n_substeps_done, self.winch_work_J = n, total
+                    self._check_tethers(active)
+            vx0, vy0 = vx1, vy1
+            if self._next_ready <= n * dt + 1e-9:
+                self.n_substeps_done, self.winch_work_J = n, total
+                self._activate_ready()
+        self.n_substeps_done, self.winch_work_J = n, total
 
     def _step_force_fast(self) -> None:
         cp, body, space, dt, hypot = _cp, self._body_ptr, self._space_ptr, self.dt_s, math.hypot
@@ -460,43 +527,62 @@ class TetherWorld:
         get_pos, set_vel, step = cp.cpBodyGetPosition, cp.cpBodySetVelocity, cp.cpSpaceStep
         winch, cache = self._winch_N, self._cache
         x, y, _, _ = self._begin_fast()
+        total = self.winch_work_J
+        n = self.n_substeps_done
+        plan = None  # what the pulling tethers make of Eq. (5), rebuilt when they change
         for _ in range(self.substeps):
             active = self._active
-            if active is None:
-                active = self._active = [t for t in self._tethers if t is not None and t.pulling]
-                self._budget = -1.0
-            if active:
-                reeling = [t for t in active if not t.held] if len(active) > 1 or active[0].held else active
-            else:
-                reeling = active
+            if active is None or plan is None or plan[0] is not active:
+                if active is None:
+                    active = self._active = [t for t in self._tethers if t is not None and t.pulling]
+                    self._budget = -1.0
+                reeling = [t for t in active if not t.held]
+                held = [t for t in active if t.held]
+                w = reeling[0].w if reeling else 0.0
+                same = all(t.w == w for t in reeling)
+                plan = (active, reeling, held, w, None if same else [t.w for t in reeling],
+                        [(t.ax, t.ay) for t in reeling])
+            _, reeling, held, w, ws, points = plan
             if reeling:
-                w = reeling[0].w
-                if len(reeling) == 1:
-                    nx, ny = _rk4_one(x, y, reeling[0].ax, reeling[0].ay, w, dt)
+                if len(points) == 1 and ws is None:
+                    nx, ny = _rk4_one(x, y, points[0][0], points[0][1], w, dt)
+                elif len(points) == 2 and ws is None:
+                    nx, ny = _rk4_two(x, y, points[0][0], points[0][1], points[1][0], points[1][1], w, dt)
                 else:
-                    ws = None if all(t.w == w for t in reeling) else [t.w for t in reeling]
-                    nx, ny = _rk4_eq5(x, y, [(t.ax, t.ay) for t in reeling], w, dt, ws)
+                    nx, ny = _rk4_eq5(x, y, points, w, dt, ws)
                 vx, vy = (nx - x) / dt, (ny - y) / dt
-                if len(reeling) < len(active):
-                    vx, vy = _keep_lengths(x, y, vx, vy, [t for t in active if t.held])
+                if held:
+                    vx, vy = _keep_lengths(x, y, vx, vy, held)
                 sx, sy = self._wall_seen_at
                 if not (cache and hypot(x - sx, y - sy) < self._wall_margin):
                     vx, vy = self._slide_along_walls(x, y, vx, vy)
                 work = 0.0
-                for t in reeling:
-                    ux, uy = t.ax - x, t.ay - y
+                for ax, ay in points:
+                    ux, uy = ax - x, ay - y
                     rate = (vx * ux + vy * uy) / hypot(ux, uy)
                     if rate > 0.0:
                         work += winch * rate * dt
-                self.winch_work_J += work
+                total += work
             else:
                 vx = vy = 0.0
             set_vel(body, (vx, vy))
             step(space, dt)
-            self.n_substeps_done += 1
+            n += 1
             p = get_pos(body)
             x, y = p.x, p.y
-            self._after_substep_fast(active, x, y)
+            if active:
+                cx, cy = self._checked_at
+                if not hypot(x - cx, y - cy) < self._budget:
+                    self.n_substeps_done, self.winch_work_J = n, total
+                    self._check_tethers(active)
+                    if self._active is None:
+                        plan = None
+            if self._next_ready <= n * dt + 1e-9:
+                self.n_substeps_done, self.winch_work_J = n, total
+                self._activate_ready()
+                if self._active is None:
+                    plan = None
+        self.n_substeps_done, self.winch_work_J = n, total
 
     def _substep(self) -> None:
         """One physics step of ``dt_s``: the tethers pull, pymunk steps, then the tether checks and attachments."""
@@ -748,6 +834,29 @@ def _rk4_one(x: float, y: float, ax: float, ay: float, w: float, dt: float) -> t
     dx, dy = ax - (x + dt * k3x), ay - (y + dt * k3y)
     d = math.hypot(dx, dy)
     k4x, k4y = w * (0.0 + dx / d), w * (0.0 + dy / d)
+    sixth = dt / 6.0
+    return (x + sixth * (k1x + 2.0 * k2x + 2.0 * k3x + k4x), y + sixth * (k1y + 2.0 * k2y + 2.0 * k3y + k4y))
+
+
+def _rk4_two(x: float, y: float, ax: float, ay: float, bx: float, by: float, w: float,
+             dt: float) -> tuple[float, float]:
+    """:func:`_rk4_eq5` for two anchors reeling at the same speed, written out (the same operations in order)."""
+    h = 0.5 * dt
+    dx, dy, ex, ey = ax - x, ay - y, bx - x, by - y
+    d, e = math.hypot(dx, dy), math.hypot(ex, ey)
+    k1x, k1y = w * (0.0 + dx / d + ex / e), w * (0.0 + dy / d + ey / e)
+    px, py = x + h * k1x, y + h * k1y
+    dx, dy, ex, ey = ax - px, ay - py, bx - px, by - py
+    d, e = math.hypot(dx, dy), math.hypot(ex, ey)
+    k2x, k2y = w * (0.0 + dx / d + ex / e), w * (0.0 + dy / d + ey / e)
+    px, py = x + h * k2x, y + h * k2y
+    dx, dy, ex, ey = ax - px, ay - py, bx - px, by - py
+    d, e = math.hypot(dx, dy), math.hypot(ex, ey)
+    k3x, k3y = w * (0.0 + dx / d + ex / e), w * (0.0 + dy / d + ey / e)
+    px, py = x + dt * k3x, y + dt * k3y
+    dx, dy, ex, ey = ax - px, ay - py, bx - px, by - py
+    d, e = math.hypot(dx, dy), math.hypot(ex, ey)
+    k4x, k4y = w * (0.0 + dx / d + ex / e), w * (0.0 + dy / d + ey / e)
     sixth = dt / 6.0
     return (x + sixth * (k1x + 2.0 * k2x + 2.0 * k3x + k4x), y + sixth * (k1y + 2.0 * k2y + 2.0 * k3y + k4y))
 

@@ -87,6 +87,26 @@ class SightCache:
         self._last = (math.nan, math.nan)  # the previous point asked for (its mask is known)
         self._calm = -1.0  # min of the slacks
         self.exact_tests = 0  # anchors tested exactly (for the tests and the benchmark)
+        self.version = 0  # counts the calls that may have changed the mask
+        self._snapshots: dict[tuple[float, float], tuple] = {}
+
+    def restart(self, x: float, y: float) -> np.ndarray:
+        """The mask at an episode's start (x, y): a jump, so the state kept for that point is restored when the
+        cache has been there before (the stations' fixed start), and kept for next time otherwise."""
+        kept = self._snapshots.get((x, y))
+        if kept is not None:
+            mask, slack = kept
+            self._mask[:] = mask
+            self._slack = list(slack)
+            self._ref = self._last = (x, y)
+            self._calm = min(self._slack) if self._slack else math.inf
+            self.version += 1
+            return self._mask
+        self._last = (math.nan, math.nan)  # a jump: no straight move from the previous point
+        self.mask(x, y)
+        if len(self._snapshots) < 8:
+            self._snapshots[(x, y)] = (self._mask.copy(), tuple(self._slack))
+        return self._mask
 
     def mask(self, x: float, y: float) -> np.ndarray:
         """The line-of-sight mask from the cargo centre (x, y) (bool, n_anchors; updated in place by later calls)."""
@@ -107,6 +127,7 @@ class SightCache:
             if rays is None or not step_ok or _crosses(lx, ly, x, y, rays):
                 exact.append(i)
             slack[i] = _distance(x, y, rays) - MARGIN_M
+        self.version += 1
         if exact:
             points = self._points
             self._mask[exact] = shapely.covers(self._sight_polygon,

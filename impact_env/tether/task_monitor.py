@@ -84,8 +84,26 @@ class HoldMonitor:
 
     def update(self, positions: Mapping[str, Sequence[float]]) -> float:
         """Append the next sample and return the robustness of the trace so far (last sample held)."""
+        return self._append(self._rho(positions))
+
+    def update_pair(self, first: str, x0: float, y0: float, x1: float, y1: float) -> float:
+        """:meth:`update` of a trace with two bodies, ``first`` at (x0, y0) and the other at (x1, y1) (no dict)."""
+        rho = math.inf
+        for body, distance in self._boxes:
+            d = distance(x0, y0) if body == first else distance(x1, y1)
+            if d < rho:
+                rho = d
+        for body, distance, cx, cy, depth in self._others:
+            px, py = (x0, y0) if body == first else (x1, y1)
+            if rho <= depth - math.hypot(px - cx, py - cy):
+                continue
+            d = distance(px, py)
+            if d < rho:
+                rho = d
+        return self._append(rho)
+
+    def _append(self, rho: float) -> float:
         k = self._k = self._k + 1
-        rho = self._rho(positions)
         if k >= self._k_final_end():
             return self._value  # every window is final: later samples change nothing
         window, h, t_end = self._window, self.h_steps, self.t_steps
