@@ -137,6 +137,7 @@ class TetherCore:
         self._rest2 = st.rest_speed_mps ** 2
         self.world: TetherWorld | None = None
         self.sight = SightCache(st)
+        self._agent_index: dict[int, np.ndarray] = {}
         self._buf = np.zeros(self.obs_size, dtype=np.float32)
         self._buf_changes, self._buf_sight, self._buf_tethers = -1, -1, []
         self._bounds4 = (self.obs_low[:4].astype(float).tolist(), self.obs_high[:4].astype(float).tolist())
@@ -420,12 +421,13 @@ class TetherCore:
 
     def agent_observation(self, robot: int) -> np.ndarray:
         """A robot's observation: the same layout with its own block first, then the others in order."""
-        out = self._central().copy()
-        if robot:
+        index = self._agent_index.get(robot)
+        if index is None:
             order = [robot] + [i for i in range(self.n_robots) if i != robot]
-            blocks = slice(4, self._los0)
-            out[blocks] = out[blocks].reshape(self.n_robots, self.robot_block)[order].reshape(-1)
-        return out
+            blocks = np.arange(4, self._los0).reshape(self.n_robots, self.robot_block)[order].reshape(-1)
+            index = self._agent_index[robot] = np.concatenate([np.arange(4), blocks,
+                                                               np.arange(self._los0, self.obs_size)])
+        return self._central()[index]
 
     def _central(self) -> np.ndarray:
         """The central observation of this step, kept up to date in one buffer: the robot blocks are rewritten

@@ -116,6 +116,9 @@ class TetherParallelEnv(ParallelShell):
             if value is None:
                 joint.append(KEEP)
                 continue
+            if type(value) is int:
+                joint.append(value)
+                continue
             try:
                 flat = np.asarray(value).reshape(-1)
             except (TypeError, ValueError) as exc:
@@ -124,6 +127,10 @@ class TetherParallelEnv(ParallelShell):
                 raise ActionError(f"the action of {agent} must be one integer command, got {brief(value)}")
             joint.append(flat[0].item() if flat.dtype.kind in "iufb" else flat[0])
         return joint
+
+    def _observations(self) -> dict[str, np.ndarray]:
+        core, agents = self.core, self.agents
+        return {a: core.agent_observation(i) for i, a in enumerate(self.possible_agents) if a in agents}
 
     def _new_renderer(self) -> TetherRenderer:
         return TetherRenderer(self.station, self.render_mode, width_px=self.render_width_px,
