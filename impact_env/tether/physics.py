@@ -104,7 +104,8 @@ class TetherWorld:
       both of two tethers are taut the cargo moves along the bisector at ``w / cos(theta / 2)`` (each distance
       shrinks at exactly ``w``), not at Eq. (5)'s ``2 w cos(theta / 2)``: equal at ``theta = 90 deg``, half of it
       for parallel tethers, and growing without bound toward opposite tethers, where the winch limit takes over.
-      A held tether keeps its length: it stops, within the winch limit, a cargo moving away from its anchor.
+      A held tether keeps its length: it stops, within the winch limit, a cargo moving away from its anchor,
+      and does not pull it back (a locked drum, not a spring: the joint corrects no length error).
     - ``"force"``: a tension ``T_i = F_max * clip(1 - v_r,i / w, 0, 1)`` along each reeling tether, ``v_r,i`` the
       cargo's speed toward anchor ``i``: full winch force from rest, none once the cargo approaches at ``w``. One
       tether from rest: ``v_n = w (1 - (1 - g)^n)`` after ``n`` substeps, ``g = dt F_max / (m w)`` (pymunk's
@@ -341,7 +342,7 @@ class TetherWorld:
             return False
         if not t.held and t.jptr is not None:
             x, y = self.state()[:2]
-            self._set_max(t, math.hypot(t.ax - x, t.ay - y))
+            self._brake(t, math.hypot(t.ax - x, t.ay - y))
         t.held = True
         self.changes += 1
         self._active = None
@@ -352,8 +353,17 @@ class TetherWorld:
         t = self._tethers[robot]
         if t is not None and t.held:
             t.held = False
+            if t.joint is not None:
+                t.joint.max_bias = math.inf  # the reel loop shortens it again
             self.changes += 1
             self._active = None
+
+    def _brake(self, t: _Tether, length: float) -> None:
+        """A held tether under ``reel``: a joint that keeps its present length with no error correction, so it
+        stops (within the winch limit) a cargo moving away from the anchor but never pulls it back: a drum that
+        is locked, not a spring."""
+        self._set_max(t, length)
+        t.joint.max_bias = 0.0
 
     # ---------------------------------------------------------------------------------------- faults
     def fail_anchor(self, anchor: int) -> None:
@@ -403,6 +413,8 @@ class TetherWorld:
             self.space.add(joint)
             t.joint = joint
             t.jptr = joint._constraint if self._fast else joint
+            if t.held:
+                self._brake(t, math.hypot(t.ax - x, t.ay - y))
         self._events.append(TetherEvent(self.time_s, "attached", robot, t.anchor))
 
     # ----------------------------------------------------------------------------------------- step
