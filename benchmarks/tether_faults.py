@@ -45,26 +45,28 @@ CONTROLLERS = ("expert", "open_loop")
 
 
 class OpenLoopPlan:
-    """A tether plan flown by the clock (no feedback): pull ``i`` starts at ``T_i`` (the first after one attach
-    time, each next when the previous has run its length at ``w``), its robot attaches ``t_switch`` earlier,
-    two robots taking turns, and lets go when the pull has run."""
+    """A tether plan flown by the clock (no feedback), as ``TetherPlan.travel_time_s`` times it with two robots:
+    pull ``i``'s robot (the two take turns) attaches ``t_switch`` before pull ``i - 1`` ends, or as soon as it
+    has let go of its previous pull if that is later (the cargo then waits); each robot lets go when its pull
+    has run its length at ``w``. Commands fall on the control steps nearest those times."""
 
     name = "open_loop"
 
     def __init__(self, station: Any, plan: Any) -> None:
         self.station, self.plan = station, plan
         dt, t_switch, w = station.control_period_s, station.switch_time_s, plan.pull_speed_mps
-        starts, t = [], t_switch
-        for p in plan.pulls:
-            starts.append(t)
-            t += p.length_m / w
-        ends = starts[1:] + [t]
         robots = min(2, station.n_robots)
         self.schedule: dict[int, list[tuple[int, int]]] = {}  # step -> [(robot, command)]
-        for i, (p, t0, t1) in enumerate(zip(plan.pulls, starts, ends)):
+        ends: list[float] = []
+        for i, p in enumerate(plan.pulls):
+            previous_end = ends[i - 1] if i >= 1 else t_switch
+            robot_free = ends[i - robots] if i >= robots else 0.0
+            attach = max(previous_end - t_switch, robot_free) if i else 0.0
+            start = max(previous_end, attach + t_switch)
+            ends.append(start + p.length_m / w)
             robot = i % robots
-            self.schedule.setdefault(max(0, round((t0 - t_switch) / dt)), []).append((robot, 2 + p.anchor))
-            self.schedule.setdefault(round(t1 / dt), []).append((robot, 1))
+            self.schedule.setdefault(round(attach / dt), []).append((robot, 2 + p.anchor))
+            self.schedule.setdefault(round(ends[-1] / dt), []).append((robot, 1))
         self.n_robots = station.n_robots
 
     def reset(self, env: Any = None, seed: int | None = None) -> None:
@@ -73,11 +75,8 @@ class OpenLoopPlan:
     def act(self, observation: np.ndarray, info: dict | None = None) -> np.ndarray:
         commands = [0] * self.n_robots
         for robot, command in self.schedule.get(self.step, []):
-            if command == 1 or commands[robot] == 0:
-                commands[robot] = command
-        # an attach and a release in one step for one robot: the attach (it lets go of the old anchor first)
-        for robot, command in self.schedule.get(self.step, []):
-            if command >= 2:
+            # a release and an attach of one robot in one step: the attach (it lets go of the old anchor first)
+            if command >= 2 or commands[robot] == 0:
                 commands[robot] = command
         self.step += 1
         return np.asarray(commands, dtype=np.int64)
