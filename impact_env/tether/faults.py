@@ -75,6 +75,29 @@ class FaultConfig:
                              f"{type(value).__name__}")
 
 
+def parse_faults(text: str | None) -> dict[str, Any] | None:
+    """The ``--faults`` option: ``anchor_failures=1,winch_speed_error=0.1:0.3`` as FaultConfig's fields (a pair
+    is written ``lo:hi``); None or an empty text is no faults."""
+    if text is None or not text.strip():
+        return None
+    out: dict[str, Any] = {}
+    for part in text.split(","):
+        key, eq, value = part.partition("=")
+        key = key.strip()
+        if not eq:
+            raise EnvConfigError(f"--faults: {part!r} is not FIELD=VALUE (e.g. anchor_failures=1)")
+        try:
+            if ":" in value:
+                lo, hi = value.split(":", 1)
+                out[key] = (float(lo), float(hi))
+            else:
+                out[key] = int(value) if value.strip().lstrip("+").isdigit() else float(value)
+        except ValueError:
+            raise EnvConfigError(f"--faults: {key} = {value!r} is not a number (or lo:hi)") from None
+    FaultConfig.of(out)  # unknown fields and bad values, named, before any env is built
+    return out
+
+
 def _pair(config: FaultConfig, name: str, low: float, high: float) -> tuple[float, float]:
     value = getattr(config, name)
     try:
