@@ -19,8 +19,7 @@ from impact_env.stl import parse, robustness
 from impact_env.tether import pettingzoo_env as tether_parallel
 from impact_env.tether.gym_env import TetherEnv
 from impact_env.tether.gym_env import TetherEnvV0 as TetherEnvReach  # the v0 task and spaces
-from impact_env.tether.pettingzoo_env import TetherParallelEnv
-from impact_env.tether.pettingzoo_env import TetherParallelEnvV0
+from impact_env.tether.pettingzoo_env import TetherParallelEnv, TetherParallelEnvV0
 from impact_env.tether.station import load_station
 from tests.station_helpers import make_station
 

@@ -215,7 +215,7 @@ class TetherWorld:
         the previous step length that chipmunk scales cached impulses by (0 in a fresh space), then multiplies
         nothing: no contact is cached and a new joint's impulse starts at 0. The static walls are untouched.
         """
-        for robot, t in enumerate(self._tethers):
+        for t in self._tethers:
             if t is not None and t.joint is not None:
                 self.space.remove(t.joint)
         shape = next(iter(self.cargo.shapes))

@@ -24,6 +24,7 @@ from shapely.geometry.base import BaseGeometry
 from impact_env.config_checks import check_integer, check_number
 from impact_env.tether.station import Station
 from planners.errors import PlannerError
+from planners.tether.braking import with_hold
 from planners.tether.errors import TetherInfeasibleError
 from planners.tether.geometry import (
     AREA_EPS_M2,
@@ -36,7 +37,6 @@ from planners.tether.geometry import (
     seen_free_space,
     shadow_pieces,
 )
-from planners.tether.braking import with_hold
 from planners.tether.plan import Pull, TetherPlan
 
 COVER_TOL_M = 1e-6  # a point this close to a level is in it (the rays between radial cells have no area)
