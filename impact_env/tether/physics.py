@@ -55,12 +55,14 @@ class TetherEvent:
 
 
 class _Tether:
-    __slots__ = ("anchor", "ax", "ay", "ready_s", "joint", "jptr", "pulling", "held", "w", "seen_at", "clearance")
+    __slots__ = ("anchor", "ax", "ay", "ready_s", "joint", "jptr", "pulling", "held", "w", "seen_at", "clearance",
+                 "length")
 
     def __init__(self, anchor: int, position: tuple[float, float], ready_s: float, w: float) -> None:
         self.anchor, self.ready_s, self.joint, self.jptr, self.pulling = anchor, ready_s, None, None, False
         self.ax, self.ay = position
         self.held = False  # the winch holds the tether at its length instead of reeling in
+        self.length = math.inf  # a held tether's length (m), set when the hold starts
         self.w = w  # this robot's reel-in speed (m/s)
         self.seen_at, self.clearance = (math.nan, math.nan), -1.0  # see TetherWorld._check_tethers
 
@@ -340,9 +342,11 @@ class TetherWorld:
         t = self._tethers[robot]
         if t is None:
             return False
-        if not t.held and t.jptr is not None:
+        if not t.held and t.pulling:
             x, y = self.state()[:2]
-            self._brake(t, math.hypot(t.ax - x, t.ay - y))
+            t.length = math.hypot(t.ax - x, t.ay - y)
+            if t.jptr is not None:
+                self._brake(t, t.length)
         t.held = True
         self.changes += 1
         self._active = None
@@ -415,6 +419,8 @@ class TetherWorld:
             t.jptr = joint._constraint if self._fast else joint
             if t.held:
                 self._brake(t, math.hypot(t.ax - x, t.ay - y))
+        if t.held:
+            t.length = math.hypot(t.ax - x, t.ay - y)
         self._events.append(TetherEvent(self.time_s, "attached", robot, t.anchor))
 
     # ----------------------------------------------------------------------------------------- step
@@ -564,7 +570,7 @@ class TetherWorld:
                     nx, ny = _rk4_eq5(x, y, points, w, dt, ws)
                 vx, vy = (nx - x) / dt, (ny - y) / dt
                 if held:
-                    vx, vy = _keep_lengths(x, y, vx, vy, held)
+                    vx, vy = _keep_lengths(x, y, vx, vy, held, dt)
                 sx, sy = self._wall_seen_at
                 if not (cache and hypot(x - sx, y - sy) < self._wall_margin):
                     vx, vy = self._slide_along_walls(x, y, vx, vy)
@@ -656,7 +662,7 @@ class TetherWorld:
             nx, ny = _rk4_eq5(x, y, anchors, w, dt, ws)
             vx, vy = (nx - x) / dt, (ny - y) / dt
             if len(reeling) < len(active):
-                vx, vy = _keep_lengths(x, y, vx, vy, [t for t in active if t.held])
+                vx, vy = _keep_lengths(x, y, vx, vy, [t for t in active if t.held], dt)
             vx, vy = self._slide_along_walls(x, y, vx, vy)
             # Eq. (5)'s tension: every reeling winch at its limit, times the rate its tether shrinks
             work = 0.0
@@ -798,8 +804,10 @@ class TetherWorld:
         return distance_to_rays(x, y, rays)
 
 
-def _keep_lengths(x: float, y: float, vx: float, vy: float, held: list[_Tether]) -> tuple[float, float]:
-    """Drop the velocity component that would lengthen a held tether (two passes settle two of them)."""
+def _keep_lengths(x: float, y: float, vx: float, vy: float, held: list[_Tether], dt: float) -> tuple[float, float]:
+    """The velocity over the next ``dt`` that lengthens no held tether: the component away from each held anchor
+    dropped, then the step shortened radially where it would still end farther than the tether's held length
+    (moving across a tether lengthens it to second order); two passes settle two of them."""
     for _ in range(2):
         for t in held:
             ux, uy = t.ax - x, t.ay - y
@@ -808,6 +816,13 @@ def _keep_lengths(x: float, y: float, vx: float, vy: float, held: list[_Tether])
             toward = vx * ux + vy * uy
             if toward < 0.0:
                 vx, vy = vx - toward * ux, vy - toward * uy
+    for _ in range(2):
+        for t in held:
+            px, py = x + vx * dt - t.ax, y + vy * dt - t.ay
+            d = math.hypot(px, py)
+            if d > t.length > 0.0:
+                s = t.length / d
+                vx, vy = (t.ax + px * s - x) / dt, (t.ay + py * s - y) / dt
     return vx, vy
 
 
