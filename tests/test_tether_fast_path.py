@@ -157,7 +157,7 @@ def _reference_observation(core: TetherCore, order) -> np.ndarray:
 def test_the_incremental_observation_is_the_one_built_from_zeros(version):
     core = TetherCore("alcove", fidelity="reel", version=version)
     rng = np.random.default_rng(2)
-    for episode in range(3):
+    for _ in range(3):
         core.reset(rng)
         for _ in range(120):
             core.step([int(rng.integers(0, core.n_commands)) if rng.uniform() < 0.1 else 0 for _ in range(3)])
