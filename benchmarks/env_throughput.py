@@ -5,18 +5,28 @@ run; the bare loop is the floor (physics only: set forces, step, read bodies). P
 each row's ratio to the bare loop. A second table does the same for the tether environments of a station:
 the bare loop there is the cargo disc, the wall segments and two slide joints reeled in every substep (the
 ``reel`` physics without line-of-sight checks, STL, observations or rules); each env row pulls with two
-tethers the same way (two attaches, then keeps), and every loop starts a fresh world every 60 steps.
+tethers the same way (two attaches, then keeps), and every loop starts a fresh world every 60 steps. The
+tether table's reference is that bare loop as this file defined it at commit ``--reference`` (0378a64, the
+target of issue 23), run from that commit's own tree (``git archive``) in a child process between the rows of
+each repeat; the bare loop of this checkout is a row too. ``--clock cpu`` times with this process's CPU time
+instead of the wall clock (on a machine other jobs keep busy, the wall clock measures the scheduler).
 Usage:
 
     python -m benchmarks.env_throughput [--scenario corridor] [--station L] [--steps 20000] [--repeats 3]
+                                        [--reference 0378a64] [--clock wall|cpu] [--tether-only]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import os
 import statistics
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pymunk
@@ -31,6 +41,17 @@ from impact_env.transport.physics import World
 from impact_env.transport.scenario import load_scenario
 
 TETHER_EPISODE_STEPS = 60  # a fresh world this often, so that both tethers pull through every measured step
+REFERENCE = "0378a64"  # the commit whose bare tether loop is the reference of the tether table
+ROOT = Path(__file__).resolve().parents[1]
+# the child that runs the reference commit's bare_tether_loop in its own tree: nothing of this checkout imported
+_CHILD = """
+import json, sys, time
+import _reference_env_throughput as m
+if sys.argv[3] == "cpu":
+    m.time.perf_counter = time.process_time
+from impact_env.station import load_station
+print(json.dumps(m.bare_tether_loop(load_station(sys.argv[1]), int(sys.argv[2]))))
+"""
 
 
 def bare_pymunk(scenario, steps: int, actions: np.ndarray) -> float:
@@ -153,38 +174,82 @@ def _table(cases, repeats: int) -> None:
         print(f"| {label} | {rate:,.0f} | {1e6 / rate:.1f} | {rate / base:.2f} |", flush=True)
 
 
+def reference_tree(ref: str) -> Path:
+    """``ref``'s impact_env and planners (benchmarks.git_tree.export_tree) with its env_throughput.py beside them."""
+    from benchmarks.git_tree import export_tree
+
+    tree = Path(export_tree(ref, prefix="impact_env_throughput_ref_"))
+    source = subprocess.run(["git", "-C", str(ROOT), "show", f"{ref}:benchmarks/env_throughput.py"], check=True,
+                            capture_output=True, text=True).stdout
+    (tree / "_reference_env_throughput.py").write_text(source)
+    return tree
+
+
+def reference_bare_loop(tree: Path, station: str, steps: int, clock: str) -> float:
+    """Steps/s of the reference commit's bare tether loop, in a child process that imports only that tree."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    done = subprocess.run([sys.executable, "-c", _CHILD, station, str(steps), clock], cwd=tree, env=env,
+                          capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"the reference bare loop failed in {tree}:\n{done.stderr[-2000:]}")
+    return float(json.loads(done.stdout.strip().splitlines()[-1]))
+
+
+def tether_table(station, steps: int, repeats: int, ref: str, clock: str) -> dict[str, float]:
+    """The tether table: each repeat runs the reference bare loop, then every row once; medians over repeats,
+    ratios to the reference. Returns label -> median steps/s."""
+    tree = reference_tree(ref)
+    rows = [(f"bare pymunk loop at {ref} (cargo, walls, 2 slide joints reeled in)",
+             lambda: reference_bare_loop(tree, station.name, steps, clock)),
+            ("bare pymunk loop at this commit", lambda: bare_tether_loop(station, steps)),
+            *[(f"Tether Gymnasium env, {fid}, 2 tethers", lambda fid=fid: tether_gym(station, steps, fid))
+              for fid in ("kinematic", "reel", "force")],
+            ("Tether PettingZoo env, reel, 2 tethers", lambda: tether_pettingzoo(station, steps, "reel"))]
+    rates: dict[str, list[float]] = {label: [] for label, _ in rows}
+    for _ in range(repeats):
+        for label, fn in rows:
+            rates[label].append(fn())
+    medians = {label: statistics.median(v) for label, v in rates.items()}
+    base = medians[rows[0][0]]
+    print("| loop | env-steps/s | us/step | vs the bare loop at " + ref + " |")
+    print("|---|---:|---:|---:|")
+    for label, rate in medians.items():
+        print(f"| {label} | {rate:,.0f} | {1e6 / rate:.1f} | {rate / base:.2f} |", flush=True)
+    return medians
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scenario", default="corridor")
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--station", default="L", help="tether station of the second table")
+    parser.add_argument("--reference", default=REFERENCE, help="the commit whose bare tether loop is the reference")
+    parser.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                        help="wall clock (perf_counter, as the loops define it) or this process's CPU time")
+    parser.add_argument("--tether-only", action="store_true", help="only the tether table")
     args = parser.parse_args()
-    scenario = load_scenario(args.scenario)
-    rng = np.random.default_rng(0)
-    actions = rng.uniform(-1, 1, (1000, 3 * len(scenario.robots))).astype(np.float32)
-
-    cases = [
-        ("bare pymunk loop (same bodies, substeps)", lambda: bare_pymunk(scenario, args.steps, actions)),
-        ("Gymnasium env, dense reward", lambda: gym_env(scenario, args.steps, actions, "dense")),
-        ("Gymnasium env, sparse reward", lambda: gym_env(scenario, args.steps, actions, "sparse")),
-        ("PettingZoo parallel env, dense reward", lambda: pettingzoo_env(scenario, args.steps, actions)),
-    ]
-    print(f"scenario {scenario.name}: {len(scenario.bodies)} bodies, {scenario.substeps} substeps per env step, "
-          f"{args.steps} steps x {args.repeats} repeats (median)\n")
-    _table(cases, args.repeats)
-
+    if args.clock == "cpu":
+        time.perf_counter = time.process_time  # every loop here reads the clock through time.perf_counter
+    if not args.tether_only:
+        scenario = load_scenario(args.scenario)
+        rng = np.random.default_rng(0)
+        actions = rng.uniform(-1, 1, (1000, 3 * len(scenario.robots))).astype(np.float32)
+        cases = [
+            ("bare pymunk loop (same bodies, substeps)", lambda: bare_pymunk(scenario, args.steps, actions)),
+            ("Gymnasium env, dense reward", lambda: gym_env(scenario, args.steps, actions, "dense")),
+            ("Gymnasium env, sparse reward", lambda: gym_env(scenario, args.steps, actions, "sparse")),
+            ("PettingZoo parallel env, dense reward", lambda: pettingzoo_env(scenario, args.steps, actions)),
+        ]
+        print(f"scenario {scenario.name}: {len(scenario.bodies)} bodies, {scenario.substeps} substeps per env step, "
+              f"{args.steps} steps x {args.repeats} repeats (median), {args.clock} clock\n")
+        _table(cases, args.repeats)
     station = load_station(args.station)
     tether_steps = max(TETHER_EPISODE_STEPS, args.steps // 4)
-    cases = [
-        ("bare pymunk loop (cargo, walls, 2 slide joints reeled in)", lambda: bare_tether_loop(station, tether_steps)),
-        *[(f"Tether Gymnasium env, {fid}, 2 tethers", lambda fid=fid: tether_gym(station, tether_steps, fid))
-          for fid in ("kinematic", "reel", "force")],
-        ("Tether PettingZoo env, reel, 2 tethers", lambda: tether_pettingzoo(station, tether_steps, "reel")),
-    ]
     print(f"\nstation {station.name}: {station.n_anchors} anchors, {station.n_robots} robots, {station.substeps} "
-          f"substeps per env step, {tether_steps} steps x {args.repeats} repeats (median)\n")
-    _table(cases, args.repeats)
+          f"substeps per env step, {tether_steps} steps x {args.repeats} repeats (median), {args.clock} clock; "
+          f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores\n")
+    tether_table(station, tether_steps, args.repeats, args.reference, args.clock)
 
 
 if __name__ == "__main__":
