@@ -22,6 +22,7 @@ import argparse
 import json
 import math
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -209,6 +210,7 @@ def tether_table(station, steps: int, repeats: int, ref: str, clock: str) -> dic
     for _ in range(repeats):
         for label, fn in rows:
             rates[label].append(fn())
+    shutil.rmtree(tree, ignore_errors=True)
     medians = {label: statistics.median(v) for label, v in rates.items()}
     base = medians[rows[0][0]]
     print("| loop | env-steps/s | us/step | vs the bare loop at " + ref + " |")
