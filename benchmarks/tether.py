@@ -68,7 +68,7 @@ def smt_row(station, rule: str, timeout_s: float) -> str:
         plan.check(station)
         return f"{time.perf_counter() - t0:.2f} s, {plan.switches} pulls"
     except PlannerError as exc:
-        why = "timeouts" if "unknown)" in str(exc) and not str(exc).endswith(" 0 unknown)") else "no plan"
+        why = "no plan (z3 timeouts)" if getattr(exc, "stats", {}).get("unknown") else "no plan"
         return f"{time.perf_counter() - t0:.2f} s, {why}"
 
 
