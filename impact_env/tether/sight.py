@@ -29,27 +29,34 @@ from impact_env.tether.station import Station
 MARGIN_M = 1e-7  # a radius ends this much early (the exact test's 1 nm tolerance, and rounding)
 
 
-def shadow_rays(anchor: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Origins and unit directions (each (m, 2)) of the rays on which a segment from a cargo centre to ``anchor``
-    passes through one of ``points``: from each point away from the anchor. None when the anchor sits on one of
-    the points (its segments always touch it: no radius holds)."""
-    rel = points - anchor
-    dist = np.hypot(rel[:, 0], rel[:, 1])
-    if len(points) and dist.min() <= 1e-9:
-        return None
-    return points.copy(), rel / dist[:, None]
+def shadow_rays(anchor: np.ndarray, points: np.ndarray) -> list[tuple[float, float, float, float]] | None:
+    """The rays on which a segment from a cargo centre to ``anchor`` passes through one of ``points``, as
+    (origin x, origin y, unit direction x, y): from each point away from the anchor. None when the anchor sits on
+    one of the points (its segments always touch it: no radius holds)."""
+    ax, ay = float(anchor[0]), float(anchor[1])
+    rays = []
+    for vx, vy in np.asarray(points, dtype=float).reshape(-1, 2):
+        d = math.hypot(vx - ax, vy - ay)
+        if d <= 1e-9:
+            return None
+        rays.append((float(vx), float(vy), (vx - ax) / d, (vy - ay) / d))
+    return rays
 
 
-def distance_to_rays(x: float, y: float, rays: tuple[np.ndarray, np.ndarray] | None) -> float:
+def distance_to_rays(x: float, y: float, rays: list[tuple[float, float, float, float]] | None) -> float:
     """The smallest distance (m) from (x, y) to the rays (inf without rays, 0 for None)."""
     if rays is None:
         return 0.0
-    origins, directions = rays
-    if not len(origins):
-        return math.inf
-    rx, ry = x - origins[:, 0], y - origins[:, 1]
-    s = np.maximum(rx * directions[:, 0] + ry * directions[:, 1], 0.0)
-    return float(np.hypot(rx - s * directions[:, 0], ry - s * directions[:, 1]).min())
+    best = math.inf
+    for ox, oy, dx, dy in rays:
+        px, py = x - ox, y - oy
+        t = px * dx + py * dy
+        if t > 0.0:
+            px, py = px - t * dx, py - t * dy
+        d = math.hypot(px, py)
+        if d < best:
+            best = d
+    return best
 
 
 class SightCache:
@@ -67,16 +74,12 @@ class SightCache:
         polygon = np.array(station.polygon, dtype=float)
         self._rays: list[list[tuple[float, float, float, float]] | None] = []
         for a in station.anchors:
-            ax, ay = (float(c) for c in a.position_m)
-            if np.hypot(polygon[:, 0] - ax, polygon[:, 1] - ay).min() <= 1e-9:
+            position = np.asarray(a.position_m, dtype=float)
+            if np.hypot(polygon[:, 0] - position[0], polygon[:, 1] - position[1]).min() <= 1e-9:
                 self._rays.append(None)  # an anchor on a vertex: always tested exactly
                 continue
             ends = polygon[[a.wall, (a.wall + 1) % len(polygon)]]
-            rays = []
-            for vx, vy in np.concatenate([station.notches, ends]):
-                d = math.hypot(vx - ax, vy - ay)
-                rays.append((float(vx), float(vy), (vx - ax) / d, (vy - ay) / d))
-            self._rays.append(rays)
+            self._rays.append(shadow_rays(position, np.concatenate([station.notches, ends])))
         self._points = station.anchor_points
         self._sight_polygon = station._sight_polygon
         self._longest_move = 1.9 * station.cargo.radius_m  # a straight move this short stays inside the station
@@ -126,7 +129,7 @@ class SightCache:
             rays = rays_of[i]
             if rays is None or not step_ok or _crosses(lx, ly, x, y, rays):
                 exact.append(i)
-            slack[i] = _distance(x, y, rays) - MARGIN_M
+            slack[i] = distance_to_rays(x, y, rays) - MARGIN_M
         self.version += 1
         if exact:
             points = self._points
@@ -136,22 +139,6 @@ class SightCache:
         self._ref = self._last = (x, y)
         self._calm = min(slack) if slack else math.inf
         return self._mask
-
-
-def _distance(x: float, y: float, rays: list | None) -> float:
-    """The distance (m) from (x, y) to the nearest of the rays (0 for None)."""
-    if rays is None:
-        return 0.0
-    best = math.inf
-    for ox, oy, dx, dy in rays:
-        px, py = x - ox, y - oy
-        t = px * dx + py * dy
-        if t > 0.0:
-            px, py = px - t * dx, py - t * dy
-        d = math.hypot(px, py)
-        if d < best:
-            best = d
-    return best
 
 
 def _crosses(x0: float, y0: float, x1: float, y1: float, rays: list) -> bool:
