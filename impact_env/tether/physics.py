@@ -468,31 +468,61 @@ class TetherWorld:
         x, y, vx0, vy0 = self._begin_fast()
         total = self.winch_work_J  # the same additions in the same order as _substep's, kept in a local
         n = self.n_substeps_done
+        pair = None  # the two pulling tethers' constants, the common case written out below
         for _ in range(self.substeps):
             active = self._active
             if active is None:
                 active = self._active = [t for t in self._tethers if t is not None and t.pulling]
                 self._budget = -1.0
             px, py = x + vx0 * dt, y + vy0 * dt
-            units = []
-            for t in active:
-                ax, ay = t.ax, t.ay
-                d = hypot(ax - px, ay - py)
-                units.append(((ax - px) / d, (ay - py) / d))
-                if not t.held:
-                    set_max(t.jptr, max(0.0, d - t.w * dt))
-            step(space, dt)
-            v = get_vel(body)
-            vx1, vy1 = v.x, v.y
-            p = get_pos(body)
-            x, y = p.x, p.y
-            n += 1
-            if active:
+            if len(active) == 2:
+                if pair is None or pair[0] is not active:
+                    t1, t2 = active
+                    pair = (active, t1.ax, t1.ay, t1.jptr, None if t1.held else t1.w * dt,
+                            t2.ax, t2.ay, t2.jptr, None if t2.held else t2.w * dt)
+                _, a1x, a1y, j1, s1, a2x, a2y, j2, s2 = pair
+                d = hypot(a1x - px, a1y - py)
+                u1x, u1y = (a1x - px) / d, (a1y - py) / d
+                if s1 is not None:
+                    set_max(j1, max(0.0, d - s1))
+                d = hypot(a2x - px, a2y - py)
+                u2x, u2y = (a2x - px) / d, (a2y - py) / d
+                if s2 is not None:
+                    set_max(j2, max(0.0, d - s2))
+                step(space, dt)
+                v = get_vel(body)
+                vx1, vy1 = v.x, v.y
+                p = get_pos(body)
+                x, y = p.x, p.y
+                n += 1
                 mx, my = 0.5 * (vx0 + vx1), 0.5 * (vy0 + vy1)
-                for t, (ux, uy) in zip(active, units):
-                    work = impulse(t.jptr) * (ux * mx + uy * my)
-                    if work > 0.0:
-                        total += work
+                work = impulse(j1) * (u1x * mx + u1y * my)
+                if work > 0.0:
+                    total += work
+                work = impulse(j2) * (u2x * mx + u2y * my)
+                if work > 0.0:
+                    total += work
+            else:
+                units = []
+                for t in active:
+                    ax, ay = t.ax, t.ay
+                    d = hypot(ax - px, ay - py)
+                    units.append(((ax - px) / d, (ay - py) / d))
+                    if not t.held:
+                        set_max(t.jptr, max(0.0, d - t.w * dt))
+                step(space, dt)
+                v = get_vel(body)
+                vx1, vy1 = v.x, v.y
+                p = get_pos(body)
+                x, y = p.x, p.y
+                n += 1
+                if active:
+                    mx, my = 0.5 * (vx0 + vx1), 0.5 * (vy0 + vy1)
+                    for t, (ux, uy) in zip(active, units):
+                        work = impulse(t.jptr) * (ux * mx + uy * my)
+                        if work > 0.0:
+                            total += work
+            if active:
                 cx, cy = self._checked_at
                 if not hypot(x - cx, y - cy) < self._budget:
                     self.n_substeps_done, self.winch_work_J = n, total
