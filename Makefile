@@ -79,6 +79,7 @@ bench-ray: $(VENV)/.dev-installed
 
 bench: $(VENV)/.base-installed
 	$(BIN)/python -m benchmarks.env_throughput
+	$(BIN)/python -m benchmarks.tether_throughput
 	$(BIN)/python -m benchmarks.planner
 	$(BIN)/python -m benchmarks.planner_stage2
 	$(BIN)/python -m benchmarks.mpc

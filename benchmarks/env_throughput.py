@@ -1,4 +1,4 @@
-"""Environment throughput: env-steps/s of the transport envs against a reference commit, and of the tether envs.
+"""Environment throughput: env-steps/s of the transport envs against a reference commit.
 
 First table: the transport Gymnasium env (dense and sparse reward) and PettingZoo env of this tree, of this tree
 on its pure-Python path (``IMPACT_ENV_PURE_PYTHON=1``) and of a reference commit (``--ref``, default 0378a64,
@@ -7,13 +7,11 @@ every repeat; and the bare pymunk loop with the same bodies and substeps (set fo
 floor of the public API. Second table: the STL monitor's update on the scenario's task, per step, fed one
 recorded episode (the reference as its env calls it, with the positions dict; this tree as its env calls it,
 with the state array), and whether both trees give the same values. Third: whether an episode of each env
-(random actions, seed 0) is the same bit for bit in both trees (observations, rewards, infos). The last table
-does the same as the first for the tether environments of a station: the bare loop there is the cargo disc,
-the wall segments and two slide joints reeled in every substep; each env row pulls with two tethers the same
-way (two attaches, then keeps), and every loop starts a fresh world every 60 steps. This module imports the
-packages only inside its functions, so that the reference tree's process can run them. Usage:
+(random actions, seed 0) is the same bit for bit in both trees (observations, rewards, infos). The tether
+envs have their own table: :mod:`benchmarks.tether_throughput`. This module imports the packages only inside
+its functions, so that the reference tree's process can run them. Usage:
 
-    python -m benchmarks.env_throughput [--scenario corridor] [--station L] [--steps 20000] [--repeats 3]
+    python -m benchmarks.env_throughput [--scenario corridor] [--steps 20000] [--repeats 3]
                                         [--ref 0378a64 | --ref ""] [--wall]
 
 Every rate is steps per second of the process's CPU time (``--wall``: of the wall clock): on a shared machine the
@@ -36,9 +34,6 @@ from benchmarks.git_tree import ROOT, export_tree, run_in_tree
 # "cpu": the process's CPU time (time.process_time), so that the other jobs of a shared machine do not enter a
 # loop's rate (every loop here is one thread); "wall": time.perf_counter
 CLOCKS = {"cpu": time.process_time, "wall": time.perf_counter}
-
-TETHER_EPISODE_STEPS = 60  # a fresh world this often, so that both tethers pull through every measured step
-
 
 def _transport_api():
     """(TransportEnv, TransportParallelEnv, World, load_scenario) of the tree on the path: this layout, or the
@@ -206,81 +201,6 @@ def episode_digest(scenario_name: str, steps: int) -> tuple[str, str]:
     return gym_hash.hexdigest(), pz_hash.hexdigest()
 
 
-def _two_visible_anchors(station) -> tuple[int, int]:
-    """The two anchors in line of sight of the start that are farthest from it (long pulls)."""
-    start = np.array(station.cargo.start_m)
-    visible = np.flatnonzero(station.line_of_sight(station.cargo.start_m))
-    far = sorted(visible, key=lambda j: -np.linalg.norm(station.anchor_positions[j] - start))
-    return int(far[0]), int(far[1])
-
-
-def bare_tether_loop(station, steps: int, clock: str = "cpu") -> float:
-    """Steps/s of pymunk alone: cargo disc, wall segments, two slide joints whose length shrinks every substep."""
-    import pymunk
-
-    anchors = [tuple(station.anchor_positions[j]) for j in _two_visible_anchors(station)]
-    dt = station.control_period_s / station.substeps
-    w = station.pull_speed_mps
-    now = CLOCKS[clock]
-    start = now()
-    for k in range(steps):
-        if k % TETHER_EPISODE_STEPS == 0:
-            space = pymunk.Space()
-            space.damping = 1.0
-            space.iterations = 30
-            cargo = pymunk.Body(station.cargo.mass_kg, pymunk.moment_for_circle(station.cargo.mass_kg, 0.0,
-                                                                                station.cargo.radius_m))
-            cargo.position = station.cargo.start_m
-            space.add(cargo, pymunk.Circle(cargo, station.cargo.radius_m),
-                      *[pymunk.Segment(space.static_body, a, b, 0.0) for a, b in station.walls])
-            joints = []
-            for a in anchors:
-                joint = pymunk.SlideJoint(space.static_body, cargo, a, (0.0, 0.0), 0.0, 1e9)
-                joint.max_force = station.winch_force_limit_N
-                joint.error_bias = 0.0
-                joints.append(joint)
-            space.add(*joints)
-        for _ in range(station.substeps):
-            p, v = cargo.position, cargo.velocity
-            q = (p.x + v.x * dt, p.y + v.y * dt)
-            for joint, (ax, ay) in zip(joints, anchors):
-                joint.max = max(0.0, math.hypot(ax - q[0], ay - q[1]) - w * dt)
-            space.step(dt)
-        state = (cargo.position, cargo.velocity)  # read the body, as the env does
-    del state
-    return steps / (now() - start)
-
-
-def tether_gym(station, steps: int, fidelity: str, clock: str = "cpu") -> float:
-    from impact_env.tether.gym_env import TetherEnv
-
-    env = TetherEnv(station, fidelity=fidelity, max_active=2)
-    a, b = _two_visible_anchors(station)
-    attach, keep = [2 + a, 2 + b] + [0] * (station.n_robots - 2), [0] * station.n_robots
-    now = CLOCKS[clock]
-    start = now()
-    for k in range(steps):
-        if k % TETHER_EPISODE_STEPS == 0:
-            env.reset(seed=k)
-        env.step(attach if k % TETHER_EPISODE_STEPS == 0 else keep)
-    return steps / (now() - start)
-
-
-def tether_pettingzoo(station, steps: int, fidelity: str, clock: str = "cpu") -> float:
-    from impact_env.tether.pettingzoo_env import TetherParallelEnv
-
-    env = TetherParallelEnv(station, fidelity=fidelity, max_active=2)
-    a, b = _two_visible_anchors(station)
-    attach = {"robot_0": 2 + a, "robot_1": 2 + b}
-    now = CLOCKS[clock]
-    start = now()
-    for k in range(steps):
-        if k % TETHER_EPISODE_STEPS == 0:
-            env.reset(seed=k)
-        env.step(attach if k % TETHER_EPISODE_STEPS == 0 else {})
-    return steps / (now() - start)
-
-
 def _table(cases, repeats: int) -> None:
     print("| loop | env-steps/s | us/step | vs bare pymunk |")
     print("|---|---:|---:|---:|")
@@ -375,26 +295,10 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--ref", default="0378a64", help="reference commit of the transport table ('' for none)")
-    parser.add_argument("--station", default="L", help="tether station of the last table")
     parser.add_argument("--wall", action="store_true", help="time by the wall clock, not the processes' CPU time")
     args = parser.parse_args()
     clock = "wall" if args.wall else "cpu"
     transport_tables(args.scenario, args.steps, args.repeats, args.ref, clock)
-
-    from impact_env.tether.station import load_station
-
-    station = load_station(args.station)
-    tether_steps = max(TETHER_EPISODE_STEPS, args.steps // 4)
-    cases = [
-        ("bare pymunk loop (cargo, walls, 2 slide joints reeled in)",
-         lambda: bare_tether_loop(station, tether_steps, clock)),
-        *[(f"Tether Gymnasium env, {fid}, 2 tethers", lambda fid=fid: tether_gym(station, tether_steps, fid, clock))
-          for fid in ("kinematic", "reel", "force")],
-        ("Tether PettingZoo env, reel, 2 tethers", lambda: tether_pettingzoo(station, tether_steps, "reel", clock)),
-    ]
-    print(f"\nstation {station.name}: {station.n_anchors} anchors, {station.n_robots} robots, {station.substeps} "
-          f"substeps per env step, {tether_steps} steps x {args.repeats} repeats (median), {clock} time\n")
-    _table(cases, args.repeats)
 
 
 if __name__ == "__main__":
