@@ -172,9 +172,10 @@ def cell_store(out: Path) -> CellStore:
 
 def run(scenarios, stacks, seeds: int, out: Path, workers: int, factors=None, planners=PLANNERS,
         stale: tuple[str, ...] = ()) -> None:
-    """Fly the cells not done (``factors``: only those noise cells; ``planners``: only those plans). For the
-    stacks in ``stale``, a cell flown with another config than the stack's current one (or none recorded) is
-    flown again."""
+    """Fly the cells not done (``factors``: only those noise cells; ``planners``: only those plans). A cell with
+    fewer episodes than asked gets the missing seeds flown and added (an episode depends on its seed only). For
+    the stacks in ``stale``, a cell flown with another config than the stack's current one (or none recorded)
+    is flown again whole."""
     out.mkdir(parents=True, exist_ok=True)
     store = cell_store(out)
     fingerprints = {stack: config_fingerprint(stack) for stack in stacks}
@@ -191,12 +192,14 @@ def run(scenarios, stacks, seeds: int, out: Path, workers: int, factors=None, pl
                             done = None
                         if done is not None and done["episodes_requested"] >= n:
                             continue
+                        kept = [] if done is None else done["episodes"][:n]  # a cell asked for more seeds
                         start = time.perf_counter()
-                        jobs = [(name, planner, stack, plans[planner], axis, level, s) for s in range(n)]
-                        episodes = list(pool.map(_episode, jobs))
+                        jobs = [(name, planner, stack, plans[planner], axis, level, s) for s in range(len(kept), n)]
+                        episodes = kept + list(pool.map(_episode, jobs))
+                        wall = time.perf_counter() - start + (0.0 if done is None else done["wall_s"])
                         cell = {"scenario": name, "planner": planner, "stack": stack, "axis": axis, "level": level,
-                                "delta": delta, "episodes_requested": n, "episodes": episodes,
-                                "wall_s": time.perf_counter() - start, "config": fingerprints[stack]}
+                                "delta": delta, "episodes_requested": n, "episodes": episodes, "wall_s": wall,
+                                "config": fingerprints[stack]}
                         store.put(cell)
                         print(row(cell), flush=True)
                         write_table(out, store.cells())

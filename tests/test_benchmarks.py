@@ -201,6 +201,11 @@ def test_the_impact_robust_benchmark_flies_a_part_of_the_grid_and_again_the_cell
     impact_robust.run(factors=(1.0,), planners=("ir",), stale=("all",), **grid)
     assert [(j[2], j[6]) for j in FakePool.last.jobs] == [("all", 0), ("all", 1), ("all", 2)]
     assert "*" not in impact_robust.table(impact_robust.cell_store(out).cells(), ["throw_and_catch_exp"])
+    impact_robust.run(**{**grid, "seeds": 5, "stacks": ["paper"]}, factors=(1.0,), planners=("ir",))
+    assert [j[6] for j in FakePool.last.jobs] == [3, 4]  # more seeds asked: only the missing ones flown
+    cell = impact_robust.cell_store(out).get(impact_robust.cell_key("throw_and_catch_exp", "ir", "paper", "noise",
+                                                                   delta))
+    assert cell["episodes_requested"] == 5 and [e["seed"] for e in cell["episodes"]] == list(range(5))
     assert [c[:3] for c in impact_robust.conditions(0.01, 50)[:2]] == [("nominal", 0.0, 1), ("noise", 0.01, 50)]
 
 
