@@ -99,7 +99,7 @@ docs: $(VENV)/.docs-installed
 	TUTORIAL_SIZE=$(TUTORIAL_SIZE) NO_MKDOCS_2_WARNING=1 SDL_VIDEODRIVER=dummy MPLBACKEND=Agg $(BIN)/mkdocs build --strict
 
 docs-check: docs
-	$(BIN)/python -m pytest -q -p no:cacheprovider tests/docs_site_check.py
+	$(BIN)/python -m pytest -q -p no:cacheprovider tests/docs/docs_site_check.py
 
 docs-media: $(VENV)/.base-installed
 	SDL_VIDEODRIVER=dummy MPLBACKEND=Agg $(BIN)/python scripts/make_docs_media.py
