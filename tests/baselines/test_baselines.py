@@ -16,6 +16,7 @@ from baselines import hyperparams  # noqa: E402
 from baselines.train import TrainConfig, train  # noqa: E402
 from impact_env.cli import main  # noqa: E402
 from tests.paths import DATA
+from tests.shipped_plans import path as committed_plan
 
 MODELS = DATA / "models"  # copies of published folders of results/baselines/models/
 
@@ -97,11 +98,13 @@ def test_bench_rejects_a_missing_model(tmp_path, capsys):
 
 @pytest.fixture(scope="module")
 def demonstrations(tmp_path_factory):
-    """Three expert episodes of throw_and_catch_exp recorded through the CLI (with noise, so they differ)."""
+    """Three expert episodes of throw_and_catch_exp recorded through the CLI (with noise, so they differ), on
+    the committed plan (tests/shipped_plans.py)."""
     pytest.importorskip("minari")
     out = tmp_path_factory.mktemp("datasets")
-    assert main(["record", "throw_and_catch_exp", "--episodes", "3", "--out", str(out), "--thrust-noise", "0.05",
-                 "--initial-position-noise-m", "0.03"]) == 0
+    plan = committed_plan("sr", "throw_and_catch_exp")
+    assert main(["record", "throw_and_catch_exp", "--episodes", "3", "--out", str(out), "--plan", str(plan),
+                 "--thrust-noise", "0.05", "--initial-position-noise-m", "0.03"]) == 0
     return out
 
 
@@ -160,7 +163,7 @@ def test_behaviour_cloning_unpickles_nothing_and_writes_no_pickle(demonstrations
     marker file) are never loaded; bc's model folder holds no pickle and flies without --trust-pickle."""
     import pickle
 
-    from tests.test_model_safety import Payload, with_malicious_zip_entry
+    from tests.baselines.test_model_safety import Payload, with_malicious_zip_entry
 
     marker = tmp_path / "marker"
     run_dir = tmp_path / "runs" / "bc_throw_and_catch_exp_s0"

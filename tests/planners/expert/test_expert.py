@@ -13,12 +13,14 @@ from impact_env.transport.gym_env import TransportEnv
 from impact_env.transport.scenario import load_scenario
 from planners.expert import Expert
 from planners.expert.wrappers import ExpertActionInfo
-from planners.offline.spatially_robust import plan_spatially_robust
+from tests.shipped_plans import path as committed_plan
 
 
 @pytest.fixture(scope="module")
-def experts():
-    return {name: Expert(load_scenario(name)) for name in ("throw_and_catch_exp", "corridor")}
+def experts(shipped_plans):
+    """The expert on the committed plans of two shipped scenarios (tests/conftest.py)."""
+    names = ("throw_and_catch_exp", "corridor")
+    return {name: Expert(load_scenario(name), plan=shipped_plans.sr(name)) for name in names}
 
 
 def fly(expert: Expert, seed: int = 0, **env_options) -> tuple[dict, np.ndarray, TransportEnv]:
@@ -84,7 +86,7 @@ def test_plan_for_another_scenario_is_rejected(experts):
 
 
 def test_cli_run_with_the_expert_and_a_saved_plan(tmp_path):
-    plan_path = plan_spatially_robust(load_scenario("throw_and_catch_exp")).save(tmp_path / "plan.json")
+    plan_path = committed_plan("sr", "throw_and_catch_exp")  # a saved plan: the committed one
     out, fig = tmp_path / "run.json", tmp_path / "run.png"
     code = main(["run", "throw_and_catch_exp", "--controller", "expert", "--plan", str(plan_path),
                  "--json", str(out), "--plot", str(fig)])
@@ -98,8 +100,8 @@ def test_cli_run_with_the_expert_and_a_saved_plan(tmp_path):
 
 
 @pytest.mark.slow
-def test_closed_loop_obstacle_avoidance():
-    expert = Expert(load_scenario("obstacle_avoidance"))
+def test_closed_loop_obstacle_avoidance(shipped_plans):
+    expert = Expert(load_scenario("obstacle_avoidance"), plan=shipped_plans.sr("obstacle_avoidance"))
     info, obs, env = fly(expert)
     assert info["is_success"], f"robustness {info['robustness']}"
     o1 = env.core.body_names.index("O1")

@@ -7,18 +7,16 @@ import pytest
 
 from impact_env.rollout import run_episode
 from impact_env.transport.gym_env import TransportEnv
-from impact_env.transport.scenario import load_scenario
 from planners.expert import Expert
-from planners.offline.impact_robust import plan_impact_robust
 from planners.online.contingency import CopyContact, copies_of, feedback_velocity
 from planners.online.reference import ContactQuery, PlanContact
 from planners.plan.funnels import box_coordinates, copy_targets
 
 
 @pytest.fixture(scope="module")
-def lab():
-    scenario = load_scenario("throw_and_catch_exp")
-    return scenario, plan_impact_robust(scenario)
+def lab(ir_lab):
+    """throw_and_catch_exp and its committed impact-robust plan (tests/conftest.py)."""
+    return ir_lab
 
 
 def _vertex_state(plan, copies, s_p, s_v):

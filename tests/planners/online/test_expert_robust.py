@@ -15,7 +15,7 @@ from impact_env.stl import parse
 from impact_env.transport.gym_env import TransportEnv
 from impact_env.transport.scenario import load_scenario
 from planners.expert import Expert, ExpertConfig
-from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
+from planners.offline.spatially_robust import plan_spatially_robust
 from planners.online.bookkeeping import ImpactBook
 from planners.online.keep_off import robot_keep_off
 from planners.online.mission import resample_plan, splice
@@ -24,9 +24,6 @@ from planners.online.replanner import SegmentLimits, hermite, replan_segment
 from tests.paths import DATA
 
 HOLD_STOP = DATA / "hold_stop.toml"
-# the relay's robustness stage takes 26 s on a lightly loaded 2-core machine and more than the default 60 s
-# when every core is busy: a time limit that cut it would give a different (worse) plan
-RELAY_CONFIG = PlannerConfig(time_limit_s=600.0)
 
 
 @pytest.fixture(scope="module")
@@ -184,10 +181,13 @@ def test_unplanned_contacts_are_counted_per_pair(hold_stop):
 # ------------------------------------------------------------------------------------- new scenarios
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["ping_pong_stop", "relay", "two_objects"])
-def test_new_scenarios_plan_with_highs_and_fly_nominally_without_unplanned_robot_contacts(name):
+def test_new_scenarios_plan_with_highs_and_fly_nominally_without_unplanned_robot_contacts(shipped_plans, name):
+    """The committed plans (HiGHS, planned again by tests/planners/offline/test_spatially_robust.py; the
+    relay's robustness stage needs more than the default 60 s when every core is busy, and a time limit that
+    cut it gave a different plan) flown by the full expert."""
     scenario = load_scenario(name)
-    plan = plan_spatially_robust(scenario, RELAY_CONFIG if name == "relay" else None)
-    assert plan.robustness > 0 and plan.mip_gap < 1e-3
+    plan = shipped_plans.sr(name)
+    assert plan.solver == "highs" and plan.robustness > 0 and plan.mip_gap < 1e-3
     result, expert = fly(scenario, plan, ExpertConfig())
     assert result.success, result.robustness
     robots = {r.name for r in scenario.robots}
@@ -195,11 +195,11 @@ def test_new_scenarios_plan_with_highs_and_fly_nominally_without_unplanned_robot
 
 
 @pytest.mark.slow
-def test_safe_segments_remove_the_relays_wall_contacts():
+def test_safe_segments_remove_the_relays_wall_contacts(shipped_plans):
     """The paper's stack touches the walls in the relay (R1 starts 0.3 m off two walls); safe segments alone
-    bring the count to zero."""
+    bring the count to zero. The committed plan (see the test above)."""
     scenario = load_scenario("relay")
-    plan = plan_spatially_robust(scenario, RELAY_CONFIG)
+    plan = shipped_plans.sr("relay")
     _, paper = fly(scenario, plan, ExpertConfig.paper())
     _, safe = fly(scenario, plan, ExpertConfig.paper(safe_segments=True))
     walls = {k: v for k, v in paper.report()["unplanned_contacts"].items() if "wall" in k}

@@ -42,10 +42,10 @@ def test_unobserved_pairs_use_the_pooled_estimate_and_contacts_with_walls_are_ig
     assert ident.estimate("R2", "O1").count == 1
 
 
-def test_identification_through_the_pettingzoo_env():
+def test_identification_through_the_pettingzoo_env(shipped_plans):
     """Each agent passes its own info; the estimate after the throw matches the simulator's restitution."""
     scenario = load_scenario("throw_and_catch_exp")
-    expert = Expert(scenario)
+    expert = Expert(scenario, plan=shipped_plans.sr("throw_and_catch_exp"))
     true_e = scenario.restitution + 0.2
     par = impact_env.parallel_env(scenario="throw_and_catch_exp", restitution=true_e)
     observations, infos = par.reset(seed=0)

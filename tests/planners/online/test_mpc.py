@@ -384,7 +384,7 @@ def test_an_object_is_not_a_robot() -> None:
 
 def test_runs_next_to_highspy() -> None:
     """The planner's highspy and CasADi share a process: the MPC must not load CasADi's own libhighs."""
-    code = ("import highspy, numpy as np; from tests.test_mpc import solo; "
+    code = ("import highspy, numpy as np; from tests.planners.online.test_mpc import solo; "
             "from planners.online.mpc import FreeflyerMPC; "
             "r = FreeflyerMPC(solo().robots[0]).solve(np.zeros(6), np.zeros((11, 4))); assert r.success")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120, cwd=ROOT)
