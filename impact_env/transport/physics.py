@@ -9,7 +9,8 @@ lasts, and the contacts that end in one substep are closed after it in the scena
 (chipmunk's own order depends on where malloc put them: ``docs/background.md#physics``). Optional post-impact
 velocity noise perturbs an object when a robot-object contact ends: the error the impact-robust planner's delta
 bounds. The substep loop calls chipmunk's C functions where pymunk exposes them (its Python properties cost
-more than the physics at this size); both paths give bit-identical trajectories (``tests/test_physics.py``).
+more than the physics at this size); both paths give bit-identical trajectories
+(``tests/impact_env/transport/test_physics.py``).
 """
 
 from __future__ import annotations

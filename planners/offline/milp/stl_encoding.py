@@ -109,7 +109,8 @@ class STLEncoder:
         # its object lives, and the negation normal form of each conjunct is a new tree that the caller drops
         # once it is encoded. Keyed by the ids of dead nodes, a later conjunct's node allocated at a freed
         # address was given an earlier conjunct's encoding (two_objects: R2's pillar constraint became R1's),
-        # depending on the heap, i.e. on what the process had done before (tests/test_determinism.py).
+        # depending on the heap, i.e. on what the process had done before
+        # (tests/planners/offline/milp/test_stl_encoding.py).
         self._memo: dict[tuple[int, int], tuple[Formula, LinExpr]] = {}  # (id(node), k) -> (node, robustness)
         self._ub: dict[int, tuple[LinExpr, float]] = {}  # id(r) -> (r, an upper bound of its value)
         self._pred_ub: dict[tuple[str, str, bool], float] = {}
