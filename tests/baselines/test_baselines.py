@@ -9,15 +9,14 @@ import shutil
 import numpy as np
 import pytest
 
-pytest.importorskip("stable_baselines3")
-pytest.importorskip("supersuit")
-
-from baselines import hyperparams  # noqa: E402
-from baselines.train import TrainConfig, train  # noqa: E402
-from impact_env.cli import main  # noqa: E402
+from baselines import hyperparams
+from baselines.train import TrainConfig, train
+from impact_env.cli import main
+from tests.optional import requires
 from tests.paths import DATA
 from tests.shipped_plans import path as committed_plan
 
+pytestmark = requires("stable_baselines3", "supersuit")
 MODELS = DATA / "models"  # copies of published folders of results/baselines/models/
 
 

@@ -15,13 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("stable_baselines3")
-
-from baselines import model_files  # noqa: E402
-from impact_env.cli import main  # noqa: E402
-from impact_env.errors import ModelFileError, UntrustedFileError  # noqa: E402
+from baselines import model_files
+from impact_env.cli import main
+from impact_env.errors import ModelFileError, UntrustedFileError
+from tests.optional import requires
 from tests.paths import DATA
 
+pytestmark = requires("stable_baselines3")
 MODELS = DATA / "models"  # copies of published folders of results/baselines/models/
 
 

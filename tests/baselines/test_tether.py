@@ -5,14 +5,13 @@ from __future__ import annotations
 import csv
 import json
 
-import pytest
+from baselines import hyperparams
+from baselines.train import env_id_for
+from impact_env import TETHER_GYM_IDS
+from impact_env.cli import main
+from tests.optional import requires
 
-pytest.importorskip("stable_baselines3")
-
-from baselines import hyperparams  # noqa: E402
-from baselines.train import env_id_for  # noqa: E402
-from impact_env import TETHER_GYM_IDS  # noqa: E402
-from impact_env.cli import main  # noqa: E402
+pytestmark = requires("stable_baselines3")
 
 
 def test_every_tether_env_id_has_ppo_hyperparameters():

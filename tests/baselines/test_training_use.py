@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("stable_baselines3")
+from baselines.train import TrainConfig, train
+from impact_env.cli import main
+from tests.optional import requires
+from tests.paths import DATA
 
-from baselines.train import TrainConfig, train  # noqa: E402
-from impact_env.cli import main  # noqa: E402
-from tests.paths import ROOT
-
-MODELS = ROOT / "tests" / "data" / "models"  # copies of published folders of results/baselines/models/
+pytestmark = requires("stable_baselines3")
+MODELS = DATA / "models"  # copies of published folders of results/baselines/models/
 TINY = """\
 impact_env/ThrowAndCatchExp-v0:
   n_envs: 1

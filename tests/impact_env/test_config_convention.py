@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import functools
 import importlib
 import math
 import re
@@ -31,20 +32,31 @@ REQUIRED = {  # valid values of required fields
 }
 
 
-def _config_classes() -> list[tuple[str, str, ast.ClassDef]]:
-    """(module, class name, class node) of every class named ``*Config`` or ``*Options``, from the sources
-    (importing every module at once is not possible: highspy and CasADi's HiGHS plugin cannot share a process)."""
-    found = []
+def _sources() -> list[tuple[str, str]]:
+    """(module, source text) of every module of the three layers."""
+    out = []
     for package in PACKAGES:
         for path in sorted((ROOT / package).rglob("*.py")):
-            module = ".".join(path.relative_to(ROOT).with_suffix("").parts)
-            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-                if isinstance(node, ast.ClassDef) and re.search(r"(Config|Options)$", node.name):
-                    found.append((module, node.name, node))
+            out.append((".".join(path.relative_to(ROOT).with_suffix("").parts), path.read_text(encoding="utf-8")))
+    return out
+
+
+@functools.cache
+def _config_nodes() -> dict[tuple[str, str], ast.ClassDef]:
+    """(module, class name) -> class node of every class named ``*Config`` or ``*Options``, from the sources
+    (importing every module at once is not possible: highspy and CasADi's HiGHS plugin cannot share a process)."""
+    found = {}
+    for module, text in _sources():
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.ClassDef) and re.search(r"(Config|Options)$", node.name):
+                found[(module, node.name)] = node
     return found
 
 
-CLASSES = _config_classes()
+# The same classes found by a scan of the text, which is all that collecting the tests needs (parsing every
+# source takes most of a second); test_the_walk_finds_every_config_of_the_three_layers checks they agree.
+CLASS_LINE = re.compile(r"^[ \t]*class[ \t]+(\w*(?:Config|Options))\b", re.MULTILINE)
+CLASSES = [(module, name) for module, text in _sources() for name in CLASS_LINE.findall(text)]
 
 
 def _class(module: str, name: str) -> type:
@@ -85,28 +97,29 @@ def _bad_value(field: dataclasses.Field):
 
 
 def test_the_walk_finds_every_config_of_the_three_layers():
-    names = {name for _, name, _ in CLASSES}
+    assert sorted(CLASSES) == sorted(_config_nodes())
+    names = {name for _, name in CLASSES}
     assert {"EngineConfig", "PlannerConfig", "IRPlannerConfig", "SolverOptions", "MissionConfig", "ExpertConfig",
             "IdentificationConfig", "MPCConfig", "ReachabilityConfig", "SmtConfig", "TrainConfig",
             "RLlibTrainConfig", "BCConfig"} <= names
 
 
-@pytest.mark.parametrize("module, name, node", CLASSES, ids=[name for _, name, _ in CLASSES])
-def test_a_config_is_a_frozen_dataclass_with_every_field_documented(module, name, node):
+@pytest.mark.parametrize("module, name", CLASSES, ids=[name for _, name in CLASSES])
+def test_a_config_is_a_frozen_dataclass_with_every_field_documented(module, name):
     cls = _class(module, name)
     assert dataclasses.is_dataclass(cls), f"{module}.{name} is not a dataclass"
     assert cls.__dataclass_params__.frozen, f"{module}.{name} is not frozen: @dataclass(frozen=True)"
     documented = {}
     for base in reversed(cls.__mro__):  # a field is documented where it is (re)declared
         if dataclasses.is_dataclass(base):
-            base_node = next((n for m, c, n in CLASSES if c == base.__name__ and m == base.__module__), None)
+            base_node = _config_nodes().get((base.__module__, base.__name__))
             documented.update(_documented_fields(base_node) if base_node is not None else {})
     for field in dataclasses.fields(cls):
         assert documented.get(field.name), f"{name}.{field.name} has no docstring line under it"
 
 
-@pytest.mark.parametrize("module, name, node", CLASSES, ids=[name for _, name, _ in CLASSES])
-def test_a_bad_value_of_every_field_is_the_layers_typed_error_naming_class_and_field(module, name, node):
+@pytest.mark.parametrize("module, name", CLASSES, ids=[name for _, name in CLASSES])
+def test_a_bad_value_of_every_field_is_the_layers_typed_error_naming_class_and_field(module, name):
     cls = _class(module, name)
     error = LAYER_ERRORS[module.split(".")[0]]
     example = _example(cls)

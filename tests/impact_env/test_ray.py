@@ -17,15 +17,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-ray = pytest.importorskip("ray")
-pytest.importorskip("ray.rllib")
+from impact_env.cli import main
+from impact_env.errors import EngineError, ScenarioError
+from impact_env.sweep import EngineConfig, open_engine
+from tests import sweep_jobs
+from tests.optional import requires
 
-from impact_env.cli import main  # noqa: E402
-from impact_env.errors import EngineError, ScenarioError  # noqa: E402
-from impact_env.sweep import EngineConfig, open_engine  # noqa: E402
-from tests import sweep_jobs  # noqa: E402
-
-pytestmark = pytest.mark.xdist_group("ray")  # with --dist loadgroup: one Ray instance at a time in the suite
+# with --dist loadgroup: one Ray instance at a time in the suite
+pytestmark = [requires("ray", "ray.rllib"), pytest.mark.xdist_group("ray")]
 
 NOISE = ["--thrust-noise", "0.05", "--initial-position-noise-m", "0.05"]
 TINY_PPO = """impact_env/ThrowAndCatchExp-v0:
@@ -42,6 +41,8 @@ TINY_PPO = """impact_env/ThrowAndCatchExp-v0:
 
 @pytest.fixture(scope="module", autouse=True)
 def local_ray():
+    import ray
+
     ray.init(num_cpus=2, include_dashboard=False, logging_level="WARNING")
     yield
     ray.shutdown()

@@ -10,19 +10,20 @@ from pathlib import Path
 
 import pytest
 
-ray = pytest.importorskip("ray")
-from ray.cluster_utils import Cluster  # noqa: E402
+from impact_env.cli import main
+from impact_env.sweep import EngineConfig, open_engine
+from tests.optional import requires
+from tests.paths import ROOT
 
-from impact_env.cli import main  # noqa: E402
-from impact_env.sweep import EngineConfig, open_engine  # noqa: E402
-from tests.paths import ROOT  # noqa: E402
-
-pytestmark = pytest.mark.xdist_group("ray")  # one Ray instance at a time (test_ray.py runs in the same worker)
-
+# one Ray instance at a time (test_ray.py runs in the same worker)
+pytestmark = [requires("ray"), pytest.mark.xdist_group("ray")]
 
 
 @pytest.fixture(scope="module")
 def cluster():
+    import ray
+    from ray.cluster_utils import Cluster
+
     c = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
     c.add_node(num_cpus=1)
     c.wait_for_nodes()
@@ -40,6 +41,8 @@ def test_a_bench_sweep_on_the_cluster_gives_the_local_table(cluster, tmp_path, c
     """The bench's jobs are short: under load one node can finish all 8 before the other has started a
     worker (Ray's SPREAD is best effort), so where they ran is reported, not asserted; that jobs do reach
     both nodes is checked by test_shipped_code_runs_on_every_node, whose jobs last long enough."""
+    import ray
+
     common = ["bench", "throw_and_catch_exp", "--controllers", "random,zero", "--episodes", "4",
               "--thrust-noise", "0.05", "--initial-position-noise-m", "0.05"]
     assert main(common + ["--engine", "ray", "--address", cluster.address, "--out", str(tmp_path / "cluster")]) == 0

@@ -11,7 +11,6 @@ import sys
 from importlib.resources import files
 
 import pytest
-from matplotlib.figure import Figure
 
 from impact_env.cli import main
 from impact_env.transport.scenario import load_scenario
@@ -19,7 +18,6 @@ from planners.cli import format_progress, progress_printer
 from planners.errors import PlanTimeoutError
 from planners.offline.solvers.base import Progress
 from planners.plan import Plan
-from planners.plan.plotting import plot_plan
 
 SCENARIO = "throw_and_catch_exp"
 IMPACT_KEYS = {"time", "robot", "object", "position", "object_velocity_before", "object_velocity_after",
@@ -68,6 +66,10 @@ def test_plan_prints_model_size_result_and_one_line_per_impact(planned):
 
 
 def test_plot_plan_returns_a_figure_with_three_axes(planned, tmp_path):
+    from matplotlib.figure import Figure
+
+    from planners.plan.plotting import plot_plan
+
     _, _, out, _ = planned
     plan = Plan.load(out)
     fig = plot_plan(load_scenario(SCENARIO), plan, samples=50)

@@ -6,8 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 from shapely.geometry import LineString, Point, Polygon
 
 from impact_env.errors import ScenarioError
@@ -191,46 +189,58 @@ def test_narrow_passage_gives_a_free_space_in_pieces():
 # ------------------------------------------------------------------------------------- property tests
 
 
-@st.composite
-def histogram_polygons(draw):
-    """Orthogonal 'histogram' polygons: a flat bottom and 2-6 columns of random widths and heights (m)."""
-    widths = draw(st.lists(st.integers(2, 6), min_size=2, max_size=6))
-    heights = draw(st.lists(st.integers(2, 8), min_size=len(widths), max_size=len(widths)))
-    pts, x = [(0.0, 0.0), (float(sum(widths)), 0.0)], float(sum(widths))
-    for w, h in zip(reversed(widths), reversed(heights)):
-        pts.append((x, float(h)))
-        x -= w
-        pts.append((x, float(h)))
-    # equal neighbouring heights repeat a vertex: keep one (the straight wall then has a collinear vertex)
-    unique = [p for i, p in enumerate(pts) if p != pts[i - 1]]
-    return [list(p) for p in unique]
+def histogram_polygons():
+    """Orthogonal 'histogram' polygons: a flat bottom and 2-6 columns of random widths and heights (m). A
+    hypothesis strategy, built when a test draws from it (hypothesis is not imported to collect the suite)."""
+    from hypothesis import strategies as st
+
+    @st.composite
+    def polygons(draw):
+        widths = draw(st.lists(st.integers(2, 6), min_size=2, max_size=6))
+        heights = draw(st.lists(st.integers(2, 8), min_size=len(widths), max_size=len(widths)))
+        pts, x = [(0.0, 0.0), (float(sum(widths)), 0.0)], float(sum(widths))
+        for w, h in zip(reversed(widths), reversed(heights)):
+            pts.append((x, float(h)))
+            x -= w
+            pts.append((x, float(h)))
+        # equal neighbouring heights repeat a vertex: keep one (the straight wall then has a collinear vertex)
+        unique = [p for i, p in enumerate(pts) if p != pts[i - 1]]
+        return [list(p) for p in unique]
+
+    return polygons()
 
 
-@settings(max_examples=40, deadline=None)
-@given(polygon=histogram_polygons(), spacing=st.sampled_from([1.0, 2.5, 5.0]), reverse=st.booleans())
-def test_property_any_orthogonal_station(polygon, spacing, reverse):
-    poly = Polygon(polygon)
-    free = poly.buffer(-0.3)
-    start = free.representative_point()
-    goal_box = Point(start.x, start.y).buffer(0.5, cap_style="square")
-    if not poly.covers(goal_box):  # keep the goal inside; the start is then also the goal centre
-        return
-    written = polygon if not reverse else [polygon[0]] + polygon[:0:-1]
-    s = make_station(written, start=(start.x, start.y), goal=(start.x, start.y), anchors={"spacing_m": spacing})
-    assert _signed_area(s.polygon) > 0 and abs(_signed_area(s.polygon)) == pytest.approx(poly.area)
-    assert s.n_anchors == _rule_count(s.polygon, spacing)
-    for a in s.anchors:
-        assert poly.exterior.distance(Point(a.position_m)) < 1e-9
-    # line of sight agrees with dense sampling of the segment (visible -> every sample inside the polygon;
-    # hidden -> the segment leaves the polygon by more than rounding)
-    mask = s.line_of_sight((start.x, start.y))
-    grown = poly.buffer(1e-6)
-    for a, visible in zip(s.anchors, mask):
-        seg = LineString([(start.x, start.y), a.position_m])
-        samples = [seg.interpolate(t, normalized=True) for t in np.linspace(0.0, 1.0, 101)]
-        if visible:
-            assert all(poly.buffer(1e-9).covers(q) for q in samples)
-        elif not any(seg.distance(Point(v)) < 1e-6 for v in s.polygon):
-            # hidden: the segment leaves the polygon by more than rounding, unless it grazes a corner, where
-            # either answer is right (the tether would touch the wall there)
-            assert not grown.covers(seg)
+def test_property_any_orthogonal_station():
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    @settings(max_examples=40, deadline=None)
+    @given(polygon=histogram_polygons(), spacing=st.sampled_from([1.0, 2.5, 5.0]), reverse=st.booleans())
+    def check(polygon, spacing, reverse):
+        poly = Polygon(polygon)
+        free = poly.buffer(-0.3)
+        start = free.representative_point()
+        goal_box = Point(start.x, start.y).buffer(0.5, cap_style="square")
+        if not poly.covers(goal_box):  # keep the goal inside; the start is then also the goal centre
+            return
+        written = polygon if not reverse else [polygon[0]] + polygon[:0:-1]
+        s = make_station(written, start=(start.x, start.y), goal=(start.x, start.y), anchors={"spacing_m": spacing})
+        assert _signed_area(s.polygon) > 0 and abs(_signed_area(s.polygon)) == pytest.approx(poly.area)
+        assert s.n_anchors == _rule_count(s.polygon, spacing)
+        for a in s.anchors:
+            assert poly.exterior.distance(Point(a.position_m)) < 1e-9
+        # line of sight agrees with dense sampling of the segment (visible -> every sample inside the polygon;
+        # hidden -> the segment leaves the polygon by more than rounding)
+        mask = s.line_of_sight((start.x, start.y))
+        grown = poly.buffer(1e-6)
+        for a, visible in zip(s.anchors, mask):
+            seg = LineString([(start.x, start.y), a.position_m])
+            samples = [seg.interpolate(t, normalized=True) for t in np.linspace(0.0, 1.0, 101)]
+            if visible:
+                assert all(poly.buffer(1e-9).covers(q) for q in samples)
+            elif not any(seg.distance(Point(v)) < 1e-6 for v in s.polygon):
+                # hidden: the segment leaves the polygon by more than rounding, unless it grazes a corner, where
+                # either answer is right (the tether would touch the wall there)
+                assert not grown.covers(seg)
+
+    check()

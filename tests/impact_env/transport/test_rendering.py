@@ -16,7 +16,6 @@ import pytest  # noqa: E402
 
 from impact_env.geometry import ConvexPolygon  # noqa: E402
 from impact_env.transport import rendering  # noqa: E402
-from impact_env.transport.plotting import draw_scenario, plot_run, save_scenario_figure  # noqa: E402
 from impact_env.transport.rendering import FORCE_SCALE_M_PER_N, HEADER_PX, MARGIN_PX, Renderer, RenderFrame  # noqa: E402
 from impact_env.transport.scenario import Body, Region, Scenario, load_scenario  # noqa: E402
 
@@ -177,6 +176,7 @@ def test_renders_every_shipped_scenario() -> None:
 
 
 # ------------------------------------------------------------------------------------------------- plotting
+# (each test imports impact_env.transport.plotting, and with it matplotlib, when it runs: not to collect)
 
 
 def straight_run(scenario: Scenario, steps: int = 30) -> tuple[np.ndarray, np.ndarray]:
@@ -194,6 +194,8 @@ def assert_png(path: Path) -> None:
 
 
 def test_draw_scenario_labels_and_legend() -> None:
+    from impact_env.transport.plotting import draw_scenario
+
     scenario = small_scenario()
     ax = draw_scenario(scenario)
     assert ax.get_aspect() == 1.0
@@ -208,6 +210,8 @@ def test_draw_scenario_labels_and_legend() -> None:
 
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_scenario_figures_are_written(name: str, tmp_path: Path) -> None:
+    from impact_env.transport.plotting import plot_run, save_scenario_figure
+
     scenario = load_scenario(name)
     assert_png(save_scenario_figure(scenario, tmp_path / f"{name}.png"))
     times, positions = straight_run(scenario)
@@ -217,6 +221,8 @@ def test_shipped_scenario_figures_are_written(name: str, tmp_path: Path) -> None
 
 
 def test_plot_run_rejects_wrong_shapes(tmp_path: Path) -> None:
+    from impact_env.transport.plotting import plot_run
+
     scenario = small_scenario()
     times, positions = straight_run(scenario)
     with pytest.raises(ValueError, match=r"positions must have shape \(T, n_bodies, 2\)"):

@@ -5,9 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import event, given, settings
-from hypothesis import strategies as st
-from scipy.optimize import linprog
 
 from planners import bezier
 from planners.errors import ReplanInputError
@@ -35,6 +32,8 @@ def _args(case: dict) -> tuple:
 def _lp_feasible(p0, v0, p1, v1, duration_s, degree, velocity_bound, acceleration_bound) -> bool:
     """The QP's constraints (without limits) as an LP over the control points of both axes, rows built from
     the Bezier derivative (planners.bezier), solved by HiGHS through scipy."""
+    from scipy.optimize import linprog
+
     n = degree + 1
     first = bezier.derivative(np.eye(n)) / duration_s  # velocity control points = first @ P
     second = bezier.derivative(bezier.derivative(np.eye(n))) / duration_s ** 2
@@ -157,64 +156,80 @@ def test_bounds_feasible_rejects_bad_input_naming_the_field(bad):
         bounds_feasible((0, 0), (0, 0), (1, 0), (0, 0), **kwargs)
 
 
-@st.composite
-def segment_problems(draw) -> tuple:
+def segment_problems():
     """(p0, v0, p1, v1, duration_s, degree), velocity_bound, acceleration_bound: end velocities as fractions
     of the bound (a few beyond it), the acceleration bound a multiple of the least that joins them (a few
     below), the run such that the mean velocity falls from 15 % below to 15 % above the range the closed form
-    gives (its ends too). About half the cases are feasible, many on the boundary; the LP is the judge."""
-    fraction, pair = st.floats(-1.02, 1.02), st.tuples
-    duration_s = draw(st.floats(0.1, 12.0))
-    degree = draw(st.sampled_from([3, 4, 10]))
-    velocity_bound = draw(st.one_of(st.none(), pair(st.floats(0.05, 0.5), st.floats(0.05, 0.5))))
-    scale = np.full(2, 0.3) if velocity_bound is None else np.asarray(velocity_bound)
-    v0 = np.asarray(draw(pair(fraction, fraction))) * scale
-    v1 = np.asarray(draw(pair(fraction, fraction))) * scale
-    turn = np.asarray(draw(pair(st.floats(0.9, 4.0), st.floats(0.9, 4.0))))
-    acceleration_bound = tuple(turn * np.abs(v1 - v0) / duration_s + 1e-4) if draw(st.booleans()) else None
-    low, high = velocity_sum_range(v0, v1, duration_s, degree, velocity_bound, acceleration_bound)
-    low, high = np.where(np.isfinite(low), low, -degree * 0.5), np.where(np.isfinite(high), high, degree * 0.5)
-    where = st.one_of(st.floats(-0.15, 1.15), st.sampled_from([0.0, 1.0]))
-    p0 = np.array([0.4, -0.2])
-    p1 = p0 + (low + np.asarray(draw(pair(where, where))) * (high - low)) * duration_s / degree
-    return (p0, v0, p1, v1, duration_s, degree), velocity_bound, acceleration_bound
+    gives (its ends too). About half the cases are feasible, many on the boundary; the LP is the judge. A
+    hypothesis strategy, built when a test draws from it (hypothesis is not imported to collect the suite)."""
+    from hypothesis import strategies as st
+
+    @st.composite
+    def problems(draw) -> tuple:
+        fraction, pair = st.floats(-1.02, 1.02), st.tuples
+        duration_s = draw(st.floats(0.1, 12.0))
+        degree = draw(st.sampled_from([3, 4, 10]))
+        velocity_bound = draw(st.one_of(st.none(), pair(st.floats(0.05, 0.5), st.floats(0.05, 0.5))))
+        scale = np.full(2, 0.3) if velocity_bound is None else np.asarray(velocity_bound)
+        v0 = np.asarray(draw(pair(fraction, fraction))) * scale
+        v1 = np.asarray(draw(pair(fraction, fraction))) * scale
+        turn = np.asarray(draw(pair(st.floats(0.9, 4.0), st.floats(0.9, 4.0))))
+        acceleration_bound = tuple(turn * np.abs(v1 - v0) / duration_s + 1e-4) if draw(st.booleans()) else None
+        low, high = velocity_sum_range(v0, v1, duration_s, degree, velocity_bound, acceleration_bound)
+        low, high = np.where(np.isfinite(low), low, -degree * 0.5), np.where(np.isfinite(high), high, degree * 0.5)
+        where = st.one_of(st.floats(-0.15, 1.15), st.sampled_from([0.0, 1.0]))
+        p0 = np.array([0.4, -0.2])
+        p1 = p0 + (low + np.asarray(draw(pair(where, where))) * (high - low)) * duration_s / degree
+        return (p0, v0, p1, v1, duration_s, degree), velocity_bound, acceleration_bound
+
+    return problems()
 
 
 def _shifted(bound, delta: float, relative: float = 0.0):
     return None if bound is None else tuple(max(b * (1 + relative) + delta, 0.0) for b in bound)
 
 
-@settings(max_examples=300, deadline=None)
-@given(case=segment_problems())
-def test_bounds_feasible_agrees_with_an_lp_solver(case):
+def test_bounds_feasible_agrees_with_an_lp_solver():
     """Sound: a False is never given to a feasible problem. Exact: it agrees with HiGHS wherever HiGHS's
     verdict is robust (the same with the bounds 1e-6 tighter and 1e-6 looser)."""
-    problem, velocity_bound, acceleration_bound = case
-    if not bounds_feasible(*problem, velocity_bound, acceleration_bound):
-        event("infeasible")
-        assert not _lp_feasible(*problem, velocity_bound, acceleration_bound)
-    else:
-        event("feasible")
-    tight = _lp_feasible(*problem, _shifted(velocity_bound, -1e-6), _shifted(acceleration_bound, -1e-6))
-    loose = _lp_feasible(*problem, _shifted(velocity_bound, 1e-6), _shifted(acceleration_bound, 1e-6))
-    if tight == loose:
-        assert bounds_feasible(*problem, velocity_bound, acceleration_bound, tol=0.0) == tight
+    from hypothesis import event, given, settings
+
+    @settings(max_examples=300, deadline=None)
+    @given(case=segment_problems())
+    def check(case):
+        problem, velocity_bound, acceleration_bound = case
+        if not bounds_feasible(*problem, velocity_bound, acceleration_bound):
+            event("infeasible")
+            assert not _lp_feasible(*problem, velocity_bound, acceleration_bound)
+        else:
+            event("feasible")
+        tight = _lp_feasible(*problem, _shifted(velocity_bound, -1e-6), _shifted(acceleration_bound, -1e-6))
+        loose = _lp_feasible(*problem, _shifted(velocity_bound, 1e-6), _shifted(acceleration_bound, 1e-6))
+        if tight == loose:
+            assert bounds_feasible(*problem, velocity_bound, acceleration_bound, tol=0.0) == tight
+
+    check()
 
 
-@settings(max_examples=150, deadline=None)
-@given(case=segment_problems())
-def test_least_acceleration_bound_is_the_least_that_an_lp_solver_finds_feasible(case):
-    problem, velocity_bound, acceleration_bound = case
-    given_bound = (0.1, 0.1) if acceleration_bound is None else acceleration_bound
-    least = least_acceleration_bound(*problem, velocity_bound, given_bound, tol=0.0)
-    event("velocity bound unmet" if least is None else "raised" if (least > given_bound).any() else "as given")
-    if least is None:  # only when the velocity bound cannot be met, whatever the thrust (or by 1e-6 at most)
-        assert not _lp_feasible(*problem, _shifted(velocity_bound, -1e-6), None)
-        return
-    assert (least >= np.asarray(given_bound)).all()
-    assert _lp_feasible(*problem, velocity_bound, _shifted(least, 1e-7, 1e-5))
-    for axis in range(2):
-        if least[axis] > given_bound[axis] * (1 + 1e-4) + 1e-6:  # raised: a little less is not enough
-            lower = least.copy()
-            lower[axis] = least[axis] * (1 - 1e-4) - 1e-6
-            assert not _lp_feasible(*problem, velocity_bound, tuple(lower))
+def test_least_acceleration_bound_is_the_least_that_an_lp_solver_finds_feasible():
+    from hypothesis import event, given, settings
+
+    @settings(max_examples=150, deadline=None)
+    @given(case=segment_problems())
+    def check(case):
+        problem, velocity_bound, acceleration_bound = case
+        given_bound = (0.1, 0.1) if acceleration_bound is None else acceleration_bound
+        least = least_acceleration_bound(*problem, velocity_bound, given_bound, tol=0.0)
+        event("velocity bound unmet" if least is None else "raised" if (least > given_bound).any() else "as given")
+        if least is None:  # only when the velocity bound cannot be met, whatever the thrust (or by 1e-6 at most)
+            assert not _lp_feasible(*problem, _shifted(velocity_bound, -1e-6), None)
+            return
+        assert (least >= np.asarray(given_bound)).all()
+        assert _lp_feasible(*problem, velocity_bound, _shifted(least, 1e-7, 1e-5))
+        for axis in range(2):
+            if least[axis] > given_bound[axis] * (1 + 1e-4) + 1e-6:  # raised: a little less is not enough
+                lower = least.copy()
+                lower[axis] = least[axis] * (1 - 1e-4) - 1e-6
+                assert not _lp_feasible(*problem, velocity_bound, tuple(lower))
+
+    check()
