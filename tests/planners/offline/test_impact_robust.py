@@ -166,7 +166,7 @@ def test_point_products_encode_every_combination_exactly(inside):
     from planners.offline.milp.model import Model
     from planners.offline.milp.stl_encoding import PointProduct, STLEncoder
     from planners.offline.milp.trajectories import Grid
-    from planners.offline.solvers import solve
+    from planners.offline.solvers import lp_optimum, solve
 
     tri = ConvexPolygon.from_vertices([(0.0, 0.0), (4.0, 0.0), (0.0, 4.0)])
     xs, ys = ((0.5, 1.5), (0.2, 1.0, 1.8)) if inside else ((3.0, 3.5), (2.0, 2.6, 3.1))
@@ -174,7 +174,7 @@ def test_point_products_encode_every_combination_exactly(inside):
     xv = tuple(model.add_var(x, x) for x in xs)
     yv = tuple(model.add_var(y, y) for y in ys)
     encoder = STLEncoder(model, Grid(1, 1.0), lambda body, k: [PointProduct(xv, yv)],
-                         {"B": (-1.0, 5.0, -1.0, 5.0)}, {"tri": tri})
+                         {"B": (-1.0, 5.0, -1.0, 5.0)}, {"tri": tri}, lp_optimum=lp_optimum)
     r = encoder.encode(parse("G[0,1] in(B, tri)" if inside else "G[0,1] !in(B, tri)"))
     model.set_objective(r, maximize=True)
     result = solve(model, "highs")

@@ -20,7 +20,7 @@ from impact_env.transport.scenario import load_scenario
 from planners.offline.milp.model import Model
 from planners.offline.milp.stl_encoding import STLEncoder
 from planners.offline.milp.trajectories import Grid
-from planners.offline.solvers import solve
+from planners.offline.solvers import lp_optimum, solve
 from planners.offline.spatially_robust import PlannerConfig, build_model
 
 SQUARE = ConvexPolygon.from_vertices([(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)])
@@ -32,7 +32,7 @@ def _encoder() -> tuple[Model, STLEncoder]:
     points = {name: (model.add_var(x, x), model.add_var(y, y)) for name, (x, y) in (("A", INSIDE), ("B", OUTSIDE))}
     box = (-2.0, 3.0, -2.0, 3.0)
     return model, STLEncoder(model, Grid(1, 1.0), lambda body, k: [points[body]], {"A": box, "B": box},
-                             {"sq": SQUARE})
+                             {"sq": SQUARE}, lp_optimum=lp_optimum)
 
 
 def _same_address_as(dead_id: int, make):
