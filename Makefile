@@ -3,6 +3,7 @@
 #   make test   - create .venv, install with the [rl,dev,scip,tether,ray] extras, run the default (fast) test suite
 # Further targets: make test-slow (long checks), make fuzz (10 minutes of property-based fuzzing),
 #   make bench (benchmarks), make bench-ray (local processes vs Ray, RLlib vs SB3 sampling), make lint,
+#   make typecheck (mypy over impact_env, planners and baselines; its options in setup.cfg [mypy]),
 #   make wheel-check (sdist + wheel, smoke test of the wheel in a fresh venv), make docs (the documentation
 #   site, warnings as errors), make docs-check (its links and a headless-Chromium look at an environment page),
 #   make docs-media (re-make the GIFs and figures the site shows),
@@ -15,7 +16,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 OUT := out
 
-.PHONY: demo test test-slow fuzz bench bench-expert bench-ir bench-ray results lint clean wheel-check docs docs-check docs-media
+.PHONY: demo test test-slow fuzz bench bench-expert bench-ir bench-ray results lint typecheck clean wheel-check docs docs-check \
+	docs-media
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -106,6 +108,10 @@ docs-media: $(VENV)/.base-installed
 
 lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check impact_env planners baselines tests benchmarks
+
+# the packages' annotations checked (setup.cfg [mypy]: the files, the options and why each exception)
+typecheck: $(VENV)/.dev-installed
+	$(BIN)/mypy
 
 clean:
 	rm -rf $(VENV) $(OUT) *.egg-info site
