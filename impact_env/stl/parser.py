@@ -62,11 +62,11 @@ def _tokenize(text: str) -> list[_Token]:
     for m in _TOKEN.finditer(text):
         if m.start() != i:  # finditer skipped a character that starts no token
             break
-        kind = m.lastgroup
-        word = m.group(kind)
+        kind = m.lastgroup  # every alternative of _TOKEN is a named group: never None
+        word = m.group(kind)  # type: ignore[arg-type]
         append(new(_Token, (word if kind == "punct" else kind, word, m.end() - len(word))))
         i = m.end()
-    i = _SPACE.match(text, i).end()
+    i = _SPACE.match(text, i).end()  # type: ignore[union-attr]  # _SPACE matches the empty string too
     if i < len(text):
         ch = text[i]
         raise STLSyntaxError(f"unknown token {ch!r}{_HINTS.get(ch, '')}", text, i)

@@ -95,7 +95,7 @@ class TetherCore:
                                        np.zeros(self.n_anchors), [0.0]]).astype(np.float32)
         self.obs_high = np.concatenate([[xmax, ymax, v_max, v_max], np.tile(robot_high, self.n_robots),
                                         np.ones(self.n_anchors), [1.0]]).astype(np.float32)
-        self.world: TetherWorld | None = None
+        self.world: TetherWorld = None  # type: ignore[assignment]  # set by reset(); no step before it
         self.step_count = 0
         self._reset_counters()
 

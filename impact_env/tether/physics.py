@@ -42,6 +42,7 @@ class TetherEvent:
 
 class _Tether:
     __slots__ = ("anchor", "ready_s", "joint", "pulling", "seen_at", "clearance")
+    joint: pymunk.SlideJoint | None  # the reel fidelity's joint, from the moment the tether pulls
 
     def __init__(self, anchor: int, ready_s: float) -> None:
         self.anchor, self.ready_s, self.joint, self.pulling = anchor, ready_s, None, False
@@ -120,7 +121,7 @@ class TetherWorld:
         self._mass = station.cargo.mass_kg
         self._winch_N = station.winch_force_limit_N
         self._stop2 = station.stop_radius_m ** 2
-        self._anchors = [tuple(map(float, a.position_m)) for a in station.anchors]
+        self._anchors = [(float(a.position_m[0]), float(a.position_m[1])) for a in station.anchors]
         ends = np.array(station.walls, dtype=float)  # (n_walls, 2, 2)
         self._wall_a = ends[:, 0]
         self._wall_e = ends[:, 1] - ends[:, 0]
@@ -203,8 +204,9 @@ class TetherWorld:
             raise TetherError(f"robot must be in 0..{len(self._tethers) - 1}, got {robot}")
         if not 0 <= anchor < len(self._anchors):
             raise TetherError(f"anchor must be in 0..{len(self._anchors) - 1}, got {anchor}")
-        if self._tethers[robot] is not None:
-            raise TetherError(f"robot {robot} already holds anchor {self._tethers[robot].anchor}; release it first")
+        held = self._tethers[robot]
+        if held is not None:
+            raise TetherError(f"robot {robot} already holds anchor {held.anchor}; release it first")
         tether = _Tether(anchor, self.time_s + max(0.0, float(delay_s)))
         self._tethers[robot] = tether
         if tether.ready_s <= self.time_s + 1e-12:
@@ -281,12 +283,12 @@ class TetherWorld:
                 ax, ay = self._anchors[t.anchor]
                 d = math.hypot(ax - px, ay - py)
                 units.append(((ax - px) / d, (ay - py) / d, d))
-                t.joint.max = max(0.0, d - w * dt)
+                t.joint.max = max(0.0, d - w * dt)  # type: ignore[union-attr]  # reel: a pulling tether's joint
             self.space.step(dt)
             v1 = cargo.velocity
             mx, my = 0.5 * (vx0 + v1.x), 0.5 * (vy0 + v1.y)
             for t, (ux, uy, _) in zip(active, units):
-                work = t.joint.impulse * (ux * mx + uy * my)
+                work = t.joint.impulse * (ux * mx + uy * my)  # type: ignore[union-attr]  # as above
                 if work > 0.0:
                     self.winch_work_J += work
         else:
@@ -309,9 +311,9 @@ class TetherWorld:
         self.n_substeps_done += 1
         if active:
             self._check_tethers()
-        for robot, t in enumerate(self._tethers):
-            if t is not None and not t.pulling and t.ready_s <= self.time_s + 1e-9:
-                self._activate(robot, t)
+        for robot, waiting in enumerate(self._tethers):
+            if waiting is not None and not waiting.pulling and waiting.ready_s <= self.time_s + 1e-9:
+                self._activate(robot, waiting)
 
     def _slide_along_walls(self, x: float, y: float, vx: float, vy: float) -> tuple[float, float]:
         """Eq. (5) without inertia meets a wall: drop the velocity component into each wall the cargo touches.

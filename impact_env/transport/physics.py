@@ -79,6 +79,19 @@ class ImpactEvent:
 class _Contact:
     __slots__ = ("time_s", "a", "b", "body_a", "body_b", "va", "vb", "jx", "jy", "rank", "end_s", "va_end",
                  "vb_end")
+    time_s: float  # when the contact began (s)
+    a: str
+    b: str
+    body_a: pymunk.Body
+    body_b: pymunk.Body
+    va: tuple[float, float]  # velocities before (m/s)
+    vb: tuple[float, float]
+    jx: float  # the impulse summed over the contact's substeps (N s)
+    jy: float
+    rank: tuple[int, int]
+    end_s: float  # when it ended (s), and the velocities then
+    va_end: tuple[float, float]
+    vb_end: tuple[float, float]
 
 
 # Module-level callbacks (lambdas would stop a World from being pickled).
