@@ -58,6 +58,7 @@ class TetherEvent:
 class _Tether:
     __slots__ = ("anchor", "ax", "ay", "ready_s", "joint", "jptr", "pulling", "held", "w", "seen_at", "clearance",
                  "length")
+    joint: pymunk.SlideJoint | None  # the reel fidelity's joint, from the moment the tether pulls
 
     def __init__(self, anchor: int, position: tuple[float, float], ready_s: float, w: float) -> None:
         self.anchor, self.ready_s, self.joint, self.jptr, self.pulling = anchor, ready_s, None, None, False
