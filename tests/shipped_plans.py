@@ -11,7 +11,7 @@ optimum among ties, a plan proven optimal with the same objective: that keeps th
 Each scenario is planned with a time limit far above what it needs, so that the file is the proven optimum
 (stage 2 is cut by nodes, not time). After a change of a planner, write the files again::
 
-    .venv/bin/python -m tests.shipped_plans            # every plan (about 20 min on 2 cores)
+    .venv/bin/python -m tests.shipped_plans            # every plan (tens of minutes on 2 cores)
     .venv/bin/python -m tests.shipped_plans ir:relay   # one
 """
 
@@ -31,7 +31,9 @@ if TYPE_CHECKING:
     from planners.plan import Plan
 
 FOLDER = Path(__file__).parent / "data" / "plans" / "shipped"
-SR_SCENARIOS = ("throw_and_catch_exp", "corridor", "obstacle_avoidance", "two_objects", "ping_pong_stop", "relay")
+SR_SCENARIOS = ("throw_and_catch_exp", "corridor", "obstacle_avoidance", "two_objects", "ping_pong_stop", "relay",
+                "long_throw_trim", "held_drift", "narrow_gap", "one_robot_two_objects", "wall_start", "timed_visits",
+                "four_robots")
 IR_SCENARIOS = ("throw_and_catch_exp", "corridor", "obstacle_avoidance", "two_objects", "ping_pong_stop", "relay",
                 "long_throw_trim")
 # (planner, scenario) -> stage 1's time limit (s); the relay's robustness stage takes 26 s on a lightly loaded

@@ -1,7 +1,9 @@
 """The scenarios shipped for issue 22's kinds of task (a narrow gap with a time window, one robot serving two
 objects, a long sequence of timed visits ending at rest, robots starting within 5 cm of walls, four robots and
-two objects): each loads, plans to a proven rho > 0 with every hand-over flyable, and its plan (the one the
-robustness benchmark flies, results/robustness/plans/) delivers nominally with the full expert."""
+two objects): each loads, its committed plan (tests/data/plans/shipped/sr/; planned again, slow, by
+tests/planners/offline/test_spatially_robust.py) is proven with rho > 0 and every hand-over flyable, the
+robustness benchmark's plan (results/robustness/plans/) has the same rho, and the committed plan delivers
+nominally with the full expert."""
 
 from __future__ import annotations
 
@@ -10,17 +12,15 @@ import json
 import pytest
 
 from impact_env.transport.scenario import load_scenario
-from planners.offline.config import HandoverConfig, PlannerConfig, SolverOptions
-from planners.offline.spatially_robust import plan_spatially_robust
+from planners.offline.config import HandoverConfig
 from planners.plan import Plan
 from planners.plan.handover import unflyable_handovers
 from tests.paths import ROOT
 
 PLANS = ROOT / "results" / "robustness" / "plans"
-# name -> (the planned rho in m, impacts); the two heaviest models are planned in the slow run only
+# name -> (the planned rho in m, impacts)
 NEW = {"narrow_gap": (0.15, 4), "one_robot_two_objects": (0.4, 2), "wall_start": (0.4, 2),
        "timed_visits": (0.1564, 8), "four_robots": (0.5, 5)}
-SLOW = {"timed_visits", "four_robots"}
 
 
 def test_each_loads_with_what_it_is_for():
@@ -40,11 +40,10 @@ def test_each_loads_with_what_it_is_for():
     assert (len(four.robots), len(four.objects)) == (4, 2)
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW else n for n in NEW])
-def test_each_plans_to_a_proven_positive_robustness(name):
+@pytest.mark.parametrize("name", list(NEW))
+def test_each_committed_plan_has_a_proven_positive_robustness(shipped_plans, name):
     scenario = load_scenario(name)
-    # a generous safety net: the planner's node-cut stages decide the plan, not the clock
-    plan = plan_spatially_robust(scenario, PlannerConfig(solver_options=SolverOptions(time_limit_s=600)))
+    plan = shipped_plans.sr(name)
     rho, impacts = NEW[name]
     assert plan.robustness == pytest.approx(rho, abs=1e-3) and rho > 0 and plan.mip_gap < 1e-3
     assert len(plan.impacts) == impacts
@@ -55,13 +54,13 @@ def test_each_plans_to_a_proven_positive_robustness(name):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(NEW))
-def test_each_plan_flies_nominally_with_the_full_expert(name):
+def test_each_plan_flies_nominally_with_the_full_expert(shipped_plans, name):
     from impact_env.rollout import run_episode
     from impact_env.transport.gym_env import TransportEnv
     from planners.expert import Expert
 
     scenario = load_scenario(name)
-    plan = Plan.from_dict(json.loads((PLANS / f"{name}.json").read_text()))
+    plan = shipped_plans.sr(name)
     expert = Expert(scenario, plan=plan)
     result = run_episode(TransportEnv(scenario), expert, seed=0)
     assert result.success and result.robustness >= 0.9 * plan.robustness, (name, result.robustness)

@@ -226,6 +226,16 @@ def test_refine_nodes_is_checked_and_zero_skips_stage_two():
     assert plan.robustness == pytest.approx(OPTIMA["throw_and_catch_exp"], abs=1e-3)
 
 
+def test_every_shipped_scenario_has_a_committed_plan():
+    """A scenario added to impact_env/transport/scenarios/ gets its plan in tests/data/plans/shipped/sr/ (and a
+    place in SR_SCENARIOS, so that the test below plans it again): `python -m tests.shipped_plans sr:<name>`."""
+    from impact_env.transport.scenario import scenario_names
+    from tests.shipped_plans import path
+
+    assert sorted(SR_SCENARIOS) == scenario_names()
+    assert [name for name in SR_SCENARIOS if not path("sr", name).exists()] == []
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", SR_SCENARIOS)
 def test_the_committed_plans_are_the_planners_answer(shipped_plans, name, record_property):
