@@ -1,9 +1,10 @@
 """Reading actions: whatever a caller passes becomes plain numbers of the documented shape, or an ActionError.
 
 Both transport environments accept an array-like of numbers (a numpy array of an integer or float dtype, or
-nested lists and tuples of Python numbers). Strings, booleans, None, dicts, ragged lists, masked arrays with masked entries and any other shape
-than the documented ones are refused with a message naming the shape that would be accepted, rather than
-silently reinterpreted (a (3, 2) array holds six numbers, but not the (2, 3) = two robots times (Fx, Fy, torque)).
+nested lists and tuples of Python numbers). Strings, booleans, None, dicts, ragged lists, masked arrays with
+masked entries and any other shape than the documented ones are refused with a message naming the shape that
+would be accepted, rather than silently reinterpreted (a (3, 2) array holds six numbers, but not the (2, 3) =
+two robots times (Fx, Fy, torque)).
 """
 
 from __future__ import annotations

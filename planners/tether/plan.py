@@ -21,8 +21,11 @@ from typing import Any
 
 import numpy as np
 
+from impact_env.config_checks import brief
+from impact_env.geometry import MAX_COORDINATE_M
 from impact_env.tether.station import Station
 from planners.errors import PlannerError
+from planners.plan import schema
 from planners.plan.files import read_plan_json, write_plan_json
 from planners.tether.errors import TetherPlanCheckError
 
@@ -144,26 +147,83 @@ class TetherPlan:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TetherPlan:
+        """Build a plan from its JSON form, every field checked (the readers of :mod:`planners.plan.schema`);
+        a :class:`PlannerError` lists every missing, unknown or malformed field by its path."""
         if not isinstance(data, dict):
             raise PlannerError(f"not a tether plan: a JSON {type(data).__name__}, expected an object with format "
                                f"{FORMAT!r}")
         if data.get("format") != FORMAT:
-            raise PlannerError(f"not a tether plan: format is {data.get('format')!r}, expected {FORMAT!r}")
-        try:
-            pulls = [Pull(anchor=int(p["anchor"]), start_m=tuple(map(float, p["start_m"])),
-                          end_m=tuple(map(float, p["end_m"]))) for p in data["pulls"]]
-            return cls(station=str(data["station"]), start_m=tuple(map(float, data["start_m"])),
-                       goal_box=tuple(map(float, data["goal_box"])), pulls=pulls,
-                       pull_speed_mps=float(data["pull_speed_mps"]), switch_time_s=float(data["switch_time_s"]),
-                       method=str(data.get("method", "")), solve_time_s=float(data.get("solve_time_s", 0.0)),
-                       stats=dict(data.get("stats", {})))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise PlannerError(f"malformed tether plan: {exc!r}") from None
+            raise PlannerError(f"not a tether plan: format is {brief(data.get('format'))}, expected {FORMAT!r}")
+        problems: list[str] = []
+        fields = schema.read(data, _PLAN_FIELDS, "", problems)
+        if fields is not schema.INVALID:
+            targets = fields["stats"].get("targets")
+            if targets is not None and (not isinstance(targets, list) or len(targets) != len(fields["pulls"])
+                                        or not all(type(t) is int and t >= 0 for t in targets)):
+                problems.append(f"stats.targets must be a list of {len(fields['pulls'])} integers >= 0 (one level "
+                                f"per pull), got {brief(targets)}")
+        if problems:
+            raise PlannerError("malformed tether plan:\n  " + "\n  ".join(problems))
+        pulls = [Pull(p["anchor"], p["start_m"], p["end_m"]) for p in fields["pulls"]]
+        return cls(station=fields["station"], start_m=fields["start_m"], goal_box=fields["goal_box"], pulls=pulls,
+                   pull_speed_mps=fields["pull_speed_mps"], switch_time_s=fields["switch_time_s"],
+                   method=fields["method"], solve_time_s=fields["solve_time_s"], stats=fields["stats"])
 
     @classmethod
     def load(cls, path: str | Path) -> TetherPlan:
         """Read a plan file written by :meth:`save`; any problem is a :class:`PlannerError` naming it."""
         return cls.from_dict(read_plan_json(path, PlannerError, what="tether plan"))
+
+
+def _goal_box(value: Any, where: str, problems: list[str]) -> Any:
+    if not isinstance(value, list) or len(value) != 4:
+        problems.append(f"{where} must be [xmin, xmax, ymin, ymax] (m), got {brief(value)}")
+        return schema.INVALID
+    box = [schema.number(v, f"{where}[{i}]", problems, -MAX_COORDINATE_M, MAX_COORDINATE_M)
+           for i, v in enumerate(value)]
+    if schema.INVALID in box:
+        return schema.INVALID
+    if not (box[0] <= box[1] and box[2] <= box[3]):
+        problems.append(f"{where} = {box} must have xmin <= xmax and ymin <= ymax")
+        return schema.INVALID
+    return tuple(box)
+
+
+def _anchor(value: Any, where: str, problems: list[str]) -> Any:
+    if type(value) is not int or not 0 <= value <= 10_000:
+        problems.append(f"{where} must be an anchor index (an integer >= 0), got {brief(value)}")
+        return schema.INVALID
+    return value
+
+
+def _positive(value: Any, where: str, problems: list[str]) -> Any:
+    x = schema.number(value, where, problems, 0.0)
+    if x is not schema.INVALID and x <= 0.0:
+        problems.append(f"{where} must be > 0, got {brief(value)}")
+        return schema.INVALID
+    return x
+
+
+def _summary(value: Any, where: str, problems: list[str]) -> Any:
+    """What :meth:`TetherPlan.to_dict` writes for readers of the file; recomputed from the pulls, never read."""
+    return schema.json_data(value, where, problems)
+
+
+_PULL_FIELDS = {"anchor": schema.Field(_anchor), "start_m": schema.Field(schema.vec2),
+                "end_m": schema.Field(schema.vec2)}
+_PLAN_FIELDS = {
+    "format": schema.Field(schema.text),
+    "station": schema.Field(schema.text),
+    "start_m": schema.Field(schema.vec2),
+    "goal_box": schema.Field(_goal_box),
+    "pull_speed_mps": schema.Field(_positive),
+    "switch_time_s": schema.Field(schema.time_s),
+    "method": schema.Field(schema.text, ""),
+    "solve_time_s": schema.Field(schema.non_negative, 0.0),
+    "pulls": schema.Field(schema.table_list(_PULL_FIELDS, non_empty=False)),
+    "stats": schema.Field(schema.stats_object, {}),
+    "summary": schema.Field(_summary, None),
+}
 
 
 def is_tether_plan_file(path: str | Path) -> bool:
