@@ -28,6 +28,7 @@ from baselines.record import dataset_id, datasets_path, use_datasets_path
 from baselines.run_meta import scenario_fingerprint
 from impact_env.config_checks import check_integer, check_number, check_text, fail
 from impact_env.errors import ImpactEnvError
+from impact_env.results_store import atomic_path, write_atomic
 from impact_env.transport.scenario import load_scenario
 
 MIN_OBS_STD = 1e-2  # features constant in the demonstrations (e.g. a passive disc's heading) are not blown up
@@ -157,11 +158,12 @@ def behaviour_clone(config: BCConfig) -> Path:
     run_dir = Path(config.out) if config.out else Path(config.runs_dir) / f"bc_{scenario.name}_s{config.seed}"
     run_dir.mkdir(parents=True, exist_ok=True)
     policy.set_training_mode(False)
-    model.save(run_dir / "model.zip")
+    with atomic_path(run_dir / "model.zip") as tmp:
+        model.save(tmp)
     save_normalization(venv, run_dir / NORMALIZATION_FILE)
     (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
-    (run_dir / "train.json").write_text(json.dumps({
-        "algo": "ppo", "method": "behaviour cloning", "scenario": scenario.name,
+    write_atomic(run_dir / "train.json", json.dumps({
+        "algo": "ppo", "method": "behaviour cloning", "normalized": True, "scenario": scenario.name,
         "scenario_fingerprint": scenario_fingerprint(scenario),
         "dataset": dataset_id(scenario.name), "episodes_train": len(train_eps), "episodes_validation": len(val_eps),
         "samples": len(obs), "epochs": config.epochs, "batch_size": config.batch_size,

@@ -88,9 +88,10 @@ def parse_controllers(text: str, scenarios: list[str] | None = None,
         if target.endswith(".zip"):
             spec = ControllerSpec(label or Path(target).parent.name, target, trust_pickle=trust_pickle)
             for name in (scenarios or [""]) if "{scenario}" in target else [""]:
-                if not Path(model_path(spec, name)).is_file():
-                    raise ImpactEnvError(f"controller {item!r}: model file {model_path(spec, name)!r} does not exist")
-                preflight(Path(model_path(spec, name)), trust_pickle)
+                try:
+                    preflight(Path(model_path(spec, name)), trust_pickle)
+                except ImpactEnvError as exc:
+                    raise type(exc)(f"controller {item!r}: {exc}") from None
             specs.append(spec)
         else:
             specs.append(ControllerSpec(label or target, target))

@@ -43,6 +43,7 @@ from impact_env.config_checks import (
     check_text,
 )
 from impact_env.errors import ImpactEnvError
+from impact_env.results_store import atomic_path, write_atomic
 from impact_env.transport.scenario import load_scenario
 
 
@@ -318,17 +319,19 @@ def _save(model: Any, venv: Any, run_dir: Path, config: TrainConfig, scenario_na
 
     from baselines.run_meta import scenario_fingerprint
 
-    model.save(run_dir / "model.zip")
+    with atomic_path(run_dir / "model.zip") as tmp:  # a kill while saving keeps the last whole model
+        model.save(tmp)
     if isinstance(venv, VecNormalize):
         save_normalization(venv, run_dir / NORMALIZATION_FILE)
     else:
         (run_dir / NORMALIZATION_FILE).unlink(missing_ok=True)  # a previous run's statistics are not this model's
     (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
-    (run_dir / "train.json").write_text(json.dumps({
+    write_atomic(run_dir / "train.json", json.dumps({
         "algo": config.algo, "scenario": scenario_name,
         "scenario_fingerprint": scenario_fingerprint(load_world(config.scenario)), "env_id": env_id,
         "timesteps": timesteps, "timesteps_trained": int(model.num_timesteps), "max_minutes": config.max_minutes,
         "n_envs": n_envs, "seed": config.seed, "multiagent": config.multiagent, "env_options": config.env_options,
+        "normalized": isinstance(venv, VecNormalize),
         "interrupted": interrupted, "wall_time_s": wall_time_s}, indent=2))
 
 
