@@ -2,16 +2,15 @@
 
 Importing the package registers the Gymnasium environments: one id per shipped scenario (``GYM_IDS``, e.g.
 ``impact_env/Corridor-v0``), each with ``max_episode_steps`` equal to its task's horizon, and
-``impact_env/Transport-v0``, which needs ``scenario=`` and takes its ``max_episode_steps`` from that file. ``gym.make`` can import
-the package itself: ``gym.make("impact_env:impact_env/Corridor-v0")``. Where PettingZoo's registry exists it
-also registers ``impact_env/transport-v0``. PettingZoo's versioned module is :mod:`impact_env.transport_v0`
-(``parallel_env``, ``env``, ``raw_env``); ``impact_env.parallel_env``, ``impact_env.env`` and
-``impact_env.raw_env`` are the same functions.
+``impact_env/Transport-v0``, which needs ``scenario=`` and takes its ``max_episode_steps`` from that file.
+``gym.make`` can import the package itself: ``gym.make("impact_env:impact_env/Corridor-v0")``. Where
+PettingZoo's registry exists it also registers ``impact_env/transport-v0``. PettingZoo's versioned module is
+:mod:`impact_env.transport_v0` (``parallel_env``, ``env``, ``raw_env``); ``impact_env.parallel_env``,
+``impact_env.env`` and ``impact_env.raw_env`` are the same functions.
 
 Tether (anchor-pull) transport: ``impact_env/Tether-v0`` with ``station=`` (a shipped name or a path; its
-``max_episode_steps`` from that file) and one id
-per shipped station (``TETHER_GYM_IDS``, e.g. ``impact_env/TetherL-v0``); PettingZoo ``impact_env/tether-v0`` and
-the module :mod:`impact_env.tether_v0`.
+``max_episode_steps`` from that file) and one id per shipped station (``TETHER_GYM_IDS``, e.g.
+``impact_env/TetherL-v0``); PettingZoo ``impact_env/tether-v0`` and the module :mod:`impact_env.tether_v0`.
 """
 
 from __future__ import annotations

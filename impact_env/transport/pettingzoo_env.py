@@ -80,9 +80,9 @@ class TransportParallelEnv(ParallelShell):
 
     ## Version history
     * v0: initial release (impact_env 0.1.0). In 0.3.0 the module's entry points default to the corridor (so
-      ``max_cycles_test(transport_v0)`` runs); no episode changes. In 0.2.0: explicit entry-point arguments, the per-scenario
-      metadata name, the versioned module ``impact_env.transport_v0``; dynamics, reward and observations
-      unchanged.
+      ``max_cycles_test(transport_v0)`` runs); no episode changes. In 0.2.0: explicit entry-point arguments,
+      the per-scenario metadata name, the versioned module ``impact_env.transport_v0``; dynamics, reward and
+      observations unchanged.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10, "name": "transport_v0",
