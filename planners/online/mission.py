@@ -394,10 +394,12 @@ class MissionPlanner:
         cfg = self.config
         warm = resample_plan(plan, t, self.scenario.tf_s, intervals, self.degree)
         budget = cfg.solver_options
+        # min_robustness_m=0: a remainder that only reaches rho = 0 is still the best continuation in flight,
+        # and the remainders stay the plans 0.2 made (the offline planners refuse such a task up front)
         config = dataclasses.replace(self.planner_config, intervals=intervals, robot_degree=self.degree,
                                      solver_options=budget, refine_nodes=cfg.refine_nodes,
                                      refine_time_s=budget.time_limit_s, warm_start=warm,
-                                     diagnose_infeasibility=False)
+                                     diagnose_infeasibility=False, min_robustness_m=0.0)
         start = time.perf_counter()
         try:
             try:
