@@ -43,7 +43,7 @@ from impact_env.config_checks import (
     check_text,
 )
 from impact_env.errors import ImpactEnvError
-from impact_env.results_store import atomic_path, write_atomic
+from impact_env.results_store import atomic_path, check_output_folder, write_atomic
 from impact_env.transport.scenario import load_scenario
 
 
@@ -184,9 +184,9 @@ def train(config: TrainConfig) -> Path:
     previous = _previous_run(run_dir, config, scenario.name) if config.resume else None
     if not config.resume and (run_dir / "model.zip").is_file():
         print(f"note: {run_dir} holds a model already; it is overwritten (pass --resume to continue it)", flush=True)
-    run_dir.mkdir(parents=True, exist_ok=True)
     env_kwargs = {"station" if station else "scenario": config.scenario, **config.env_options}
     env_cls(**env_kwargs).close()  # a bad option is one clear error here, not one per worker process
+    check_output_folder(run_dir, "--out")  # before any step is trained
 
     if config.multiagent:
         if config.algo != "ppo":
