@@ -221,7 +221,8 @@ def _run(args: argparse.Namespace) -> int:
     check_world_options(args, impact=not station, station=station,
                         what=f"station {args.scenario!r}" if station else "impact scenarios")
     options = station_options(args) if station else transport_options(args)
-    for key in ("restitution", "pull_speed_mps", "max_active"):  # None: the file's own, as train.json records it
+    # None: the file's own (no faults for --faults), as train.json records it
+    for key in ("restitution", "pull_speed_mps", "max_active", "faults"):
         if options.get(key, 0) is None:
             del options[key]
     if args.engine == "rllib":

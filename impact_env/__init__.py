@@ -8,9 +8,11 @@ PettingZoo's registry exists it also registers ``impact_env/transport-v0``. Pett
 :mod:`impact_env.transport_v0` (``parallel_env``, ``env``, ``raw_env``); ``impact_env.parallel_env``,
 ``impact_env.env`` and ``impact_env.raw_env`` are the same functions.
 
-Tether (anchor-pull) transport: ``impact_env/Tether-v0`` with ``station=`` (a shipped name or a path; its
+Tether (anchor-pull) transport: ``impact_env/Tether-v1`` with ``station=`` (a shipped name or a path; its
 ``max_episode_steps`` from that file) and one id per shipped station (``TETHER_GYM_IDS``, e.g.
-``impact_env/TetherL-v0``); PettingZoo ``impact_env/tether-v0`` and the module :mod:`impact_env.tether_v0`.
+``impact_env/TetherL-v1``); PettingZoo ``impact_env/tether-v1`` and the module :mod:`impact_env.tether_v1`. The
+``-v0`` tether ids (``TETHER_GYM_IDS_V0``, ``impact_env/Tether-v0``, ``impact_env/tether-v0``,
+:mod:`impact_env.tether_v0`) stay registered for one release.
 """
 
 from __future__ import annotations
@@ -67,15 +69,23 @@ GYM_IDS = {
     "impact_env/TwoObjects-v0": "two_objects",
     "impact_env/PingPongStop-v0": "ping_pong_stop",
     "impact_env/LongThrowTrim-v0": "long_throw_trim",
+    "impact_env/NarrowGap-v0": "narrow_gap",
+    "impact_env/OneRobotTwoObjects-v0": "one_robot_two_objects",
+    "impact_env/TimedVisits-v0": "timed_visits",
+    "impact_env/WallStart-v0": "wall_start",
+    "impact_env/FourRobots-v0": "four_robots",
+    "impact_env/HeldDrift-v0": "held_drift",
 }
 
 TETHER_GYM_IDS = {
-    "impact_env/TetherL-v0": "L",
-    "impact_env/TetherT-v0": "T",
-    "impact_env/TetherAlcove-v0": "alcove",
-    "impact_env/TetherIssChain-v0": "iss_chain",
-    "impact_env/TetherDeadEnd-v0": "dead_end",
+    "impact_env/TetherL-v1": "L",
+    "impact_env/TetherT-v1": "T",
+    "impact_env/TetherAlcove-v1": "alcove",
+    "impact_env/TetherIssChain-v1": "iss_chain",
+    "impact_env/TetherDeadEnd-v1": "dead_end",
 }
+# version 0 of the tether ids ("eventually in the goal", agents robot_0 ..), kept for one release (removed in 0.4.0)
+TETHER_GYM_IDS_V0 = {env_id.replace("-v1", "-v0"): station for env_id, station in TETHER_GYM_IDS.items()}
 
 
 def _horizon_steps(task_source) -> int:
@@ -93,12 +103,18 @@ def _register() -> None:
                                max_episode_steps=_horizon_steps(load_scenario(scenario)))
     if "impact_env/Transport-v0" not in gymnasium.registry:
         gymnasium.register(id="impact_env/Transport-v0", entry_point="impact_env.transport.gym_env:make_with_horizon")
-    for env_id, station in TETHER_GYM_IDS.items():
+    for ids, cls in ((TETHER_GYM_IDS, "TetherEnv"), (TETHER_GYM_IDS_V0, "TetherEnvV0")):
+        for env_id, station in ids.items():
+            if env_id not in gymnasium.registry:
+                st = load_station(station)
+                steps = _horizon_steps(st) if cls == "TetherEnv" else round(st.tf_s / st.control_period_s)
+                gymnasium.register(id=env_id, entry_point=f"impact_env.tether.gym_env:{cls}",
+                                   kwargs={"station": station}, max_episode_steps=steps)
+    # the file given to make sets max_episode_steps (gym_env.make_with_horizon)
+    for env_id, entry in (("impact_env/Tether-v1", "make_with_horizon"),
+                          ("impact_env/Tether-v0", "make_v0_with_horizon")):
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point="impact_env.tether.gym_env:TetherEnv",
-                               kwargs={"station": station}, max_episode_steps=_horizon_steps(load_station(station)))
-    if "impact_env/Tether-v0" not in gymnasium.registry:
-        gymnasium.register(id="impact_env/Tether-v0", entry_point="impact_env.tether.gym_env:make_with_horizon")
+            gymnasium.register(id=env_id, entry_point=f"impact_env.tether.gym_env:{entry}")
     try:
         import pettingzoo
         from pettingzoo.env_registry.registration import parallel_registry
@@ -106,13 +122,15 @@ def _register() -> None:
         return
     if "impact_env/transport-v0" not in parallel_registry:
         pettingzoo.register("parallel", "impact_env/transport-v0", entry_point="impact_env.transport_v0:parallel_env")
-    if "impact_env/tether-v0" not in parallel_registry:
-        pettingzoo.register("parallel", "impact_env/tether-v0", entry_point="impact_env.tether_v0:parallel_env")
+    for version in ("v1", "v0"):
+        if f"impact_env/tether-{version}" not in parallel_registry:
+            pettingzoo.register("parallel", f"impact_env/tether-{version}",
+                                entry_point=f"impact_env.tether_{version}:parallel_env")
 
 
 _register()
 
-from impact_env import tether_v0, transport_v0  # noqa: E402, F401 - PettingZoo's versioned modules
+from impact_env import tether_v0, tether_v1, transport_v0  # noqa: E402, F401 - PettingZoo's versioned modules
 from impact_env.transport_v0 import env, parallel_env, raw_env  # noqa: E402
 
 __all__ = [

@@ -33,7 +33,8 @@ from impact_env.results_store import check_output_file, check_output_folder, wri
 RENAMED = {"--reward": "--reward-mode", "--init-noise": "--initial-position-noise-m"}
 REMOVED_IN = "0.4.0"  # the release in which the spellings deprecated in 0.3.0 go
 # the tether stations' options and their defaults; an impact scenario refuses them when set, and vice versa
-STATION_DEFAULTS = {"fidelity": "kinematic", "energy_penalty": 0.0, "pull_speed_mps": None, "max_active": None}
+STATION_DEFAULTS = {"fidelity": "kinematic", "energy_penalty": 0.0, "pull_speed_mps": None, "max_active": None,
+                    "faults": None}
 IMPACT_DEFAULTS = {"restitution": None, "thrust_noise": 0.0, "fuel_penalty": 0.0, "impact_velocity_noise_mps": 0.0}
 
 REWARD_HELP = ("dense: per-step increment of the STL robustness estimate (sums to the final robustness); sparse: "
@@ -214,6 +215,9 @@ def add_tether_options(p: argparse.ArgumentParser) -> None:
                    help="stations only: the winches' real pulling speed (default: the station's)")
     p.add_argument("--max-active", type=int, default=None, metavar="K",
                    help="stations only: robots that may hold anchors at once (default: the station's k)")
+    p.add_argument("--faults", default=None, metavar="SPEC",
+                   help="stations only: faults drawn from each episode's seed, e.g. anchor_failures=1,tether_snaps=1,"
+                        "robot_dropouts=1,winch_speed_error=0.1:0.3,window_s=10:150 (see impact_env.tether.faults)")
 
 
 def transport_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -224,10 +228,13 @@ def transport_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def station_options(args: argparse.Namespace) -> dict[str, Any]:
-    """``TetherEnv`` keywords from the parsed options."""
+    """``TetherEnv`` keywords from the parsed options (``--faults`` parsed and checked, or None)."""
+    from impact_env.tether.faults import parse_faults
+
     return {"fidelity": args.fidelity, "reward_mode": args.reward_mode, "energy_penalty": args.energy_penalty,
             "pull_speed_mps": args.pull_speed_mps, "max_active": args.max_active,
-            "initial_position_noise_m": args.initial_position_noise_m}
+            "initial_position_noise_m": args.initial_position_noise_m,
+            "faults": parse_faults(getattr(args, "faults", None))}
 
 
 def check_world_options(args: argparse.Namespace, impact: bool, station: bool, what: str) -> None:

@@ -45,6 +45,11 @@ class STLBindingError(STLError, KeyError):
         return str(self.args[0]) if self.args else ""
 
 
+class STLUnsupportedError(STLError):
+    """A valid STL formula that an evaluator does not support (e.g. nested temporal operators in the batched
+    world's monitor); the message names the subformula and what would be accepted."""
+
+
 class ActionError(ImpactEnvError, ValueError):
     """An action has the wrong type or shape, or contains NaN / infinite values."""
 
@@ -98,8 +103,8 @@ class OutputPathError(ImpactEnvError, OSError):
 
 
 TYPED_ERRORS: tuple[type[ImpactEnvError], ...] = (
-    ImpactEnvError, ScenarioError, STLError, STLSyntaxError, STLBindingError, ActionError, EnvConfigError,
-    ControllerError, TetherError, HyperparameterError, ModelFileError, UntrustedFileError, EngineError,
+    ImpactEnvError, ScenarioError, STLError, STLSyntaxError, STLBindingError, STLUnsupportedError, ActionError,
+    EnvConfigError, ControllerError, TetherError, HyperparameterError, ModelFileError, UntrustedFileError, EngineError,
     ResultsFileError, OutputPathError,
 )
 

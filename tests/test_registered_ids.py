@@ -17,7 +17,10 @@ from impact_env.errors import EnvConfigError
 
 SCENARIOS = Path(impact_env.__file__).parent / "transport" / "scenarios"
 NEW_IDS = {"impact_env/Relay-v0": "relay", "impact_env/TwoObjects-v0": "two_objects",
-           "impact_env/PingPongStop-v0": "ping_pong_stop", "impact_env/LongThrowTrim-v0": "long_throw_trim"}
+           "impact_env/PingPongStop-v0": "ping_pong_stop", "impact_env/LongThrowTrim-v0": "long_throw_trim",
+           "impact_env/NarrowGap-v0": "narrow_gap", "impact_env/OneRobotTwoObjects-v0": "one_robot_two_objects",
+           "impact_env/TimedVisits-v0": "timed_visits", "impact_env/WallStart-v0": "wall_start",
+           "impact_env/FourRobots-v0": "four_robots", "impact_env/HeldDrift-v0": "held_drift"}
 
 
 def test_every_shipped_scenario_and_station_has_an_id():

@@ -68,5 +68,5 @@ def test_the_online_replanner_keeps_the_old_constraint():
 
     import planners.online.mission as mission
 
-    source = inspect.getsource(mission.MissionPlanner._replan)
+    source = inspect.getsource(mission.MissionPlanner._solve)  # every re-plan's config (IR re-plans take it too)
     assert "min_robustness_m=0.0" in source and "dataclasses.replace(self.planner_config" in source

@@ -11,7 +11,8 @@ import argparse
 
 from impact_env.cli_options import check_world_options, print_catalogue, run_and_report, save_summary, station_options
 
-TETHER_KEYS = ("switches", "snags", "path_length_m", "winch_work_J", "wall_contacts")
+TETHER_KEYS = ("switches", "snags", "path_length_m", "winch_work_J", "wall_contacts", "time_to_goal_s",
+               "time_at_rest_in_goal_s", "speed_mps", "failed_anchors", "dropped_robots")
 # impact-env scenarios: (title, format, value) of each column between the name and the description
 COLUMNS = (("robots", ">7", lambda st: st.n_robots), ("k", ">3", lambda st: st.k),
            ("anchors", ">8", lambda st: st.n_anchors), ("w_mps", ">7.2f", lambda st: st.pull_speed_mps),
@@ -53,7 +54,9 @@ def run_station(args: argparse.Namespace) -> int:
     def details(res: EpisodeResult) -> str:
         events.append(list(env.core.events))
         info = res.final_info
-        return f"switches={info['switches']} snags={info['snags']} path={info['path_length_m']:.2f} m"
+        goal = "-" if info["time_to_goal_s"] is None else f"{info['time_to_goal_s']:.0f} s"
+        return (f"switches={info['switches']} snags={info['snags']} path={info['path_length_m']:.2f} m "
+                f"goal={goal} held={info['time_at_rest_in_goal_s']:.0f} s speed={info['speed_mps']:.3f} m/s")
 
     results = run_and_report(args, env, controller, details)
     first = results[0]

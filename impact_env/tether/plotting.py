@@ -124,4 +124,4 @@ def draw_station_layers(station: Station, ax: Axes, fan: bool) -> list:
     return handles
 
 
-_draw = draw_station_layers  # the 0.2 name, kept for the old module path (impact_env.tether_plotting)
+_draw = draw_station_layers  # the 0.2 name, kept for the old module path (impact_env.tether.plotting)

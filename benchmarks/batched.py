@@ -1,0 +1,204 @@
+"""Batched-world throughput: env-steps/s against num_envs, with VMAS and the pymunk env in the same run.
+
+Rows, all at the same torch thread count, random actions in [-1, 1], after a warm-up (which includes
+torch.compile's first compilation):
+
+- the batched world (:class:`impact_env.transport.batched.BatchedTransportWorld`) on the CPU, and on a GPU
+  when one is present, for each ``--num-envs``; envs that reach the horizon are reset (``reset(mask=...)``);
+- VMAS's ``transport`` scenario (4 agents, continuous actions, float32, CPU) at the same num_envs, run by a
+  subprocess in the Python given by ``--vmas-python`` or ``$VMAS_PYTHON`` (a venv with ``vmas`` and
+  ``torch==2.13.0``: vmas pulls the legacy ``gym``, so it never enters this package's install); skipped with a
+  message when neither is given;
+- the pymunk Gymnasium env (``TransportEnv``, one process), measured before and after the batched rows.
+
+Prints a markdown table and appends one JSON line per measurement to ``results/batched/throughput.jsonl``
+(rewritten atomically: temporary file, then ``os.replace``). Run from the repository's top folder:
+
+    python -m benchmarks.batched [--scenario corridor] [--num-envs 1 16 256 1024 4096 16384] [--threads 2]
+        [--seconds 5] [--dtype float32] [--eager] [--vmas-python PATH]
+
+On a shared machine, compare rows of the same run (the load average is recorded with every line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parents[1] / "results" / "batched" / "throughput.jsonl"
+POOL = 64  # random action batches drawn up front and cycled, for every backend alike
+
+VMAS_SCRIPT = r"""
+import json, sys, time
+import torch
+import vmas
+num_envs, threads, seconds = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3])
+torch.set_num_threads(threads)
+env = vmas.make_env("transport", num_envs=num_envs, device="cpu", continuous_actions=True, seed=0)
+env.reset()
+gen = torch.Generator().manual_seed(0)
+pool = [[torch.rand(num_envs, 2, generator=gen) * 2 - 1 for _ in env.agents] for _ in range(64)]
+for k in range(20):
+    env.step(pool[k % 64])
+steps, start = 0, time.perf_counter()
+while time.perf_counter() - start < seconds:
+    env.step(pool[steps % 64])
+    steps += 1
+elapsed = time.perf_counter() - start
+print(json.dumps({"env_steps_per_s": steps * num_envs / elapsed, "steps": steps, "seconds": elapsed,
+                  "vmas": vmas.__version__, "agents": len(env.agents)}))
+"""
+
+
+def measure_batched(scenario: str, num_envs: int, seconds: float, dtype: str, device: str, compile_: bool) -> dict:
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
+    start = time.perf_counter()
+    world = BatchedTransportWorld(scenario, num_envs, device=device, dtype=getattr(torch, dtype), compile=compile_)
+    world.reset(seeds=0)
+    gen = torch.Generator().manual_seed(0)
+    pool = [(torch.rand(num_envs, world.action_size, generator=gen) * 2 - 1).to(device) for _ in range(POOL)]
+    for k in range(20):
+        world.step(pool[k % POOL])
+    warmup = time.perf_counter() - start
+    steps, start = 0, time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        _, _, terminated, _, _ = world.step(pool[steps % POOL])
+        steps += 1
+        if bool(terminated.any()):
+            world.reset(mask=terminated)
+    if device.startswith("cuda"):
+        torch.cuda.synchronize()
+    elapsed = time.perf_counter() - start
+    return {"env_steps_per_s": steps * num_envs / elapsed, "steps": steps, "seconds": elapsed, "warmup_s": warmup}
+
+
+def measure_pymunk(scenario: str, seconds: float) -> dict:
+    from impact_env.envs import TransportEnv
+
+    env = TransportEnv(scenario)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    pool = rng.uniform(-1.0, 1.0, (POOL * 16, *env.action_space.shape)).astype(np.float32)
+    for k in range(100):
+        env.step(pool[k])
+    steps, start = 0, time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        _, _, terminated, _, _ = env.step(pool[steps % len(pool)])
+        steps += 1
+        if terminated:
+            env.reset()
+    elapsed = time.perf_counter() - start
+    return {"env_steps_per_s": steps / elapsed, "steps": steps, "seconds": elapsed}
+
+
+def measure_vmas(python: str, num_envs: int, threads: int, seconds: float) -> dict | str:
+    """The subprocess's measurement, or the reason it failed."""
+    try:
+        out = subprocess.run([python, "-c", VMAS_SCRIPT, str(num_envs), str(threads), str(seconds)], check=True,
+                             capture_output=True, text=True, timeout=600 + 10 * seconds)
+    except (OSError, subprocess.SubprocessError) as exc:
+        stderr = getattr(exc, "stderr", "") or ""
+        return f"{type(exc).__name__}: {stderr.strip().splitlines()[-1] if stderr.strip() else exc}"
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def append_results(lines: list[dict], path: Path = RESULTS) -> None:
+    """Append JSON lines to ``path``, atomically: the whole file is written to a temporary file and replaced."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    old = path.read_text(encoding="utf-8") if path.exists() else ""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(old + "".join(json.dumps(line, sort_keys=True) + "\n" for line in lines))
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scenario", default="corridor")
+    parser.add_argument("--num-envs", type=int, nargs="+", default=[1, 16, 256, 1024, 4096, 16384])
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--seconds", type=float, default=5.0, help="measured time per row (after the warm-up)")
+    parser.add_argument("--dtype", choices=("float32", "float64"), default="float32")
+    parser.add_argument("--eager", action="store_true", help="the batched world without torch.compile")
+    parser.add_argument("--vmas-python", default=os.environ.get("VMAS_PYTHON"),
+                        help="python of a venv with vmas (default: $VMAS_PYTHON)")
+    parser.add_argument("--no-write", action="store_true", help="print only, do not append to the results")
+    args = parser.parse_args(argv)
+
+    import torch
+
+    torch.set_num_threads(args.threads)
+    devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    run = {"run": datetime.now(timezone.utc).isoformat(timespec="seconds"), "scenario": args.scenario,
+           "threads": args.threads, "dtype": args.dtype, "torch": torch.__version__, "machine": platform.machine(),
+           "cpus": os.cpu_count(), "command": "python -m benchmarks.batched " + " ".join(sys.argv[1:])}
+    lines: list[dict] = []
+
+    def record(backend: str, num_envs: int, result: dict) -> None:
+        lines.append({**run, **result, "backend": backend, "num_envs": num_envs,
+                      "load_average_1min": round(os.getloadavg()[0], 2)})
+
+    record("pymunk-gym", 1, measure_pymunk(args.scenario, args.seconds))
+    if not args.vmas_python:
+        print("VMAS not measured: pass --vmas-python PATH (a venv with vmas and torch==2.13.0) or set VMAS_PYTHON")
+    for n in args.num_envs:
+        for device in devices:
+            result = measure_batched(args.scenario, n, args.seconds, args.dtype, device, not args.eager)
+            record(f"batched-{device}{'' if not args.eager else '-eager'}", n, result)
+            print(f"batched {device} N={n}: {result['env_steps_per_s']:,.0f} env-steps/s", flush=True)
+        if args.vmas_python:
+            result = measure_vmas(args.vmas_python, n, args.threads, args.seconds)
+            if isinstance(result, str):
+                print(f"VMAS N={n} failed: {result}")
+            else:
+                record("vmas-cpu", n, result)
+                print(f"VMAS N={n}: {result['env_steps_per_s']:,.0f} env-steps/s", flush=True)
+    record("pymunk-gym", 1, measure_pymunk(args.scenario, args.seconds))
+    print_table(lines)
+    if not args.no_write:
+        append_results(lines)
+        print(f"\nappended {len(lines)} lines to {RESULTS.relative_to(RESULTS.parents[2])}")
+
+
+def print_table(lines: list[dict]) -> None:
+    pymunk = [line["env_steps_per_s"] for line in lines if line["backend"] == "pymunk-gym"]
+    pymunk_rate = sum(pymunk) / len(pymunk)
+    rates: dict[tuple[str, int], float] = {(line["backend"], line["num_envs"]): line["env_steps_per_s"]
+                                           for line in lines if line["backend"] != "pymunk-gym"}
+    backends = sorted({b for b, _ in rates}, key=lambda b: (b.startswith("vmas"), b))
+    first = lines[0]
+    print(f"\n{first['scenario']}, dense STL reward, {first['dtype']}, {first['threads']} torch threads; pymunk "
+          f"Gymnasium env (one process): {pymunk_rate:,.0f} env-steps/s (mean of {len(pymunk)})\n")
+    batched = [b for b in backends if b.startswith("batched")]
+    header = ["num_envs", *[f"{b} env-steps/s" for b in backends]]
+    header += [f"{b} / pymunk" for b in batched] + ([f"{b} / VMAS" for b in batched] if "vmas-cpu" in backends else [])
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---:|" * len(header))
+    for n in sorted({n for _, n in rates}):
+        cells = [str(n)] + [f"{rates[(b, n)]:,.0f}" if (b, n) in rates else "-" for b in backends]
+        cells += [f"{rates[(b, n)] / pymunk_rate:.1f}x" if (b, n) in rates else "-" for b in batched]
+        if "vmas-cpu" in backends:
+            cells += [f"{rates[(b, n)] / rates[('vmas-cpu', n)]:.1f}x" if (b, n) in rates and ("vmas-cpu", n) in rates
+                      else "-" for b in batched]
+        print("| " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()
