@@ -12,7 +12,16 @@ import pytest
 from pettingzoo.test import api_test, max_cycles_test, parallel_api_test
 
 import impact_env
-from impact_env import GYM_IDS, TETHER_GYM_IDS, scenario_names, station_names, tether_v0, transport_v0
+from impact_env import (
+    GYM_IDS,
+    TETHER_GYM_IDS,
+    TETHER_GYM_IDS_V0,
+    scenario_names,
+    station_names,
+    tether_v0,
+    tether_v1,
+    transport_v0,
+)
 from impact_env.errors import EnvConfigError
 
 SCENARIOS = Path(impact_env.__file__).parent / "transport" / "scenarios"
@@ -67,13 +76,15 @@ def test_a_scenario_of_ones_own_gets_its_horizon(tmp_path):
     assert steps == env.spec.max_episode_steps == env.unwrapped.horizon_steps and terminated and truncated
 
 
+@pytest.mark.parametrize("version, ids", [("v1", TETHER_GYM_IDS), ("v0", TETHER_GYM_IDS_V0)])
 @pytest.mark.parametrize("station", ["L", "iss_chain"])
-def test_tether_v0_takes_max_episode_steps_from_its_file(station):
+def test_tether_ids_take_max_episode_steps_from_their_file(station, version, ids):
     stations = Path(impact_env.__file__).parent / "tether" / "stations"
     for given in (station, str(stations / f"{station}.toml")):
-        env = gym.make("impact_env/Tether-v0", station=given)
+        env = gym.make(f"impact_env/Tether-{version}", station=given)
+        assert env.unwrapped.version == int(version[1])
         assert env.spec.max_episode_steps == env.unwrapped.horizon_steps
-        assert env.spec.max_episode_steps == gym.spec(next(i for i, s in TETHER_GYM_IDS.items()
+        assert env.spec.max_episode_steps == gym.spec(next(i for i, s in ids.items()
                                                            if s == station)).max_episode_steps
 
 
@@ -90,8 +101,9 @@ def test_the_generic_ids_still_need_their_file_and_pass_the_checkers():
 
     with pytest.raises(EnvConfigError, match="scenario= is required"):
         gym.make("impact_env/Transport-v0")
-    with pytest.raises(EnvConfigError, match="station= is required"):
-        gym.make("impact_env/Tether-v0")
+    for version in ("v1", "v0"):
+        with pytest.raises(EnvConfigError, match="station= is required"):
+            gym.make(f"impact_env/Tether-{version}")
     check_env(gym.make("impact_env/Transport-v0", scenario="relay").unwrapped, skip_render_check=True)
     sb3 = pytest.importorskip("stable_baselines3.common.env_checker")
     with warnings.catch_warnings():
@@ -99,7 +111,7 @@ def test_the_generic_ids_still_need_their_file_and_pass_the_checkers():
         sb3.check_env(gym.make("impact_env/Transport-v0", scenario="two_objects"))
 
 
-@pytest.mark.parametrize("module", [transport_v0, tether_v0], ids=["transport_v0", "tether_v0"])
+@pytest.mark.parametrize("module", [transport_v0, tether_v1, tether_v0], ids=["transport_v0", "tether_v1", "tether_v0"])
 def test_pettingzoo_suite_on_the_modules_as_they_are(module):
     max_cycles_test(module)
     with warnings.catch_warnings():
@@ -110,7 +122,9 @@ def test_pettingzoo_suite_on_the_modules_as_they_are(module):
 
 def test_module_defaults_are_the_documented_ones():
     assert transport_v0.parallel_env().scenario.name == "corridor"
-    assert tether_v0.parallel_env().station.name == "L"
+    assert tether_v1.parallel_env().station.name == tether_v0.parallel_env().station.name == "L"
+    assert tether_v1.parallel_env().possible_agents == ["R1", "R2", "R3"]  # the station's robots, as in transport
+    assert tether_v0.parallel_env().possible_agents == ["robot_0", "robot_1", "robot_2"]  # v0, kept for a release
     assert transport_v0.env().unwrapped.scenario.name == "corridor"
     with pytest.raises(EnvConfigError, match="scenario= is required"):
         transport_v0.TransportParallelEnv()  # the class itself names its scenario
