@@ -128,9 +128,19 @@ def add_quiet(p: argparse.ArgumentParser, what: str = "no progress lines; only t
         p.add_argument("--no-progress", action=_DeprecatedQuiet)
 
 
+def output_path(text: str) -> str:
+    """argparse's type of every output path: an empty one (``--plot ""``, which would mean "not given" further
+    on, or the current folder) and one with a NUL byte (which no file system takes) are usage errors."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"{text!r} is an empty path: give a file or folder path")
+    if "\0" in text:
+        raise argparse.ArgumentTypeError(f"{text!r} contains a NUL byte, which no path can")
+    return text
+
+
 def add_out(p: argparse.ArgumentParser, what: str, default: str | None = None) -> None:
     """``--out DIR``: the folder of the command's outputs."""
-    p.add_argument("--out", metavar="DIR", default=default, help=f"output folder: {what}")
+    p.add_argument("--out", metavar="DIR", default=default, type=output_path, help=f"output folder: {what}")
 
 
 def add_files(p: argparse.ArgumentParser, **what: str) -> None:
@@ -138,7 +148,7 @@ def add_files(p: argparse.ArgumentParser, **what: str) -> None:
     with its help text (``add_files(p, json="the plan", plot="a figure of it")``)."""
     metavars = {"json": "PATH", "plot": "PNG", "video": "MP4"}
     for name, text in what.items():
-        p.add_argument(f"--{name}", metavar=metavars[name], default=None, help=text)
+        p.add_argument(f"--{name}", metavar=metavars[name], default=None, type=output_path, help=text)
 
 
 def legacy_file_out(args: argparse.Namespace, option: str, suffixes: tuple[str, ...]) -> None:
@@ -164,6 +174,13 @@ def in_folder(args: argparse.Namespace, option: str, name: str) -> str | None:
     return str(Path(args.out) / name) if getattr(args, "out", None) is not None else None
 
 
+def figure_suffixes() -> list[str]:
+    """The suffixes a figure can be saved with (matplotlib picks the format from it): ``.png``, ``.pdf``, ..."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    return sorted(f".{kind}" for kind in FigureCanvasBase.get_supported_filetypes())
+
+
 def check_outputs(files: dict[str, str | None] = (), folders: dict[str, str | None] = ()) -> None:
     """Every output file and folder checked before any work (``{option: path}``; None: not asked for), so that
     an unwritable path is an :class:`~impact_env.errors.OutputPathError` naming it, at the start, not a
@@ -180,6 +197,11 @@ def check_outputs(files: dict[str, str | None] = (), folders: dict[str, str | No
             from impact_env.errors import OutputPathError
 
             raise OutputPathError(f"--video {path} must end in .mp4 (an H.264 video)")
+        if option == "--plot" and Path(path).suffix and Path(path).suffix.lower() not in figure_suffixes():
+            from impact_env.errors import OutputPathError
+
+            raise OutputPathError(f"--plot {path}: {Path(path).suffix} is not an image format matplotlib writes "
+                                  f"({', '.join(figure_suffixes())}); .png, or no suffix, gives a PNG")
         check_output_file(path, option)
         if option == "--plot" and not Path(path).suffix:  # the figure goes to PATH.png: check that too, but only
             check_output_file(Path(path).with_suffix(".png"), option)  # once PATH itself is not /dev/full

@@ -44,6 +44,8 @@ def _stat(path: Path, named: str) -> os.stat_result | None:
         return path.stat()
     except FileNotFoundError:
         return None
+    except ValueError:  # a NUL byte: no file system takes it
+        raise OutputPathError(f"{named} contains a NUL byte, which no path can") from None
     except OSError as exc:
         if exc.errno == errno.ELOOP:
             raise OutputPathError(f"{named} is a loop of symbolic links") from None

@@ -127,3 +127,35 @@ def test_plans_summaries_and_videos_are_written_atomically(tmp_path, monkeypatch
                for a, b in written)
     assert json.loads((tmp_path / "summary.json").read_text()) == {"a": 1}
     assert (tmp_path / "run.mp4").stat().st_size > 0
+
+
+# found by tests/fuzz/test_files_fuzz.py (output_path)
+def test_a_plot_whose_suffix_no_writer_takes_is_refused_before_work(tmp_path, capsys):
+    from impact_env.cli import main
+
+    assert main(["show", "corridor", "--plot", str(tmp_path / "setup.json")]) == 2
+    err = capsys.readouterr().err
+    assert ".json is not an image format matplotlib writes" in err and ".png" in err and ".pdf" in err
+    assert not list(tmp_path.iterdir())
+    assert main(["show", "corridor", "--plot", str(tmp_path / "setup.svg")]) == 0  # a format it writes
+    assert (tmp_path / "setup.svg").read_bytes().lstrip().startswith(b"<?xml")
+
+
+@pytest.mark.parametrize("option", ["--plot", "--out"])
+@pytest.mark.parametrize("path, message", [("", "is an empty path"), ("  ", "is an empty path"),
+                                           ("a\0b.png", "contains a NUL byte")])
+def test_empty_and_nul_paths_are_usage_errors(tmp_path, monkeypatch, capsys, option, path, message):
+    from impact_env.cli import main
+
+    monkeypatch.chdir(tmp_path)  # 0.3.0 wrote corridor.png here for --plot ""
+    with pytest.raises(SystemExit) as info:
+        main(["show", "corridor", option, path])
+    assert info.value.code == 2 and message in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_nul_byte_is_an_output_path_error(tmp_path):
+    with pytest.raises(OutputPathError, match="contains a NUL byte"):
+        check_output_file(str(tmp_path / "a\0b.json"), "--json")
+    with pytest.raises(OutputPathError, match="contains a NUL byte"):
+        check_output_folder(str(tmp_path / "a\0b"), "--out")
