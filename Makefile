@@ -42,8 +42,8 @@ $(VENV)/.dev-installed: $(VENV)/.base-installed
 # simulator, write the plan, the video, the plots and the JSON summary.
 demo: $(VENV)/.base-installed
 	mkdir -p $(OUT)
-	$(BIN)/impact-env show corridor --out $(OUT)/corridor_setup.png
-	$(BIN)/impact-env plan corridor --out $(OUT)/corridor_plan.json --plot $(OUT)/corridor_plan.png
+	$(BIN)/impact-env show corridor --plot $(OUT)/corridor_setup.png
+	$(BIN)/impact-env plan corridor --json $(OUT)/corridor_plan.json --plot $(OUT)/corridor_plan.png
 	$(BIN)/impact-env run corridor --controller expert --plan $(OUT)/corridor_plan.json --seed 0 \
 		--video $(OUT)/corridor_expert.mp4 --json $(OUT)/corridor_expert.json --plot $(OUT)/corridor_expert.png
 	@echo "demo outputs in $(OUT)/"

@@ -221,3 +221,36 @@ def test_no_sys_path_edits_in_benchmarks_and_tests():
                     hits.append(f"{path.relative_to(ROOT)}:{node.lineno}")
     assert hits == []
 
+
+
+def _planner_cache(path: Path, rows: dict[bool, str]) -> None:
+    keys = {baseline: json.dumps(["corridor", "sr", "highs", baseline, 1, 5.0]) for baseline in rows}
+    path.write_text("".join(json.dumps({"key": keys[b], "row": r}) + "\n" for b, r in rows.items()))
+
+
+def test_planner_benchmark_resumes_from_its_cells(tmp_path, capsys):
+    """``--cache`` is a CellStore: the rows done are printed from it, not solved again (issue 24: the cache was
+    appended in place, and a kill mid-write left a line that blocked the next run)."""
+    from benchmarks import planner
+
+    cache = tmp_path / "planner.jsonl"
+    _planner_cache(cache, {False: "| corridor | highs | cached row |", True: "| corridor | highs | cached baseline |"})
+    before = cache.read_bytes()
+    planner.main(["--planners", "sr", "--scenarios", "corridor", "--solvers", "highs", "--repeats", "1",
+                  "--time-limit", "5", "--cache", str(cache)])
+    out = capsys.readouterr().out
+    assert "| corridor | highs | cached row |" in out and "| corridor | highs | cached baseline |" in out
+    assert cache.read_bytes() == before  # nothing solved, nothing rewritten
+
+
+def test_planner_benchmark_names_a_cut_line(tmp_path):
+    from benchmarks import planner
+    from impact_env.errors import ResultsFileError
+
+    cache = tmp_path / "planner.jsonl"
+    _planner_cache(cache, {False: "| corridor | highs | cached row |"})
+    with cache.open("a") as f:
+        f.write('{"key": "[\\"corridor\\", \\"sr\\"')  # what a kill during an in-place append left
+    with pytest.raises(ResultsFileError, match="line 2 .*not a complete JSON object.*sed -i '2d'"):
+        planner.main(["--planners", "sr", "--scenarios", "corridor", "--solvers", "highs", "--repeats", "1",
+                      "--time-limit", "5", "--cache", str(cache)])

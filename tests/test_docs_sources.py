@@ -39,9 +39,10 @@ def test_environment_page_is_written_from_the_environment(page):
                     "## Version history"):
         assert section in text, section
     assert "``" not in text and ":class:" not in text
-    table = text[text.index("| | |"):text.index("| Spaces shown for")]
-    rows = table.splitlines()
-    assert all(row.startswith("|") and row.endswith("|") and row.count("|") == 3 for row in rows), table
+    card = text[text.index('<table class="env-card"><tbody>'):text.index("</tbody></table>")]
+    assert "<thead>" not in card and "<th>" not in card  # no empty header row
+    assert card.index("env-card") < text.index("env-gif")  # the card before the GIF
+    assert card.count("<tr><td>") >= 7 and f'<code class="env-id">{page.env_id}</code>' in card
 
 
 def test_cli_page_has_every_subcommand():
