@@ -82,14 +82,15 @@ def run_one(run: Run, runs_dir: Path, logs: Path, python: str, vmas_python: str 
     if exe is None:
         return f"{run.name}: skipped (no --vmas-python / $VMAS_PYTHON)"
     logs.mkdir(parents=True, exist_ok=True)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
+    env = {**os.environ,
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
            "OMP_NUM_THREADS": str(threads)}
     start = time.perf_counter()
     with (logs / f"{run.name}.log").open("a", encoding="utf-8") as log:
         log.write(f"\n=== start {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
         log.flush()
-        done = subprocess.run(run.command(exe, folder, threads), cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT,
-                              check=False)
+        done = subprocess.run(run.command(exe, folder, threads), cwd=ROOT, env=env, stdout=log,
+                              stderr=subprocess.STDOUT, check=False)
     status = "finished" if done.returncode == 0 else f"exited with {done.returncode} (log: {logs / run.name}.log)"
     return f"{run.name}: {status} after {time.perf_counter() - start:.0f} s"
 
