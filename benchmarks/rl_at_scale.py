@@ -10,7 +10,8 @@ A cell is one run: (algorithm, task, seed). Each is a subprocess (``python -m ba
 ``python -m baselines.batched.marl``; the VMAS runs in the Python of ``--vmas-python`` / ``$VMAS_PYTHON``, a
 venv with vmas and benchmarl, since vmas pulls the legacy gym) that trains in its folder under ``--runs``
 (default ``runs/rl_at_scale/<algorithm>__<task>__s<seed>/``: checkpoints every ~1M env-steps, ``curve.jsonl``,
-and ``result.json`` when the budget is spent and the final evaluation done), with its output in ``--logs``.
+and ``result.json`` when the budget is spent and the final evaluation done), with its output in ``--logs``
+(default ``<runs>/logs/``). ``--trainer-args`` passes further options to every trainer.
 Runs go in the order seed, then scenario, then algorithm, so the first seed of every scenario finishes
 first. A killed queue started again with the same command skips the finished cells and resumes the others
 from their last checkpoint. A larger ``--frames`` than a finished cell's budget trains that cell on from its
@@ -29,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shlex
 import subprocess
 import sys
 import time
@@ -58,6 +60,7 @@ class Run:
     seed: int
     frames: int  # env-step budget
     compile: bool = False  # sb3_ppo: the world's torch.compile kernels
+    trainer_args: tuple[str, ...] = ()  # further options of the trainer's command line (e.g. --num-envs 64)
 
     @property
     def name(self) -> str:
@@ -69,10 +72,11 @@ class Run:
         else:
             args = [python, "-m", "baselines.batched.marl", self.algorithm, self.task]
         return args + ["--seed", str(self.seed), "--frames", str(self.frames), "--out", str(folder),
-                       "--threads", str(threads)]
+                       "--threads", str(threads), *self.trainer_args]
 
 
-def queue(kinds: list[str], seeds: list[int], frames: int, scenarios: list[str], compile: bool = False) -> list[Run]:
+def queue(kinds: list[str], seeds: list[int], frames: int, scenarios: list[str], compile: bool = False,
+          trainer_args: tuple[str, ...] = ()) -> list[Run]:
     """The runs of ``kinds`` (any of :data:`KINDS`), seed by seed: every scenario's, then VMAS's."""
     unknown = sorted(set(kinds) - set(KINDS))
     if unknown:
@@ -83,10 +87,11 @@ def queue(kinds: list[str], seeds: list[int], frames: int, scenarios: list[str],
     for seed in seeds:
         for scenario in scenarios:
             if "sb3" in kinds:
-                runs.append(Run("sb3_ppo", scenario, seed, frames, compile))
-            runs += [Run(algo, scenario, seed, frames) for algo in ("mappo", "ippo") if algo in kinds]
+                runs.append(Run("sb3_ppo", scenario, seed, frames, compile, trainer_args))
+            runs += [Run(algo, scenario, seed, frames, trainer_args=trainer_args) for algo in ("mappo", "ippo")
+                     if algo in kinds]
         if "vmas" in kinds:
-            runs += [Run(algo, VMAS_TASK, seed, frames) for algo in ("mappo", "ippo")]
+            runs += [Run(algo, VMAS_TASK, seed, frames, trainer_args=trainer_args) for algo in ("mappo", "ippo")]
     return runs
 
 
@@ -186,9 +191,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--workers", type=int, default=2, help="runs at once")
     parser.add_argument("--threads", type=int, default=1, help="torch threads per run")
     parser.add_argument("--compile", action="store_true", help="sb3_ppo: the world's torch.compile kernels")
+    parser.add_argument("--trainer-args", default="", help="further trainer options, one string (e.g. "
+                        "'--num-envs 512 --eval-episodes 50'): the same for every run of the queue")
     parser.add_argument("--runs", type=Path, default=ROOT / "runs" / "rl_at_scale", help="run folders")
     parser.add_argument("--out", type=Path, default=RESULTS, help="the published results")
-    parser.add_argument("--logs", type=Path, default=Path("/tmp/rl_at_scale"))
+    parser.add_argument("--logs", type=Path, default=None, help="the runs' output (default <runs>/logs)")
     parser.add_argument("--vmas-python", default=os.environ.get("VMAS_PYTHON"))
     parser.add_argument("--status", action="store_true", help="list the queue's runs and their state, then exit")
     parser.add_argument("--publish", action="store_true", help="only rebuild --out from the run folders")
@@ -199,18 +206,19 @@ def main(argv: list[str] | None = None) -> None:
         return
     try:
         runs = queue([k for k in args.kinds.split(",") if k], [int(s) for s in args.seeds.split(",")], args.frames,
-                     [s for s in args.scenarios.split(",") if s], args.compile)
+                     [s for s in args.scenarios.split(",") if s], args.compile, tuple(shlex.split(args.trainer_args)))
     except ValueError as exc:
         raise SystemExit(f"rl_at_scale: {exc}") from None
     if args.status:
         print_status(runs, args.runs)
         return
+    logs = args.logs or args.runs / "logs"
     todo = [r for r in runs if status(r, args.runs)[0] != "done"]
     print(f"{len(runs)} runs, {len(runs) - len(todo)} done before; {len(todo)} to train, {args.workers} at a time "
-          f"({args.threads} torch thread(s) each); logs in {args.logs}", flush=True)
+          f"({args.threads} torch thread(s) each); logs in {logs}", flush=True)
     start = time.perf_counter()
     with ThreadPoolExecutor(args.workers) as pool:
-        futures = [pool.submit(run_one, r, args.runs, args.logs, sys.executable, args.vmas_python, args.threads)
+        futures = [pool.submit(run_one, r, args.runs, logs, sys.executable, args.vmas_python, args.threads)
                    for r in todo]
         for i, future in enumerate(as_completed(futures), start=1):
             print(f"[{i}/{len(todo)}, {time.perf_counter() - start:.0f} s] {future.result()}", flush=True)
