@@ -1,6 +1,6 @@
 # Two entry points from a fresh clone (only Python 3.11 needed):
 #   make demo   - create .venv, install the package, run the main demo (video + JSON + plots in out/)
-#   make test   - create .venv, install with the [rl,dev,scip,tether,ray] extras, run the default (fast) test suite
+#   make test   - create .venv, install with the [rl,marl,dev,scip,tether,ray] extras, run the default (fast) test suite
 # Further targets: make test-slow (long checks), make fuzz (10 minutes of property-based fuzzing),
 #   make bench (benchmarks), make bench-ray (local processes vs Ray, RLlib vs SB3 sampling), make lint,
 #   make wheel-check (sdist + wheel, smoke test of the wheel in a fresh venv), make docs (the documentation
@@ -21,8 +21,10 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# The base install: what the simulator, planner and expert need.
-$(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml
+# The base install: what the simulator, planner and expert need. The editable install compiles the two C
+# helpers in place (setup.py; a change to their sources rebuilds them here).
+$(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml setup.py impact_env/transport/_substeps.c \
+		impact_env/stl/_cmonitor.c
 	$(BIN)/pip install --quiet -e .
 	touch $@
 
@@ -33,7 +35,7 @@ $(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml
 # test tools. torch is pinned again on the line that pulls RLlib.
 $(VENV)/.dev-installed: $(VENV)/.base-installed
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,dev,scip,tether,ray]'
+	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,marl,dev,scip,tether,ray]'
 	touch $@
 
 # The main demo: plan the corridor (MILP, HiGHS), fly it with the expert (replanner + MPC) in the
@@ -66,7 +68,8 @@ bench-expert: $(VENV)/.base-installed
 	$(BIN)/python -m benchmarks.expert --episodes 50
 
 # the expert flying spatially robust against impact-robust plans under impact noise and restitution offsets
-# (results/impact_robust: cells.jsonl, resumable, and table.md; about 1.5 h with 2 workers on an idle machine)
+# (results/impact_robust: cells.jsonl, resumable, and table.md; with long_throw_trim about 1.7 h with 2 workers
+# on an idle machine, by python -m benchmarks.impact_robust --estimate)
 bench-ir: $(VENV)/.base-installed
 	$(BIN)/python -m benchmarks.impact_robust --workers 2
 
@@ -76,6 +79,7 @@ bench-ray: $(VENV)/.dev-installed
 
 bench: $(VENV)/.base-installed
 	$(BIN)/python -m benchmarks.env_throughput
+	$(BIN)/python -m benchmarks.tether_throughput
 	$(BIN)/python -m benchmarks.planner
 	$(BIN)/python -m benchmarks.planner_stage2
 	$(BIN)/python -m benchmarks.mpc
@@ -86,7 +90,7 @@ results: $(VENV)/.dev-installed
 
 # the docs tools on top of the dev install (torch stays the pinned CPU build installed above)
 $(VENV)/.docs-installed: $(VENV)/.dev-installed
-	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,dev,scip,tether,ray,docs]'
+	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,marl,dev,scip,tether,ray,docs]'
 	touch $@
 
 wheel-check: $(VENV)/.dev-installed
@@ -108,4 +112,5 @@ lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check impact_env planners baselines tests benchmarks
 
 clean:
-	rm -rf $(VENV) $(OUT) *.egg-info site
+	rm -rf $(VENV) $(OUT) *.egg-info site build
+	find impact_env -name "_*.so" -delete

@@ -8,10 +8,12 @@ expert in the Gymnasium env under:
   noise-free cell is deterministic and runs once);
 - the simulator's restitution off by -0.2, -0.1, +0.1, +0.2 (no noise: each is one deterministic episode).
 
-Two expert stacks: ``all`` (the default :class:`~planners.expert.ExpertConfig`: identification, mission
-replanning, safe segments; a mission re-plan replaces the rest of an IR plan by an SR plan) and ``paper``
-(local replanning at planned impacts only, so what each plan brings is what flies). An IR plan is flown
-with its copies as contingency plans (:mod:`planners.online.contingency`).
+Expert stacks: ``all`` (the default :class:`~planners.expert.ExpertConfig`: identification, mission
+replanning, safe segments; a mission re-plan replaces the rest of an IR plan by an SR plan), ``paper``
+(local replanning at planned impacts only, so what each plan brings is what flies) and, on request,
+``all+sig`` (``all`` with identification's significance test, k = 3, which keeps the file's restitution
+unless the impacts contradict it). An IR plan is flown with its copies as contingency plans
+(:mod:`planners.online.contingency`).
 
 Reported per cell: success rate (final STL robustness > 0), mean and min robustness, the object's final
 speed (mean and max, m/s), the share of episodes whose object ends inside the final box around its plan's
@@ -21,7 +23,7 @@ cell is done (a rerun resumes; :mod:`impact_env.results_store`), and the table o
 ``--out``/table.md; episodes run in ``--workers`` spawned processes. From the repository root:
 
     python -m benchmarks.impact_robust --estimate
-    python -m benchmarks.impact_robust [--scenarios a,b] [--stacks all,paper] [--seeds 50] [--workers 2]
+    python -m benchmarks.impact_robust [--scenarios a,b] [--stacks all,paper,all+sig] [--seeds 50] [--workers 2]
     python -m benchmarks.impact_robust --table-only
 """
 
@@ -40,9 +42,10 @@ import numpy as np
 from impact_env.results_store import CellStore, atomic_path, write_atomic
 
 RESULTS = Path(__file__).resolve().parents[1] / "results" / "impact_robust"  # cells.jsonl, table.md, plans/
-SHIPPED = ("corridor", "obstacle_avoidance", "throw_and_catch_exp")
+SHIPPED = ("corridor", "obstacle_avoidance", "throw_and_catch_exp", "long_throw_trim")
 PLANNERS = ("sr", "ir")
-STACKS = ("all", "paper")
+STACKS = ("all", "paper", "all+sig")
+DEFAULT_STACKS = ("all", "paper")
 NOISE_FACTORS = (1.0, 2.0, 5.0)
 E_OFFSETS = (-0.2, -0.1, 0.1, 0.2)
 _WORKER: dict = {}
@@ -50,8 +53,10 @@ _WORKER: dict = {}
 
 def expert_config(stack: str):
     from planners.expert import ExpertConfig
+    from planners.online.identification import IdentificationConfig
 
-    return {"all": ExpertConfig(), "paper": ExpertConfig.paper()}[stack]
+    return {"all": ExpertConfig(), "paper": ExpertConfig.paper(),
+            "all+sig": ExpertConfig(identification=IdentificationConfig(significance=3))}[stack]
 
 
 def plan_path(out: Path, name: str, planner: str) -> Path:
@@ -233,7 +238,7 @@ def estimate(scenarios, stacks, seeds: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scenarios", default=",".join(SHIPPED))
-    parser.add_argument("--stacks", default=",".join(STACKS))
+    parser.add_argument("--stacks", default=",".join(DEFAULT_STACKS), help=f"of {', '.join(STACKS)}")
     parser.add_argument("--seeds", type=int, default=50, help="seeds per noisy cell")
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
     parser.add_argument("--out", default=str(RESULTS),

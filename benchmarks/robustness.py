@@ -18,9 +18,11 @@ Every cell (scenario, stack, condition) is a line of ``--out``/cells.jsonl, writ
 cell is done, so an interrupted run resumes where it stopped (:mod:`impact_env.results_store`); the offline
 plans are cached in ``--out``/plans/. Episodes run on the sweep engine (:mod:`impact_env.sweep`):
 ``--workers`` spawned processes, or Ray tasks with ``--engine ray [--address ADDR]`` (the cells are the same
-either way, timings aside). Prints the markdown table (success rate, mean and min robustness, unplanned
-contacts per episode, mission replans per episode and their solve time), writes the table of every cell to
-``--out``/table.md, and draws success against perturbation size. From the repository root:
+either way, timings aside); a cell records its stack's config, and ``--stale STACKS`` re-flies the cells of
+those stacks flown with another. Prints the markdown table (success rate, mean and min robustness, unplanned
+contacts per episode, mission replans per episode and their solve time, the error of the final restitution
+estimates), writes the table of every cell to ``--out``/table.md, and draws success against perturbation
+size. From the repository root:
 
     python -m benchmarks.robustness --estimate                # how long the selected grid would take
     python -m benchmarks.robustness [--scenarios a,b] [--stacks paper,all] [--axes combined,e] [--seeds 50]
@@ -45,12 +47,17 @@ from impact_env.sweep import EngineConfig, add_engine_arguments, engine_config
 from planners.expert.stacks import STACKS
 from planners.expert.stacks import stack_config as expert_config
 
-SHIPPED = ("corridor", "obstacle_avoidance", "throw_and_catch_exp")
-NEW = ("ping_pong_stop", "relay", "two_objects")
+SHIPPED = ("corridor", "obstacle_avoidance", "throw_and_catch_exp", "long_throw_trim")
+NEW = ("ping_pong_stop", "relay", "two_objects", "held_drift", "narrow_gap", "one_robot_two_objects", "timed_visits",
+       "wall_start", "four_robots")
 AXES = {"e": (0.1, 0.2, 0.3), "offset": (0.05, 0.10, 0.15), "thrust": (0.05, 0.10, 0.20),
-        "impact": (0.005, 0.01, 0.02)}
+        "impact": (0.005, 0.01, 0.02, 0.03)}
 COMBINED = {"e": 0.2, "offset": 0.10, "thrust": 0.10}
 RESULTS = Path(__file__).resolve().parents[1] / "results" / "robustness"  # cells.jsonl, table.md, plans/
+# the stacks' config fingerprints (config_fingerprint) on main when the cells began to record theirs: a cell
+# without ``config`` counts as flown with its stack's (the paper's stack has not changed since)
+UNSTAMPED_CONFIG = {"paper": "3720cb004e2e", "+id": "3d61b070a04a", "+mission": "4830c6f13bd5",
+                    "all": "0f8ce77b8bfd"}
 _WORKER: dict = {}
 
 
@@ -153,9 +160,11 @@ def _episode(args: tuple) -> dict:
         _WORKER[key] = Expert(load_scenario(scenario_name), plan=Plan.from_dict(plan_dict),
                               config=expert_config(stack))
     expert = _WORKER[key]
-    env = TransportEnv(expert.scenario, **env_options(expert.scenario, axis, level, seed))
+    options = env_options(expert.scenario, axis, level, seed)
+    env = TransportEnv(expert.scenario, **options)
     res = run_episode(env, expert, seed=seed)
     report = expert.report()
+    simulated = options.get("restitution", expert.scenario.restitution)
     mission = report.get("mission", {})
     solves = [r["solve_s"] for r in mission.get("records", [])]
     robots = {r.name for r in expert.scenario.robots}
@@ -168,7 +177,31 @@ def _episode(args: tuple) -> dict:
                                   and not any(o.name in k.split("-") for o in expert.scenario.objects)),
             "unplanned_pairs": unplanned, "mission_replans": mission.get("replans", 0),
             "mission_attempts": mission.get("attempts", 0), "mission_timeouts": mission.get("timeouts", 0),
-            "replan_solve_s": solves, "wall_s": res.wall_time_s}
+            "replan_solve_s": solves, "identification": identification_record(expert, simulated),
+            "wall_s": res.wall_time_s}
+
+
+def identification_record(expert, simulated: float) -> dict | None:
+    """Per robot-object pair, the restitution the expert's contact inverse ended the episode with (its
+    identified estimate, or the file's where it kept that) and its ``error`` against the ``simulated`` one;
+    None for a stack without identification."""
+    if expert.config.identification is None:
+        return None
+    ident = expert.identifier
+    return {f"{r.name}-{o.name}": {"estimate": ident.restitution_for(r.name, o.name),
+                                   "error": ident.restitution_for(r.name, o.name) - simulated}
+            for r in expert.scenario.robots for o in expert.scenario.objects}
+
+
+def config_fingerprint(stack: str) -> str:
+    """12 hex digits naming the stack's ``ExpertConfig`` as it is now (every field, nested configs included):
+    a cell records the one it was flown with (``config``), and ``--stale`` re-flies the cells whose config
+    differs. It names the options, not the code: a change of code under the same options keeps it."""
+    import dataclasses
+    import hashlib
+
+    text = json.dumps(dataclasses.asdict(expert_config(stack)), sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
 def cell_key(scenario: str, stack: str, axis: str, level: float) -> tuple[str, str, str, str]:
@@ -222,9 +255,15 @@ def plan_for(scenario_name: str, out: Path) -> dict:
 
 
 def run(scenarios, stacks, axes, seeds_shipped, seeds_new, out: Path, engine: EngineConfig,
-        levels: dict[str, tuple[float, ...]] | None = None) -> None:
+        levels: dict[str, tuple[float, ...]] | None = None, stale: tuple[str, ...] = ()) -> None:
+    """Fly the cells of the grid that are not done. A cell is done when it has the episodes asked for; one with
+    fewer gets the missing seeds flown and added (an episode depends on its seed only, tested in
+    ``tests/test_determinism.py``). For the stacks in ``stale``, a cell flown with another config than the
+    stack's current one (:func:`config_fingerprint`; a cell from before the cells recorded it counts as
+    another) is flown again whole."""
     out.mkdir(parents=True, exist_ok=True)
     store = cell_store(out)
+    fingerprints = {stack: config_fingerprint(stack) for stack in stacks}
     with open_engine(engine) as pool:
         for name in scenarios:
             plan = plan_for(name, out)
@@ -233,15 +272,34 @@ def run(scenarios, stacks, axes, seeds_shipped, seeds_new, out: Path, engine: En
                 for stack in stacks:
                     n = cell_seeds(axis, seeds)
                     done = store.get(cell_key(name, stack, axis, level))
+                    if done is not None and stack in stale and flown_with(done) != fingerprints[stack]:
+                        done = None
                     if done is not None and done["episodes_requested"] >= n:
                         continue
+                    kept = [] if done is None else done["episodes"][:n]
                     start = time.perf_counter()
-                    jobs = [(name, stack, plan, axis, level, s) for s in range(n)]
-                    episodes = list(pool.map(_episode, jobs))
+                    jobs = [(name, stack, plan, axis, level, s) for s in range(len(kept), n)]
+                    episodes = kept + list(pool.map(_episode, jobs))
+                    wall = time.perf_counter() - start + (0.0 if done is None else done["wall_s"])
                     store.put({"scenario": name, "stack": stack, "axis": axis, "level": level,
-                               "episodes_requested": n, "episodes": episodes, "wall_s": time.perf_counter() - start})
+                               "episodes_requested": n, "episodes": episodes, "wall_s": wall,
+                               "config": fingerprints[stack]})
                     print(row(store.get(cell_key(name, stack, axis, level))), flush=True)
                     write_table(out, store.cells())
+
+
+def flown_with(cell: dict) -> str | None:
+    """The config fingerprint a cell was flown with (:data:`UNSTAMPED_CONFIG` for a cell that has none)."""
+    return cell.get("config", UNSTAMPED_CONFIG.get(cell["stack"]))
+
+
+def identification_error(cell: dict) -> str:
+    """``mean / max`` over the cell's episodes of the largest |error| of an episode's final restitution
+    estimates (:func:`identification_record`); ``-`` when the cell has none (no identification, or flown
+    before the episodes recorded it)."""
+    worst = [max(abs(p["error"]) for p in e["identification"].values()) for e in cell["episodes"]
+             if e.get("identification")]
+    return f"{np.mean(worst):.3f} / {max(worst):.3f}" if worst else "-"
 
 
 def row(cell: dict) -> str:
@@ -250,10 +308,11 @@ def row(cell: dict) -> str:
     solves = [s for e in eps for s in e["replan_solve_s"]]
     label = condition_label(cell["axis"], cell["level"])
     solve = f"{np.median(solves):.1f} / {max(solves):.1f}" if solves else "-"
-    return (f"| {cell['scenario']} | {label} | {cell['stack']} | {len(eps)} | "
+    stack = cell["stack"] if flown_with(cell) == config_fingerprint(cell["stack"]) else f"{cell['stack']} *"
+    return (f"| {cell['scenario']} | {label} | {stack} | {len(eps)} | "
             f"{100 * np.mean([e['success'] for e in eps]):.0f}% | {np.mean(rho):+.3f} ({min(rho):+.3f}) | "
             f"{np.mean([e['robot_contacts'] for e in eps]):.2f} | {np.mean([e['mission_replans'] for e in eps]):.2f} | "
-            f"{solve} |")
+            f"{solve} | {identification_error(cell)} |")
 
 
 def condition_label(axis: str, level: float) -> str:
@@ -276,8 +335,12 @@ def sort_cells(cells: list[dict], scenarios) -> list[dict]:
 
 def table(cells: list[dict], scenarios) -> str:
     lines = ["| scenario | simulator | stack | episodes | success | robustness mean (min) | robot contacts / ep | "
-             "mission replans / ep | replan solve s median / max |", "|---|---|---|---:|---:|---:|---:|---:|---:|"]
-    return "\n".join(lines + [row(c) for c in sort_cells(cells, scenarios) if c["scenario"] in scenarios])
+             "mission replans / ep | replan solve s median / max | e error mean / max |",
+             "|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    rows = [row(c) for c in sort_cells(cells, scenarios) if c["scenario"] in scenarios]
+    note = (["", "\\* flown with an earlier config of the stack (`--stale STACK` flies it again)"]
+            if any(" * |" in r for r in rows) else [])
+    return "\n".join(lines + rows + note)
 
 
 def all_scenarios(cells: list[dict]) -> list[str]:
@@ -376,6 +439,9 @@ def main() -> None:
     parser.add_argument("--out", default=str(RESULTS),
                         help="the cells (cells.jsonl), their table (table.md) and the cached plans (plans/) "
                              "(default: %(default)s)")
+    parser.add_argument("--stale", default="", metavar="STACKS",
+                        help="comma-separated stacks whose cells flown with another config than the stack's "
+                             "current one are flown again (e.g. after a default changed)")
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true",
                         help="print the table of the cells done (and rewrite table.md); fly nothing")
@@ -392,7 +458,11 @@ def main() -> None:
     if not args.table_only:
         if "impact" in axes and not has_impact_noise():
             print("the simulator has no impact_velocity_noise_mps option yet: the impact axis is left out")
-        run(scenarios, stacks, axes, args.seeds, args.seeds_new, out, engine_config(args), levels)
+        try:
+            stale = tuple(_stack_name(st) for st in args.stale.split(",") if st)
+        except argparse.ArgumentTypeError as err:
+            parser.error(f"--stale: {err}")
+        run(scenarios, stacks, axes, args.seeds, args.seeds_new, out, engine_config(args), levels, stale)
     cells = load_cells(out)
     if cells:
         write_table(out, cells)

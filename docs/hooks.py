@@ -52,11 +52,11 @@ def pages() -> list[EnvPage]:
                            f'gym.make("{env_id}")', name,
                            f"a scripted anchor sequence on {name} (the tether planners are not in the package yet)",
                            (("station", name),)))
-    out.append(EnvPage("tether", "Tether-v0 (any station)", "impact_env/Tether-v0", "gymnasium", "TetherEnv",
-                       'gym.make("impact_env/Tether-v0", station="my.toml")', "iss_chain",
+    out.append(EnvPage("tether", "Tether-v1 (any station)", "impact_env/Tether-v1", "gymnasium", "TetherEnv",
+                       'gym.make("impact_env/Tether-v1", station="my.toml")', "iss_chain",
                        "a scripted anchor sequence on iss_chain", (("station", "iss_chain"),)))
-    out.append(EnvPage("tether_pettingzoo", "tether-v0 (PettingZoo)", "impact_env/tether-v0", "pettingzoo",
-                       "TetherParallelEnv", 'tether_v0.parallel_env(station="L")', "L",
+    out.append(EnvPage("tether_pettingzoo", "tether-v1 (PettingZoo)", "impact_env/tether-v1", "pettingzoo",
+                       "TetherParallelEnv", 'tether_v1.parallel_env(station="L")', "L",
                        "a scripted anchor sequence on L", (("station", "L"),)))
     return out
 
@@ -105,7 +105,7 @@ def render_page(page: EnvPage) -> str:
                   f"`max_episode_steps` {env.spec.max_episode_steps}")
         agents = None
     else:
-        module = impact_env.transport_v0 if page.cls == "TransportParallelEnv" else impact_env.tether_v0
+        module = impact_env.transport_v0 if page.cls == "TransportParallelEnv" else impact_env.tether_v1
         core = module.parallel_env(**kwargs)
         agent = core.possible_agents[0]
         spaces = [("Action space (per agent)", space_text(core.action_space(agent))),
@@ -170,15 +170,17 @@ environment's own docstring and constructor, so its arguments table is the code'
   horizon. The env sets `terminated=True` at the horizon (the task's end; the time left is in the observation,
   so do not bootstrap), and Gymnasium's `TimeLimit` also sets `truncated=True` on that same step: read
   `terminated` first (stable-baselines3 does). A smaller `max_episode_steps` truncates earlier.
-- **No silent defaults**: `Transport-v0`, `Tether-v0` and the PettingZoo entry points need `scenario=` or
+- **No silent defaults**: `Transport-v0`, `Tether-v1` and the PettingZoo entry points need `scenario=` or
   `station=`.
 - **The episode's clock** is on the env: `env.unwrapped.dt_s`, `horizon_steps`, `horizon_s`.
-- **PettingZoo**: versioned modules `impact_env.transport_v0` and `impact_env.tether_v0` with `parallel_env`,
+- **PettingZoo**: versioned modules `impact_env.transport_v0` and `impact_env.tether_v1` with `parallel_env`,
   `env` and `raw_env` (arguments spelled out), `metadata["name"]` per scenario (`transport_corridor_v0`).
-  The impact env's agents are the scenario's robot names (`R1`, `R2`), so PettingZoo's `api_test` warns that
-  it recommends `player_0`-style names; the warning is harmless.
-- **Versions**: an id's `-v0` is bumped whenever its dynamics, reward or observations change; the
-  [changelog](../changelog.md) lists them.
+  The agents are the scenario's or station's robot names (`R1`, `R2`, ...), so PettingZoo's `api_test` warns
+  that it recommends `player_0`-style names; the warning is harmless.
+- **Versions**: an id's version is bumped whenever its dynamics, reward or observations change; the
+  [changelog](../changelog.md) lists them. The tether ids are at `-v1` (deliver and hold); their `-v0`
+  (`impact_env/TetherL-v0` ..., `impact_env/Tether-v0`, `impact_env/tether-v0`) stay registered for one
+  release.
 """
 
 

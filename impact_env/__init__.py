@@ -10,9 +10,10 @@ also registers ``impact_env/transport-v0``. PettingZoo's versioned module is :mo
 torch world (``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``, the ``[rl]``
 extra: :mod:`impact_env.transport.batched.vector_env`); torch is imported only when one is made.
 
-Tether (anchor-pull) transport: ``impact_env/Tether-v0`` with ``station=`` (a shipped name or a path) and one id
-per shipped station (``TETHER_GYM_IDS``, e.g. ``impact_env/TetherL-v0``); PettingZoo ``impact_env/tether-v0`` and
-the module :mod:`impact_env.tether_v0`.
+Tether (anchor-pull) transport: ``impact_env/Tether-v1`` with ``station=`` (a shipped name or a path) and one id
+per shipped station (``TETHER_GYM_IDS``, e.g. ``impact_env/TetherL-v1``); PettingZoo ``impact_env/tether-v1`` and
+the module :mod:`impact_env.tether_v1`. The ``-v0`` tether ids (``TETHER_GYM_IDS_V0``, ``impact_env/Tether-v0``,
+``impact_env/tether-v0``, :mod:`impact_env.tether_v0`) stay registered for one release.
 """
 
 from __future__ import annotations
@@ -68,12 +69,14 @@ GYM_IDS = {
 }
 
 TETHER_GYM_IDS = {
-    "impact_env/TetherL-v0": "L",
-    "impact_env/TetherT-v0": "T",
-    "impact_env/TetherAlcove-v0": "alcove",
-    "impact_env/TetherIssChain-v0": "iss_chain",
-    "impact_env/TetherDeadEnd-v0": "dead_end",
+    "impact_env/TetherL-v1": "L",
+    "impact_env/TetherT-v1": "T",
+    "impact_env/TetherAlcove-v1": "alcove",
+    "impact_env/TetherIssChain-v1": "iss_chain",
+    "impact_env/TetherDeadEnd-v1": "dead_end",
 }
+# version 0 of the tether ids ("eventually in the goal", agents robot_0 ..), kept for one release (removed in 0.4.0)
+TETHER_GYM_IDS_V0 = {env_id.replace("-v1", "-v0"): station for env_id, station in TETHER_GYM_IDS.items()}
 
 
 def _horizon_steps(task_source) -> int:
@@ -107,12 +110,16 @@ def _register() -> None:
         gymnasium.register(id="impact_env/Transport-v0", entry_point=TRANSPORT_ENTRY_POINT,
                            vector_entry_point=TRANSPORT_VECTOR_ENTRY_POINT)
     _add_vector_entry_points()
-    for env_id, station in TETHER_GYM_IDS.items():
+    for ids, cls in ((TETHER_GYM_IDS, "TetherEnv"), (TETHER_GYM_IDS_V0, "TetherEnvV0")):
+        for env_id, station in ids.items():
+            if env_id not in gymnasium.registry:
+                st = load_station(station)
+                steps = _horizon_steps(st) if cls == "TetherEnv" else round(st.tf_s / st.control_period_s)
+                gymnasium.register(id=env_id, entry_point=f"impact_env.tether.gym_env:{cls}",
+                                   kwargs={"station": station}, max_episode_steps=steps)
+    for env_id, cls in (("impact_env/Tether-v1", "TetherEnv"), ("impact_env/Tether-v0", "TetherEnvV0")):
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point="impact_env.tether.gym_env:TetherEnv",
-                               kwargs={"station": station}, max_episode_steps=_horizon_steps(load_station(station)))
-    if "impact_env/Tether-v0" not in gymnasium.registry:
-        gymnasium.register(id="impact_env/Tether-v0", entry_point="impact_env.tether.gym_env:TetherEnv")
+            gymnasium.register(id=env_id, entry_point=f"impact_env.tether.gym_env:{cls}")
     try:
         import pettingzoo
         from pettingzoo.env_registry.registration import parallel_registry
@@ -120,13 +127,15 @@ def _register() -> None:
         return
     if "impact_env/transport-v0" not in parallel_registry:
         pettingzoo.register("parallel", "impact_env/transport-v0", entry_point="impact_env.transport_v0:parallel_env")
-    if "impact_env/tether-v0" not in parallel_registry:
-        pettingzoo.register("parallel", "impact_env/tether-v0", entry_point="impact_env.tether_v0:parallel_env")
+    for version in ("v1", "v0"):
+        if f"impact_env/tether-{version}" not in parallel_registry:
+            pettingzoo.register("parallel", f"impact_env/tether-{version}",
+                                entry_point=f"impact_env.tether_{version}:parallel_env")
 
 
 _register()
 
-from impact_env import tether_v0, transport_v0  # noqa: E402, F401 - PettingZoo's versioned modules
+from impact_env import tether_v0, tether_v1, transport_v0  # noqa: E402, F401 - PettingZoo's versioned modules
 from impact_env.transport_v0 import env, parallel_env, raw_env  # noqa: E402
 
 __all__ = [

@@ -108,6 +108,9 @@ def add_tether_options(p: argparse.ArgumentParser) -> None:
                    help="stations only: the winches' real pulling speed (default: the station's)")
     p.add_argument("--max-active", type=int, default=None, metavar="K",
                    help="stations only: robots that may hold anchors at once (default: the station's k)")
+    p.add_argument("--faults", default=None, metavar="SPEC",
+                   help="stations only: faults drawn from each episode's seed, e.g. anchor_failures=1,tether_snaps=1,"
+                        "robot_dropouts=1,winch_speed_error=0.1:0.3,window_s=10:150 (see impact_env.tether.faults)")
 
 
 def transport_options(args: argparse.Namespace) -> dict[str, Any]:

@@ -27,6 +27,19 @@ class InfeasiblePlanError(PlannerError):
         self.groups = list(groups or [])
 
 
+class UnflyableHandoverError(InfeasiblePlanError):
+    """A plan asks a robot to get round an object between two of its impacts in less time than that takes
+    (:mod:`planners.plan.handover`), and the planner could not repair it. ``handovers`` are the hand-overs
+    (robot, object, impact times, least time needed, time there is); ``plan`` the plan that has them, or None
+    when no plan without them satisfies the task."""
+
+    def __init__(self, message: str, handovers: list[Any] | None = None, plan: Any = None,
+                 groups: list[str] | None = None) -> None:
+        super().__init__(message, groups=groups)
+        self.handovers = list(handovers or [])
+        self.plan = plan
+
+
 class PlanTimeoutError(PlannerError):
     """The solver hit its time limit. ``plan`` is the best plan found (or None) and ``mip_gap`` its gap."""
 
@@ -86,7 +99,8 @@ class SmtNoPlanError(PlannerError):
 
 
 PLANNER_ERRORS: tuple[type[ImpactEnvError], ...] = (
-    PlannerError, UnsupportedSpecError, SolverNotAvailableError, InfeasiblePlanError, PlanTimeoutError, MPCInputError,
-    ReplanInputError, PlanCheckError, DecompositionError, TetherInfeasibleError, TetherPlanCheckError, SmtNoPlanError,
+    PlannerError, UnsupportedSpecError, SolverNotAvailableError, InfeasiblePlanError, UnflyableHandoverError,
+    PlanTimeoutError, MPCInputError, ReplanInputError, PlanCheckError, DecompositionError, TetherInfeasibleError,
+    TetherPlanCheckError, SmtNoPlanError,
 )
 

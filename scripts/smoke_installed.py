@@ -2,8 +2,9 @@
 fresh venv that has only the wheel and its dependencies).
 
 It checks that the installed package, not a checkout, is imported; that its data files came along (scenarios,
-stations, hyperparameters); that ``gym.make`` works for an impact and a tether id; and that one planned expert
-episode (MILP plan, replanner, MPC) solves the lab's throw and catch.
+stations, hyperparameters) and its compiled helpers were built and are used (the substep loop, the STL
+monitor); that ``gym.make`` works for an impact and a tether id; and that one planned expert episode (MILP plan,
+replanner, MPC) solves the lab's throw and catch.
 """
 
 from __future__ import annotations
@@ -28,9 +29,16 @@ def main() -> int:
 
     assert files("baselines").joinpath("hyperparams", "ppo.yml").is_file()
 
+    import impact_env.stl.compiled
+    from impact_env.transport import native
+
+    assert native.available(), "the compiled substep loop (impact_env.transport._substeps) was not built"
+    assert impact_env.stl.compiled._cmonitor is not None, "the compiled STL monitor was not built"
     env = gym.make("impact_env/Corridor-v0")
     assert env.spec.max_episode_steps == 1000
     obs, info = env.reset(seed=0)
+    core = env.unwrapped.core
+    assert core.world._loop is not None and type(core.monitor) is impact_env.stl.compiled.CompiledMonitor
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     assert obs.shape == env.observation_space.shape and isinstance(reward, float)
     tether = gym.make("impact_env/TetherL-v0", fidelity="reel")

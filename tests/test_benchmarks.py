@@ -117,12 +117,49 @@ def test_the_robustness_benchmark_skips_the_cells_done_and_reruns_a_cell_asked_f
     engine.jobs.clear()
     robustness.run(seeds_new=10, **grid)
     assert engine.jobs == []  # everything done
-    robustness.run(seeds_new=25, **grid)  # more seeds asked: the cell is flown again and replaced in place
-    assert [j[5] for j in engine.jobs] == list(range(25))
+    old = robustness.cell_store(out).get(robustness.cell_key("relay", "all", "offset", 0.2))
+    robustness.run(seeds_new=25, **grid)  # more seeds asked: the missing ones are flown, the cell replaced in place
+    assert [j[5] for j in engine.jobs] == list(range(10, 25))
     store = robustness.cell_store(out)
     assert store.keys()[:len(before)] == [robustness.key_of(json.loads(line)) for line in before]  # in place
     assert len(store) == len(before) + 1
-    assert store.get(robustness.cell_key("relay", "all", "offset", 0.2))["episodes_requested"] == 25
+    cell = store.get(robustness.cell_key("relay", "all", "offset", 0.2))
+    assert cell["episodes_requested"] == 25 and cell["episodes"][:10] == old["episodes"]
+    assert [e["seed"] for e in cell["episodes"]] == list(range(25))
+    assert cell["config"] == robustness.config_fingerprint("all")
+    engine.jobs.clear()
+    robustness.run(seeds_new=25, stale=("all",), **grid)  # stamped with today's config: not stale
+    assert engine.jobs == []
+    store.put({**cell, "config": "another"})
+    robustness.run(seeds_new=25, stale=("all",), **grid)  # flown with another config: flown again whole
+    assert [j[5] for j in engine.jobs] == list(range(25))  # (the nominal cell, flown by this run, is not)
+    engine.jobs.clear()
+    robustness.run(seeds_new=25, stale=("paper",), **grid)  # only the stacks named are stale
+    assert engine.jobs == []
+
+
+def test_the_identification_error_column():
+    cell = {"episodes": [{"identification": {"R1-O1": {"estimate": 0.5, "error": -0.1},
+                                             "R2-O1": {"estimate": 0.62, "error": 0.02}}},
+                         {"identification": {"R1-O1": {"estimate": 0.6, "error": 0.0},
+                                             "R2-O1": {"estimate": 0.63, "error": 0.03}}}]}
+    assert robustness.identification_error(cell) == "0.065 / 0.100"
+    assert robustness.identification_error({"episodes": [{"identification": None}, {}]}) == "-"
+    assert robustness.config_fingerprint("paper") != robustness.config_fingerprint("all")
+
+
+def test_cells_flown_with_another_config_are_marked():
+    """A cell without a config counts as flown with its stack's config on main before cells recorded it: the
+    paper's stack's is today's (unmarked), the full stack's is not (marked, with the note)."""
+    episodes = [{"seed": 0, "success": True, "robustness": 0.5, "robot_contacts": 0, "mission_replans": 0,
+                 "replan_solve_s": []}]
+    stamped = {"config": robustness.config_fingerprint("+id")}
+    cells = [{"scenario": "relay", "stack": stack, "axis": "nominal", "level": 0.0, "episodes": episodes, **extra}
+             for stack, extra in (("paper", {}), ("all", {}), ("+id", stamped))]
+    text = robustness.table(cells, ["relay"])
+    assert "| relay | nominal | paper | 1 |" in text and "| relay | nominal | all * | 1 |" in text
+    assert "| relay | nominal | +id | 1 |" in text and text.endswith("flies it again)")
+    assert robustness.flown_with(cells[0]) == robustness.config_fingerprint("paper")
 
 
 def test_benchmarks_run_as_modules(tmp_path):
@@ -133,7 +170,8 @@ def test_benchmarks_run_as_modules(tmp_path):
                            "corridor", "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[2].startswith("| corridor | e +-0.1 | paper | 2 | 100% |")
-    assert (out / "table.md").read_text().count("\n") == 5  # header, rule, the three cells
+    # header, rule, the three cells; the two that are not the paper's stack's were flown with its 0.3 config
+    assert (out / "table.md").read_text().count("\n") == 7 and "flies it again)" in (out / "table.md").read_text()
     done = subprocess.run([sys.executable, "-m", "benchmarks.robustness_reproduce", "--help"], cwd=ROOT,
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0 and "--results" in done.stdout, done.stderr

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 import impact_env
@@ -10,6 +12,8 @@ from impact_env.transport.scenario import load_scenario
 from planners.expert import Expert
 from planners.online.identification import ImpactIdentifier
 from tests.helpers import two_body
+
+A_MAX = math.hypot(2.8, 2.8) / 16.8  # the largest acceleration of the test robots' thrust (m/s^2)
 
 
 @pytest.mark.parametrize("true_e", [0.27, 0.67, 0.95])
@@ -23,7 +27,8 @@ def test_one_impact_identifies_a_mismatched_restitution_within_002(true_e, thrus
     while not events:  # until the first contact has ended (a thrusting robot may push again later)
         events = [ev.to_dict() for ev in world.step([(thrust_N, 0.0, 0.0)])]
     assert [{ev["a"], ev["b"]} for ev in events] == [{"R1", "O1"}]
-    ident = ImpactIdentifier(0.47, {"R1": 16.8, "O1": 16.8}, frozenset({"R1"}), frozenset({"O1"}))
+    ident = ImpactIdentifier(0.47, {"R1": 16.8, "O1": 16.8}, frozenset({"R1"}), frozenset({"O1"}),
+                             accelerations={"R1": A_MAX})
     assert ident.restitution_for("R1", "O1") == 0.47  # the prior, before any impact
     ident.observe(events)
     assert abs(ident.restitution_for("R1", "O1") - true_e) < 0.02
@@ -32,10 +37,11 @@ def test_one_impact_identifies_a_mismatched_restitution_within_002(true_e, thrus
 
 
 def test_unobserved_pairs_use_the_pooled_estimate_and_contacts_with_walls_are_ignored():
-    ident = ImpactIdentifier(0.5, {"R1": 16.8, "R2": 16.8, "O1": 16.8}, frozenset({"R1", "R2"}), frozenset({"O1"}))
+    ident = ImpactIdentifier(0.5, {"R1": 16.8, "R2": 16.8, "O1": 16.8}, frozenset({"R1", "R2"}), frozenset({"O1"}),
+                             accelerations={"R1": A_MAX, "R2": A_MAX})
     hit = {"time": 1.0, "a": "R1", "b": "O1", "a_velocity_before": [0.3, 0.0], "b_velocity_before": [0.0, 0.0],
-           "a_velocity_after": [0.045, 0.0], "b_velocity_after": [0.255, 0.0]}  # e = 0.7, equal masses
-    wall = {**hit, "a": "R2", "b": "wall"}
+           "a_velocity_after": [0.045, 0.0], "b_velocity_after": [0.255, 0.0], "duration": 0.01}  # e = 0.7
+    wall = {**hit, "a": "R2", "b": "wall", "time": 3.0}
     assert len(ident.observe([wall, hit])) == 1
     assert ident.restitution_for("R1", "O1") == pytest.approx(0.7, abs=1e-3)
     assert ident.restitution_for("R2", "O1") == pytest.approx(0.7, abs=2e-3)  # pooled

@@ -42,6 +42,9 @@ def impact_event(e: float, approach_mps: float, angle_rad: float, *, robot: str 
 
 
 def identifier(significance: float | None = 3.0, **config) -> ImpactIdentifier:
+    """The significance estimator with k = ``significance``; None: the gaussian one (the test off)."""
+    if significance is None:
+        return ImpactIdentifier(FILE_E, MASSES, ROBOTS, OBJECTS, IdentificationConfig(estimator="gaussian", **config))
     return ImpactIdentifier(FILE_E, MASSES, ROBOTS, OBJECTS,
                             IdentificationConfig(significance=significance, **config))
 
@@ -231,7 +234,7 @@ def test_the_noisy_readings_variance_is_the_seen_difference():
 # ---------------------------------------------------------------------------------------- (4) validation
 @pytest.mark.parametrize("value", [0, -1.0, math.nan, math.inf, True, "3"])
 def test_significance_must_be_none_or_a_positive_number(value):
-    with pytest.raises(PlannerError, match=r"IdentificationConfig\.significance must be None \(off\) or a finite"):
+    with pytest.raises(PlannerError, match=r"IdentificationConfig\.significance must be None \(3\) or a finite"):
         IdentificationConfig(significance=value)
 
 

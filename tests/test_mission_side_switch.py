@@ -21,6 +21,7 @@ from impact_env.transport.gym_env import TransportEnv
 from impact_env.transport.scenario import load_scenario
 from planners.errors import PlannerError
 from planners.expert import Expert, ExpertConfig
+from planners.offline.config import PlannerConfig
 from planners.online.bookkeeping import ImpactBook
 from planners.online.mission import MissionConfig, MissionPlanner
 from planners.online.side_switch import side_switches, unflyable_side_switches
@@ -106,7 +107,10 @@ def test_allow_side_switches_must_be_a_bool():
 
 @pytest.fixture(scope="module")
 def replans():
-    """The mission planner's check at 10.1 s of the failing episode, with and without the side-switch test."""
+    """The mission planner's check at 10.1 s of the failing episode, with and without the side-switch test.
+
+    The re-plans are made without the offline planner's own hand-over check (``PlannerConfig(handover=None)``),
+    which would repair the side switches before the mission sees them (tests/test_handover.py)."""
     case = json.loads(CASE.read_text())
     scenario = load_scenario(case["scenario"])
     plan = Plan.from_dict(case["plan"])
@@ -115,7 +119,8 @@ def replans():
     trace = np.array(case["trace_m"])
     out = {}
     for allow in (False, True):
-        planner = MissionPlanner(scenario, plan, MissionConfig(allow_side_switches=allow), aim_final_position=True)
+        planner = MissionPlanner(scenario, plan, MissionConfig(allow_side_switches=allow), PlannerConfig(handover=None),
+                                 aim_final_position=True)
         planner.trace = list(trace[:-1])  # step() appends the observation at time_s
         book = ImpactBook(plan.impacts, tolerance_s=2.0)
         book.done = {0}  # R2's push of O2 at 8 s was observed
@@ -156,10 +161,12 @@ def test_a_replan_with_a_side_switch_keeps_the_current_plan(replans):
 
 @pytest.mark.slow
 def test_the_full_expert_now_delivers_the_benchmarks_first_failure():
-    """The whole episode (two_objects, e 0.3 instead of 0.6, seed 0): it failed with -0.20 m before."""
+    """The whole episode (two_objects, e 0.3 instead of 0.6, seed 0): it failed with -0.20 m before. (Re-plans
+    without the offline planner's hand-over check, which repairs them instead: tests/test_handover.py.)"""
     case = json.loads(CASE.read_text())
     scenario = load_scenario(case["scenario"])
-    expert = Expert(scenario, plan=Plan.from_dict(case["plan"]), config=ExpertConfig())
+    expert = Expert(scenario, plan=Plan.from_dict(case["plan"]), config=ExpertConfig(),
+                    planner_config=PlannerConfig(handover=None))
     result = run_episode(TransportEnv(scenario, restitution=0.3), expert, seed=0)
     assert result.success, result.robustness
     assert any(r["status"].startswith("kept: side switch") for r in expert.report()["mission"]["records"])

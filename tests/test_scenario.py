@@ -11,8 +11,9 @@ from tests.helpers import DELETE, modified, two_body_dict
 
 
 def test_shipped_scenarios_are_listed_and_load():
-    assert scenario_names() == ["corridor", "long_throw_trim", "obstacle_avoidance", "ping_pong_stop", "relay",
-                                "throw_and_catch_exp", "two_objects"]
+    assert scenario_names() == ["corridor", "four_robots", "held_drift", "long_throw_trim", "narrow_gap",
+                                "obstacle_avoidance", "one_robot_two_objects", "ping_pong_stop", "relay",
+                                "throw_and_catch_exp", "timed_visits", "two_objects", "wall_start"]
     for name in scenario_names():
         sc = load_scenario(name)
         assert sc.name == name

@@ -44,7 +44,8 @@ def test_shipped_stations():
             assert LineString([(x0, y0), (x1, y1)]).distance(Point(a.position_m)) < 1e-12
             assert poly.exterior.distance(Point(a.position_m)) < 1e-12
         assert s.cargo_inside(s.cargo.start_m)
-        assert s.task == "F[0,600] in(cargo, goal)" and s.formula.horizon_s == 600.0
+        assert s.task == s.hold_task == "F[0,570] G[0,30] (in(cargo, goal) & in(drift, rest))"
+        assert s.reach_task == "F[0,600] in(cargo, goal)" and s.formula.horizon_s == 600.0
 
 
 @pytest.mark.parametrize("name", sorted(REFERENCE))

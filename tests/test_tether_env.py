@@ -15,10 +15,11 @@ from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, render
 
 import impact_env
 from impact_env.errors import ActionError, ScenarioError
-from impact_env.stl import robustness
+from impact_env.stl import parse, robustness
 from impact_env.tether import pettingzoo_env as tether_parallel
 from impact_env.tether.gym_env import TetherEnv
-from impact_env.tether.pettingzoo_env import TetherParallelEnv
+from impact_env.tether.gym_env import TetherEnvV0 as TetherEnvReach  # the v0 task and spaces
+from impact_env.tether.pettingzoo_env import TetherParallelEnv, TetherParallelEnvV0
 from impact_env.tether.station import load_station
 from tests.station_helpers import make_station
 
@@ -62,7 +63,7 @@ def _run(env, policy, seed=0):
 
 @pytest.mark.parametrize("fidelity", FIDELITIES)
 def test_hand_written_sequence_delivers_the_cargo_on_the_l_map(fidelity):
-    env = TetherEnv("L", fidelity=fidelity)
+    env = TetherEnvReach("L", fidelity=fidelity)
     plan = LSequence(env.station)
     positions, rewards, info = _run(env, plan.act)
     assert info["is_success"] and info["robustness"] > 0.1, info
@@ -74,7 +75,7 @@ def test_hand_written_sequence_delivers_the_cargo_on_the_l_map(fidelity):
     assert all(env.station.cargo_inside(p, tol_m=0.01) for p in positions)
     # the dense rewards sum to the final robustness, which is the trace's offline robustness
     assert rewards.sum() == pytest.approx(info["robustness"], abs=1e-9)
-    offline = robustness(env.station.formula, {"cargo": positions}, env.station.region_map(), dt=1.0)
+    offline = robustness(parse(env.core.task), {"cargo": positions}, env.station.region_map(), dt=1.0)
     assert offline == pytest.approx(info["robustness"], abs=1e-9)
     assert info["path_length_m"] == pytest.approx(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum())
 
@@ -132,7 +133,7 @@ def test_tether_v0_takes_a_station_name_or_path(tmp_path):
 
 
 def test_observation_layout():
-    env = TetherEnv("L")
+    env = TetherEnvReach("L")
     st = env.station
     obs, _ = env.reset(seed=0)
     n, a = st.n_robots, st.n_anchors
@@ -146,7 +147,7 @@ def test_observation_layout():
 
 
 def test_bad_actions_are_errors_or_documented_rejections():
-    env = TetherEnv("L")
+    env = TetherEnvReach("L")
     st = env.station
     env.reset(seed=0)
     top = 4 + st.n_anchors + 1
@@ -169,7 +170,7 @@ def test_bad_actions_are_errors_or_documented_rejections():
     _, _, _, _, info = env.step([2 + top_anchor, 0, 1])  # re-attach to the held anchor is a keep; release frees
     assert info["rejected"] == [] and info["switches"] == 2
     assert env.core.world.tether_anchor(2) is None and [e["kind"] for e in info["events"]] == ["released"]
-    near = TetherEnv(make_station(start=(1.25, 0.5)))
+    near = TetherEnvReach(make_station(start=(1.25, 0.5)))
     near.reset(seed=0)
     _, _, _, _, info = near.step([2 + _anchor(near.station, (1.25, 0.0)), 0, 0])
     assert "inside anchor 0's stop radius" in info["rejected"][0]["reason"]
@@ -294,8 +295,8 @@ def test_registry_and_agent_observations():
 
 
 def test_team_reward_matches_the_gym_env_and_episode_end():
-    par = pickle.loads(pickle.dumps(TetherParallelEnv("L", fidelity="force")))
-    gym_env = TetherEnv("L", fidelity="force")
+    par = pickle.loads(pickle.dumps(TetherParallelEnvV0("L", fidelity="force")))
+    gym_env = TetherEnvReach("L", fidelity="force")
     par.reset(seed=1)
     gym_env.reset(seed=1)
     plan = LSequence(gym_env.station)

@@ -52,7 +52,7 @@ def test_kinematic_arrival_releases_inside_the_stop_radius_and_stops():
     assert len(arrived) == 1 and arrived[0].time_s == pytest.approx(math.ceil(9.405 / 0.01) * 0.1)
     assert world.tether_anchor(0) is None and world.velocity_mps == (0.0, 0.0)
     assert math.dist(world.position_m, (20.0, 0.0)) <= 0.6
-    assert world.winch_work_J == pytest.approx(0.5 * 20.0 * 0.1 ** 2, rel=1e-9)
+    assert world.winch_work_J == pytest.approx(1.0 * 941 * 0.01, rel=1e-9)  # Eq. 5's tension F_max, 9.41 m
 
 
 @pytest.mark.parametrize("a1,a2", [((5.0, 40.0), (35.0, 40.0)), ((0.0, 30.0), (40.0, 12.0))])

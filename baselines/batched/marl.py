@@ -276,7 +276,8 @@ def evaluate_vmas(experiment, episodes: int) -> dict:
     # one episode per env (the rollout lasts max_steps): VMAS reports done at max_steps as well, so an episode
     # succeeded when it ended earlier (the package reached the goal)
     done = td.get(("next", "done")).squeeze(-1)  # [envs, steps]
-    first = torch.where(done.any(1), done.float().argmax(1), torch.full_like(done[:, 0], done.shape[1], dtype=torch.long))
+    first = torch.where(done.any(1), done.float().argmax(1),
+                        torch.full_like(done[:, 0], done.shape[1], dtype=torch.long))
     reward = (td.get(("next", "agents", "reward"))[:, :, 0, 0] * (torch.arange(done.shape[1]) <= first[:, None])).sum(1)
     success = (first < experiment.max_steps - 1).float()
     return {"episodes": episodes, "return_mean": float(reward.mean()), "success_rate": float(success.mean())}

@@ -4,6 +4,8 @@
   :class:`Formula` nodes (bounds in seconds), which the planner also compiles into MILP constraints;
 * :func:`robustness` / :func:`robustness_signal` evaluate it offline on a trace (vectorised numpy);
 * :class:`OnlineMonitor` gives the same numbers one environment step at a time, for dense rewards;
+  :func:`impact_env.stl.compiled.compiled_monitor` the same again, from C, for the formula classes the shipped
+  tasks use (what the impact environments run);
 * :func:`progress` rewrites a formula for the rest of a trace once a prefix of it is known.
 """
 

@@ -406,21 +406,7 @@ class OnlineMonitor:
 
     def update(self, positions: Mapping[str, Sequence[float]]) -> float:
         """Append sample k = steps (body name -> (x, y) in m) and return the robustness of samples 0..k."""
-        pos: dict[str, tuple[float, float]] = {}
-        for name in self._bodies:
-            if name not in positions:
-                raise STLBindingError(f"formula names body {name!r} but the positions have "
-                                      f"{', '.join(map(str, positions)) or 'none'}")
-            p = positions[name]
-            try:
-                x, y = p[0], p[1]
-                if type(x) is not float or type(y) is not float:
-                    x, y = float(x), float(y)
-            except (TypeError, ValueError, IndexError, KeyError):
-                raise STLError(f"positions[{name!r}] must be (x, y) in metres, got {p!r}") from None
-            if x - x != 0.0 or y - y != 0.0:  # NaN or infinite
-                raise STLError(f"positions[{name!r}] must be finite, got ({x}, {y})")
-            pos[name] = (x, y)
+        pos = checked_positions(self._bodies, positions)
         k = self._steps
         if self._final is None:
             for node in self._nodes:
@@ -435,3 +421,25 @@ class OnlineMonitor:
                 self._value = root.tent[0] if root.tent else root.c
         self._steps = k + 1
         return self._value
+
+
+def checked_positions(bodies: Sequence[str],
+                      positions: Mapping[str, Sequence[float]]) -> dict[str, tuple[float, float]]:
+    """``bodies``' positions as (x, y) floats; STLBindingError for a missing body, STLError for a bad or
+    non-finite position."""
+    pos: dict[str, tuple[float, float]] = {}
+    for name in bodies:
+        if name not in positions:
+            raise STLBindingError(f"formula names body {name!r} but the positions have "
+                                  f"{', '.join(map(str, positions)) or 'none'}")
+        p = positions[name]
+        try:
+            x, y = p[0], p[1]
+            if type(x) is not float or type(y) is not float:
+                x, y = float(x), float(y)
+        except (TypeError, ValueError, IndexError, KeyError):
+            raise STLError(f"positions[{name!r}] must be (x, y) in metres, got {p!r}") from None
+        if x - x != 0.0 or y - y != 0.0:  # NaN or infinite
+            raise STLError(f"positions[{name!r}] must be finite, got ({x}, {y})")
+        pos[name] = (x, y)
+    return pos

@@ -12,7 +12,8 @@ import argparse
 from impact_env.cli_options import print_catalogue, run_and_report, save_summary
 from impact_env.errors import ImpactEnvError
 
-TETHER_KEYS = ("switches", "snags", "path_length_m", "winch_work_J", "wall_contacts")
+TETHER_KEYS = ("switches", "snags", "path_length_m", "winch_work_J", "wall_contacts", "time_to_goal_s",
+               "time_at_rest_in_goal_s", "speed_mps", "failed_anchors", "dropped_robots")
 # impact-env scenarios: (title, format, value) of each column between the name and the description
 COLUMNS = (("robots", ">7", lambda st: st.n_robots), ("k", ">3", lambda st: st.k),
            ("anchors", ">8", lambda st: st.n_anchors), ("w_mps", ">7.2f", lambda st: st.pull_speed_mps),
@@ -53,9 +54,12 @@ def run_station(args: argparse.Namespace) -> int:
     if args.reward_mode not in ("dense", "sparse"):
         raise ImpactEnvError(f"--reward-mode {args.reward_mode} applies to impact scenarios; a station takes dense or "
                              "sparse")
+    from impact_env.tether.faults import parse_faults
+
     options = {"fidelity": args.fidelity, "reward_mode": args.reward_mode, "energy_penalty": args.energy_penalty,
                "pull_speed_mps": args.pull_speed_mps, "max_active": args.max_active,
-               "initial_position_noise_m": args.initial_position_noise_m}
+               "initial_position_noise_m": args.initial_position_noise_m,
+               "faults": parse_faults(getattr(args, "faults", None))}
     env = TetherEnv(st, render_mode="rgb_array" if args.video else None, **options)
     controller = make_controller(args.controller, st, plan=args.plan)
     events = []  # each episode's tether events
@@ -63,7 +67,9 @@ def run_station(args: argparse.Namespace) -> int:
     def details(res: EpisodeResult) -> str:
         events.append(list(env.core.events))
         info = res.final_info
-        return f"switches={info['switches']} snags={info['snags']} path={info['path_length_m']:.2f} m"
+        goal = "-" if info["time_to_goal_s"] is None else f"{info['time_to_goal_s']:.0f} s"
+        return (f"switches={info['switches']} snags={info['snags']} path={info['path_length_m']:.2f} m "
+                f"goal={goal} held={info['time_at_rest_in_goal_s']:.0f} s speed={info['speed_mps']:.3f} m/s")
 
     results = run_and_report(args, env, controller, details)
     first = results[0]

@@ -44,9 +44,10 @@ def run_scenario(args: argparse.Namespace) -> int:
     from impact_env.transport.plotting import count_impacts
     from impact_env.transport.scenario import load_scenario
 
-    if (args.fidelity, args.energy_penalty, args.pull_speed_mps, args.max_active) != ("kinematic", 0.0, None, None):
-        raise ImpactEnvError("--fidelity, --energy-penalty, --pull-speed-mps and --max-active apply to tether "
-                             "stations, not to impact scenarios")
+    if (args.fidelity, args.energy_penalty, args.pull_speed_mps, args.max_active, args.faults) != \
+            ("kinematic", 0.0, None, None, None):
+        raise ImpactEnvError("--fidelity, --energy-penalty, --pull-speed-mps, --max-active and --faults apply to "
+                             "tether stations, not to impact scenarios")
     sc = load_scenario(args.scenario)
     options = transport_options(args)
     env = TransportEnv(sc, render_mode="rgb_array" if args.video else None, **options)

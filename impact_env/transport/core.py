@@ -17,7 +17,8 @@ import numpy as np
 from impact_env.env_shell import check_can_step, clip_to_space, time_left
 from impact_env.errors import ActionError, EnvConfigError
 from impact_env.stl import OnlineMonitor, conjuncts
-from impact_env.transport import starts
+from impact_env.stl.compiled import CompiledMonitor, compiled_monitor
+from impact_env.transport import native, starts
 from impact_env.transport.actions import numbers_of
 from impact_env.transport.physics import ImpactEvent, World
 from impact_env.transport.scenario import Scenario, load_scenario
@@ -96,6 +97,11 @@ class TransportCore:
     (:attr:`robustness_limit_m`): rewards and ``info["robustness"]`` stay finite, the rewards still sum to the
     (clipped) final robustness, and the sign, hence ``is_success``, is unchanged.
 
+    Speed: the substeps, the action's scaling and the observation run in C (:mod:`impact_env.transport.native`)
+    and the STL monitor too for the shipped formula classes (:mod:`impact_env.stl.compiled`), on buffers made
+    once: the state (:attr:`state`, (n_bodies, 6) float64), the wrenches and the observation. Every number is the
+    pure-Python path's, bit for bit; ``info`` is a new plain dict per step.
+
     Args:
         scenario: a Scenario, a shipped scenario name or a path to a TOML file.
         reward_mode: ``"dense"`` (default), ``"sparse"`` or ``"conjuncts"``; see above.
@@ -137,9 +143,9 @@ class TransportCore:
         self.n_bodies = len(sc.bodies)
         self.body_names = [b.name for b in sc.bodies]
         self.dt_s = sc.control_period_s
-        self.monitor = OnlineMonitor(sc.formula, sc.region_map(), self.dt_s)
+        self.monitor = self._new_monitor(sc.formula)
         self.horizon_steps = self.monitor.horizon_steps
-        self.conjunct_monitors = ([OnlineMonitor(part, sc.region_map(), self.dt_s) for part in conjuncts(sc.formula)]
+        self.conjunct_monitors = ([self._new_monitor(part) for part in conjuncts(sc.formula)]
                                   if reward_mode == "conjuncts" else [])
         self.robustness_limit_m = robustness_limit(sc)
         n = self.n_robots * ACTION_PER_ROBOT
@@ -156,9 +162,39 @@ class TransportCore:
         self.world: World | None = None
         self.step_count = 0
         self.log = EpisodeLog()
-        self.last_wrenches: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * self.n_robots
-        self._state: list[tuple[float, ...]] = []
+        self._last_wrenches: list[list[float]] = [[0.0, 0.0, 0.0] for _ in range(self.n_robots)]
+        self.state = np.zeros((self.n_bodies, 6))  # per body x, y, vx, vy, heading, omega after the last step
+        self._obs = np.zeros(self.obs_size, dtype=np.float32)
+        self._observer = None if native.Observer is None else native.Observer(self.state, self._obs, self.obs_low,
+                                                                               self.obs_high)
+        # each robot's observation: its own body's block first, then the others in order, then the time left
+        self._agent_orders = [np.array([OBS_PER_BODY * j + c for j in [i] + [b for b in range(self.n_bodies) if b != i]
+                                        for c in range(OBS_PER_BODY)] + [OBS_PER_BODY * self.n_bodies])
+                              for i in range(self.n_robots)]
         self._prev_estimate = 0.0
+        self._set_action = self._set_agent_actions = None  # the world's compiled action readers
+
+    def _new_monitor(self, formula) -> CompiledMonitor | OnlineMonitor:
+        """The compiled monitor reading :attr:`state` if the formula is of its class, else OnlineMonitor."""
+        sc = self.scenario
+        monitor = compiled_monitor(formula, sc.region_map(), self.dt_s, self.body_names)
+        return monitor if monitor is not None else OnlineMonitor(formula, sc.region_map(), self.dt_s)
+
+    def _update(self, monitor: CompiledMonitor | OnlineMonitor) -> float:
+        """Feed the monitor the positions of :attr:`state`; return its robustness estimate."""
+        if type(monitor) is CompiledMonitor:
+            return monitor.update_rows(self.state)
+        return monitor.update(self._positions())
+
+    @property
+    def last_wrenches(self) -> list[tuple[float, float, float]]:
+        """Each robot's body-frame (Fx, Fy, torque) of the last step (N, N m)."""
+        return [tuple(row) for row in self._last_wrenches]
+
+    @property
+    def _state(self) -> list[tuple[float, ...]]:
+        """:attr:`state` as one (x, y, vx, vy, heading, omega) tuple per body; empty before the first reset."""
+        return [] if self.world is None else [tuple(row) for row in self.state.tolist()]
 
     # ------------------------------------------------------------------------------------------ episode
     @property
@@ -177,15 +213,18 @@ class TransportCore:
         self.world = World(self.scenario, restitution=self.restitution, initial_positions_m=overrides,
                            impact_velocity_noise_mps=self.impact_velocity_noise_mps, rng=rng)
         self._rng = rng
+        loop = self.world._loop
+        self._set_action = None if loop is None else loop.set_action
+        self._set_agent_actions = None if loop is None else loop.set_agent_actions
         self.step_count = 0
         self.log = EpisodeLog()
-        self.last_wrenches = [(0.0, 0.0, 0.0)] * self.n_robots
+        self._last_wrenches = [[0.0, 0.0, 0.0] for _ in range(self.n_robots)]
         self.monitor.reset()
-        self._state = self.world.read_state()
-        self.log.robustness = self._clip(self.monitor.update(self._positions()))
+        self.world.read_state_into(self.state)
+        self.log.robustness = self._clip(self._update(self.monitor))
         for part in self.conjunct_monitors:
             part.reset()
-            part.update(self._positions())
+            self._update(part)
         self._prev_estimate = 0.0
 
     def reset_info(self) -> dict[str, Any]:
@@ -198,7 +237,7 @@ class TransportCore:
         return limit if rho > limit else (-limit if rho < -limit else rho)
 
     def _positions(self) -> dict[str, tuple[float, float]]:
-        return {name: (s[0], s[1]) for name, s in zip(self.body_names, self._state)}
+        return {name: (s[0], s[1]) for name, s in zip(self.body_names, self.state.tolist())}
 
     def wrenches_from_action(self, action: Any) -> list[tuple[float, float, float]]:
         """Scale a normalised action (n_robots * 3 numbers in [-1, 1]) to body-frame (Fx, Fy, torque).
@@ -226,29 +265,68 @@ class TransportCore:
             wrenches = [tuple(row) for row in noisy.tolist()]
         return wrenches
 
+    def _set_wrenches(self, action: Any) -> list[list[float]]:
+        """Write the action's wrenches (:meth:`wrenches_from_action`) into the world's buffer; return its rows.
+
+        The compiled loop reads float32/float64 arrays of an accepted shape and lists of one (3,) array per
+        robot; anything else, and a non-finite action (for its error), takes the Python path.
+        """
+        if self._set_action is None or self._set_action(action) is not True:
+            wrench = self.world.wrench
+            wrench[...] = self.wrenches_from_action(action)
+            return wrench.tolist()
+        return self._with_thrust_noise(self.world.wrench)
+
+    def _with_thrust_noise(self, wrench: np.ndarray) -> list[list[float]]:
+        """The thrust noise of :meth:`wrenches_from_action` applied to ``wrench`` in place; its rows."""
+        if self.thrust_noise > 0:
+            noisy = wrench * (1.0 + self.thrust_noise * self._rng.standard_normal((self.n_robots, 3)))
+            np.clip(noisy, -self.wrench_limits, self.wrench_limits, out=noisy)
+            wrench[...] = noisy
+        return wrench.tolist()
+
     def step(self, action: Any) -> tuple[float, bool, dict[str, Any]]:
         """Apply an action for one control period; returns (reward, terminated, info)."""
-        check_can_step(self)
-        wrenches = self.wrenches_from_action(action)
-        self.last_wrenches = wrenches
-        events = self.world.step(wrenches)
+        world = self.world
+        if world is None or self.step_count >= self.horizon_steps:
+            check_can_step(self)
+        self._last_wrenches = self._set_wrenches(action)
+        return self._advance(world)
+
+    def step_agents(self, actions: Any, agents: tuple[str, ...], joint_action: Any) -> tuple[float, bool, dict]:
+        """:meth:`step` with the PettingZoo env's actions: a dict from agent (robot i is ``agents[i]``) to its
+        (3,) action. The compiled loop reads a dict of float arrays; anything else takes ``joint_action(actions)``
+        (the env's Python path, with its errors) and :meth:`step`."""
+        world, fast = self.world, self._set_agent_actions
+        if world is None or fast is None or fast(actions, agents, np.ndarray) is not True:
+            return self.step(joint_action(actions))
+        if self.step_count >= self.horizon_steps:
+            check_can_step(self)
+        self._last_wrenches = self._with_thrust_noise(world.wrench)
+        return self._advance(world)
+
+    def _advance(self, world: World) -> tuple[float, bool, dict[str, Any]]:
+        """The rest of a step once the wrenches are set: physics, STL, fuel, reward, info."""
+        wrenches = self._last_wrenches
+        events = world.step()
         self.step_count += 1
-        self._state = self.world.read_state()
-        estimate = self._clip(self.monitor.update(self._positions()))
+        world.read_state_into(self.state)
+        estimate = self._clip(self._update(self.monitor))
         terminated = self.step_count >= self.horizon_steps
         if terminated:
-            events = events + self.world.flush_impacts()
-        fuel = self.dt_s * sum(math.hypot(fx, fy) for fx, fy, _ in wrenches)
+            events = events + world.flush_impacts()
+        hypot = math.hypot
+        fuel = self.dt_s * sum(hypot(w[0], w[1]) for w in wrenches)
         log = self.log
         log.fuel_Ns += fuel
-        log.impacts.extend(events)
+        if events:
+            log.impacts.extend(events)
         log.robustness = estimate
         if self.reward_mode == "dense":
             reward = estimate - self._prev_estimate
             self._prev_estimate = estimate
         elif self.reward_mode == "conjuncts":
-            positions = self._positions()
-            potential = sum(self._clip(part.update(positions)) for part in self.conjunct_monitors) \
+            potential = sum(self._clip(self._update(part)) for part in self.conjunct_monitors) \
                 / len(self.conjunct_monitors)
             reward = potential - self._prev_estimate
             self._prev_estimate = potential
@@ -258,25 +336,37 @@ class TransportCore:
         info = {
             "robustness": estimate,
             "is_success": estimate > 0.0,
-            "impacts": [e.to_dict() for e in events],
+            "impacts": [e.to_dict() for e in events] if events else [],
             "fuel_Ns": log.fuel_Ns,
-            "time_s": self.time_s,
+            "time_s": self.step_count * self.dt_s,
         }
         return float(reward), terminated, info
 
     # ------------------------------------------------------------------------------------- observation
     def observation(self) -> np.ndarray:
         """Central observation: per body (x, y, vx, vy, cos, sin, omega), then the fraction of time left."""
+        if self._observer is not None:
+            return self._observer(time_left(self)).copy()
         return self._observe(range(self.n_bodies))
 
     def agent_observation(self, robot_index: int) -> np.ndarray:
         """A robot's observation: the same layout with its own body first, then the others in order."""
-        order = [robot_index] + [i for i in range(self.n_bodies) if i != robot_index]
-        return self._observe(order)
+        return self.observation()[self._agent_orders[robot_index]]
+
+    def agent_observations(self) -> list[np.ndarray]:
+        """:meth:`agent_observation` of every robot, from one central observation."""
+        central = self.observation()
+        return [central[order] for order in self._agent_orders]
+
+    def agent_observation_dict(self, names: tuple[str, ...]) -> dict[str, np.ndarray]:
+        """``{names[i]: agent_observation(i)}``, each a row (view) of one new array."""
+        if self._observer is not None:
+            return self._observer.agents(time_left(self), np.empty((self.n_robots, self.obs_size), np.float32), names)
+        return dict(zip(names, self.agent_observations()))
 
     def _observe(self, order) -> np.ndarray:
         out = []
-        state = self._state
+        state = self.state.tolist()
         for i in order:
             x, y, vx, vy, th, om = state[i]
             out += (x, y, vx, vy, math.cos(th), math.sin(th), om)

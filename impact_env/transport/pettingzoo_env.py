@@ -14,13 +14,16 @@ from gymnasium import spaces
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
-from impact_env.env_shell import ParallelShell, required
+from impact_env.env_shell import ParallelShell, required, time_left
 from impact_env.errors import ActionError
+from impact_env.transport import native
 from impact_env.transport.actions import numbers_of
 from impact_env.transport.core import ACTION_PER_ROBOT, TransportCore
 from impact_env.transport.gym_env import SCENARIO_HINT
 from impact_env.transport.rendering import Renderer, RenderFrame, frame_of
 from impact_env.transport.scenario import Scenario
+
+_AGENT_SHAPE = (ACTION_PER_ROBOT,)
 
 
 class TransportParallelEnv(ParallelShell):
@@ -102,22 +105,55 @@ class TransportParallelEnv(ParallelShell):
                              name=f"transport_{self.scenario.name}_v0")
         self._set_agents([r.name for r in self.scenario.robots],
                          spaces.Box(-1.0, 1.0, shape=(ACTION_PER_ROBOT,), dtype=np.float32))
-        self._zero_list = [0.0] * ACTION_PER_ROBOT
         self._agent_set = frozenset(self.possible_agents)
+        self._agent_tuple = tuple(self.possible_agents)
+        self._observations_shape = (self.core.n_robots, self.core.obs_size)
+        self._zero_action = np.zeros(ACTION_PER_ROBOT)
 
-    def _joint_action(self, actions: dict[str, Any]) -> np.ndarray:
+    def _joint_action(self, actions: dict[str, Any]) -> list[Any]:
+        """The core's action: one (3,) action per robot in agent order, zeros for a missing agent (the Python
+        path of TransportCore.step_agents, with the errors)."""
         if not isinstance(actions, Mapping):
             raise ActionError(f"actions must be a dict from agent name to action, got {type(actions).__name__}")
         unknown = [a for a in actions if a not in self._agent_set]
         if unknown:
             raise ActionError(f"actions for unknown agents {sorted(map(repr, unknown))}; agents are "
                               f"{self.possible_agents}")
-        joint: list[float] = []
-        for a in self.possible_agents:
-            action = actions.get(a)
-            joint += self._zero_list if action is None else numbers_of(action, ((ACTION_PER_ROBOT,),),
-                                                                        f"actions[{a!r}]", "Fx, Fy, torque")
-        return np.array(joint)
+        joint = [actions.get(a) for a in self.possible_agents]
+        for i, action in enumerate(joint):
+            joint[i] = self._zero_action if action is None else numbers_of(
+                action, (_AGENT_SHAPE,), f"actions[{self.possible_agents[i]!r}]", "Fx, Fy, torque")
+        return joint
+
+    def _observations(self) -> dict[str, np.ndarray]:
+        """Every live agent's observation: the rows of one new array, each a permutation of the central one."""
+        agents = self.agents
+        if len(agents) == len(self._agent_tuple):  # every agent lives (they end together), in the same order
+            return self.core.agent_observation_dict(self._agent_tuple)
+        return {a: obs for a, obs in zip(self.possible_agents, self.core.agent_observations()) if a in agents}
+
+    def step(self, actions: dict[str, Any]):
+        """ParallelShell.step, with the per-agent dicts built in C where it is built (the same dicts)."""
+        core = self.core
+        reward, terminated, info = core.step_agents(actions, self._agent_tuple, self._joint_action)
+        self._cycles += 1
+        truncated = not terminated and self.max_cycles is not None and self._cycles >= self.max_cycles
+        agents = self.agents
+        if core._observer is not None and len(agents) == core.n_robots:  # every agent lives: they end together
+            obs, rewards, terminations, truncations, infos = native.parallel_outputs(
+                core._observer, time_left(core), np.empty(self._observations_shape, np.float32), self._agent_tuple,
+                agents, reward, terminated, truncated, info)
+        else:
+            obs = self._observations()
+            rewards = {a: reward for a in agents}
+            terminations = {a: terminated for a in agents}
+            truncations = {a: truncated for a in agents}
+            infos = {a: dict(info) for a in agents}
+        if terminated or truncated:
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terminations, truncations, infos
 
     def _new_renderer(self) -> Renderer:
         return Renderer(self.scenario, self.render_mode, width_px=self.render_width_px, fps=self.metadata["render_fps"])

@@ -8,8 +8,9 @@ logged as an :class:`ImpactEvent` from first touch to separation, its impulse su
 lasts, and the contacts that end in one substep are closed after it in the scenario's order of the shapes
 (chipmunk's own order depends on where malloc put them: ``docs/background.md#physics``). Optional post-impact
 velocity noise perturbs an object when a robot-object contact ends: the error the impact-robust planner's delta
-bounds. The substep loop calls chipmunk's C functions where pymunk exposes them (its Python properties cost
-more than the physics at this size); both paths give bit-identical trajectories (``tests/test_physics.py``).
+bounds. Three paths drive the substeps, all bit-identical (``tests/test_physics.py``, ``tests/test_native_parity.py``):
+the compiled loop (:mod:`impact_env.transport.native`, one call per control period), chipmunk's C functions
+called from Python where that loop is not built, and pymunk's public API (``fast=False``).
 """
 
 from __future__ import annotations
@@ -19,8 +20,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import pymunk
 
+from impact_env.transport import native
 from impact_env.transport.scenario import Scenario
 
 try:  # the C functions behind pymunk's properties, for the hot loop (see World.step)
@@ -130,13 +133,15 @@ class World:
         scenario: the scenario to build.
         restitution: override of the scenario's restitution (model-mismatch studies); default the scenario's.
         initial_positions_m: optional name -> (x, y) overriding bodies' initial positions.
-        fast: drive pymunk through its C functions in the substep loop (same results, ~3x faster).
+        fast: run the substeps in the compiled loop, or where it is not built through chipmunk's C functions
+            from Python (same results, faster); False: pymunk's public API.
         impact_velocity_noise_mps: when a robot-object contact ends, add a uniform error in [-this, this]
             (m/s) on each axis to the object's velocity, drawn from ``rng`` (required when > 0).
         rng: the random generator of the noise (the environment passes its reset-seeded generator).
 
     Bodies are ordered as ``scenario.bodies`` (robots, then objects). Robot inputs are body-frame forces
-    (N) and torques (N m), held constant over a control period of ``scenario.substeps`` physics steps.
+    (N) and torques (N m), held constant over a control period of ``scenario.substeps`` physics steps: the
+    argument of :meth:`step`, or what the caller wrote into :attr:`wrench` ((n_robots, 3) float64).
     """
 
     def __init__(self, scenario: Scenario, restitution: float | None = None,
@@ -154,7 +159,7 @@ class World:
         self.restitution = scenario.restitution if restitution is None else float(restitution)
         self.dt_s = scenario.physics_dt_s
         self.substeps = scenario.substeps
-        self.n_substeps_done = 0
+        self._n_substeps_done = 0
         self._open: dict[tuple[pymunk.Shape, pymunk.Shape], _Contact] = {}
         self._separated: list[_Contact] = []  # contacts that ended in the current substep, not yet closed
         self._closed: list[ImpactEvent] = []
@@ -196,6 +201,9 @@ class World:
         space.add(*[s for s in self._shape_names if s.body is static])
         self._shape_rank = {s: k for k, s in enumerate(self._shape_names)}  # bodies in scenario order, walls, obstacles
         space.on_collision(None, None, begin=_on_begin, post_solve=_on_post_solve, separate=_on_separate, data=self)
+        self.wrench = np.zeros((len(self.robots), 3))  # body-frame (Fx, Fy, torque) per robot, N and N m
+        # the robots' (Fx, Fy, torque) limits: what the compiled loop's set_action scales a normalised action by
+        self.wrench_limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in scenario.robots], dtype=float)
         self._fast = None
         if _cp is not None and fast:
             try:
@@ -203,11 +211,25 @@ class World:
                 self._all_ptrs = [b._body for b in self.bodies]
             except AttributeError:  # pragma: no cover - pymunk internals moved: use the public API
                 self._fast = None
+        self._loop = None if self._fast is None else native.substep_loop(
+            space, self.bodies, len(self.robots), self.dt_s, self._separated, self.wrench, self.wrench_limits)
 
     def _add_shape(self, shape: pymunk.Shape, name: str, elasticity: float) -> None:
         shape.elasticity = elasticity
         shape.friction = 0.0
         self._shape_names[shape] = name
+
+    @property
+    def n_substeps_done(self) -> int:
+        """Physics substeps taken since the world was built."""
+        return self._n_substeps_done if self._loop is None else self._loop.substeps_done
+
+    @n_substeps_done.setter
+    def n_substeps_done(self, value: int) -> None:
+        if self._loop is None:
+            self._n_substeps_done = value
+        else:
+            self._loop.substeps_done = value
 
     @property
     def time_s(self) -> float:
@@ -241,12 +263,18 @@ class World:
         body.velocity = (v.x + ex, v.y + ey)
         return v_end[0] + ex, v_end[1] + ey
 
-    def step(self, wrenches: Sequence[tuple[float, float, float]]) -> list[ImpactEvent]:
-        """Advance one control period with each robot's body-frame (Fx, Fy, torque) held constant.
+    def step(self, wrenches: Sequence[tuple[float, float, float]] | None = None) -> list[ImpactEvent]:
+        """Advance one control period with each robot's body-frame (Fx, Fy, torque) held constant: ``wrenches``,
+        or (None) the values in :attr:`wrench`.
 
         The wrenches must already respect the thrust limits (the environments clip them). Returns the
         impact events that ended (separated) during this period.
         """
+        if wrenches is not None:
+            self.wrench[...] = wrenches
+        if self._loop is not None:
+            return self._step_compiled()
+        wrenches = [tuple(w) for w in self.wrench.tolist()]
         if self._fast is not None:
             return self._step_fast(wrenches)
         robots = self.robots
@@ -259,6 +287,22 @@ class World:
                 body.torque = tau
             space_step(dt)
             self.n_substeps_done += 1
+            if self._separated:
+                self._close_separated()
+        closed, self._closed = self._closed, []
+        return closed
+
+    def _step_compiled(self) -> list[ImpactEvent]:
+        """The substeps in C (:mod:`impact_env.transport.native`); each contact that ends is closed here, after
+        its substep and before the next, as on the other paths."""
+        loop, space = self._loop, self.space
+        left = self.substeps
+        while left:
+            space._locked = True  # as pymunk's own step(): callbacks may not add or remove shapes
+            try:
+                left -= loop.run(left)
+            finally:
+                space._locked = False
             if self._separated:
                 self._close_separated()
         closed, self._closed = self._closed, []
@@ -294,6 +338,10 @@ class World:
 
     def read_state(self) -> list[tuple[float, float, float, float, float, float]]:
         """Per body (x, y, vx, vy, heading, angular velocity) in SI units, scenario body order."""
+        if self._loop is not None:
+            out = np.empty((len(self.bodies), 6))
+            self._loop.read_state(out)
+            return [tuple(row) for row in out.tolist()]
         if self._fast is not None:
             cp = _cp
             out = []
@@ -306,3 +354,10 @@ class World:
             p, v = b.position, b.velocity
             out.append((p.x, p.y, v.x, v.y, b.angle, b.angular_velocity))
         return out
+
+    def read_state_into(self, out: np.ndarray) -> None:
+        """:meth:`read_state` written into ``out``, a C-contiguous (n_bodies, 6) float64 array."""
+        if self._loop is not None:
+            self._loop.read_state(out)
+        else:
+            out[...] = self.read_state()

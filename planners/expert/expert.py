@@ -171,7 +171,9 @@ class Expert:
         self.book = ImpactBook(plan.impacts, tolerance_s=0.5 * self.grid_dt)
         self.identifier = ImpactIdentifier(sc.restitution, {b.name: b.mass_kg for b in sc.bodies},
                                            frozenset(self._robot_names), frozenset(self._object_names),
-                                           cfg.identification or IdentificationConfig())
+                                           cfg.identification or IdentificationConfig(),
+                                           {r.name: float(np.hypot(*r.thrust_limit_N)) / r.mass_kg
+                                            for r in self.robots})
         strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
         if plan.planner == "ir" and isinstance(strategy, PlanContact):
             from planners.online.contingency import CopyContact
@@ -322,7 +324,7 @@ class Expert:
                     if gap < 2 * reach + robot.radius_m + other.radius_m + cfg.robot_margin_m:
                         avoid.append(robot_keep_off(robot, other, centers, cfg.robot_margin_m))
             wall = boundary_keep_off(self.scenario, robot, state[:2], n + 1, reach, cfg.wall_margin_m)
-            if wall is not None:
+            if wall is not None and not self._contact_beyond(wall, name, ref):
                 avoid.append(wall)
         avoid = [a for a in avoid if a is not None]
         result = self.mpcs[name].solve(state, ref.reference, impact=ref.impact_spec, avoid=avoid or None)
@@ -331,6 +333,18 @@ class Expert:
         if not result.success:
             self.stats.mpc_failures += 1
         return np.asarray(result.wrench, float) / self.limits[index]
+
+    def _contact_beyond(self, wall, name: str, ref) -> bool:
+        """True if the robot approaches a contact that ``wall`` (a keep-off half-plane) would keep it from: an
+        impact-robust plan's copy for an object state near a wall can put the disc's contact within its
+        radius and margin of the wall (the planner's copies are points). The robot then approaches without the
+        wall keep-off and may touch the wall; held off it, it meets the object early and from another side
+        (``docs/expert_design.md#flying-an-impact-robust-plan``)."""
+        current = self.selector.replanned.get(name)
+        if ref.approaching is None or current is None or current.impact is not ref.approaching:
+            return False
+        contact = current.pre.control_points[-1]
+        return bool(np.asarray(wall.normals, float) @ contact < float(wall.offsets) - 1e-9)
 
     def _planned_path(self, name: str):
         """Callable times -> (N, 2): robot ``name``'s planned centres, with its replanned segments."""

@@ -30,7 +30,8 @@ from planners.offline.solvers import SOLVERS
 from planners.offline.solvers.base import SolverOptions
 from planners.plan import Plan
 
-__all__ = ["DEFAULT_COPY_INTERVALS", "DEFAULT_FINAL_BOX", "IRPlannerConfig", "PlannerConfig", "SolverOptions"]
+__all__ = ["DEFAULT_COPY_INTERVALS", "DEFAULT_FINAL_BOX", "HandoverConfig", "IRPlannerConfig", "PlannerConfig",
+           "SolverOptions"]
 
 DEFAULT_FINAL_BOX = (0.5, 0.05)  # position half-width (m), velocity half-width (m/s): the authors' default
 DEFAULT_COPY_INTERVALS = 2
@@ -39,6 +40,29 @@ _SOLVER_KEYWORDS = ("time_limit_s", "node_limit", "mip_gap", "threads", "verbose
 
 def _planner_budget() -> SolverOptions:
     return SolverOptions(time_limit_s=60.0)
+
+
+@dataclass(frozen=True)
+class HandoverConfig:
+    """How the offline planners make sure that a robot hitting one object twice in a row from opposite sides
+    has time to get round it in between (:mod:`planners.plan.handover`; why the numbers:
+    ``docs/planner_design.md#hand-overs``). A plan with too little time is repaired: the planner re-solves
+    without that hand-over (the same robot and object at the same two knots, nothing hitting either in
+    between), up to ``repairs`` times, and records what it cut in ``plan.stats["handovers_cut"]``."""
+
+    margin: float = 0.5
+    """The time between the two impacts must be at least (1 + margin) times the least time getting round takes
+    at the robot's thrust limit (a fraction): that least time is a lower bound, and the online layer does not
+    fly a time-optimal way round."""
+    repairs: int = 20
+    """Re-solves with the unflyable hand-overs cut out before the planner gives up with
+    ``UnflyableHandoverError``; 0 refuses such a plan at once. Each cut excludes one pair of knots, so a task
+    that a robot can only do with a hand-over may take several (the one-robot push and stop of
+    ``docs/planner_design.md#hand-overs`` takes 14)."""
+
+    def __post_init__(self) -> None:
+        check_number(self, "margin", PlannerError, low=0)
+        check_integer(self, "repairs", PlannerError, low=0)
 
 
 @dataclass(frozen=True)
@@ -84,6 +108,9 @@ class PlannerConfig:
     """On an infeasible task, name the conflicting constraint groups (re-solving once per group)."""
     bound_propagation: bool = True
     """Give every robustness variable its exact upper bound (off only to measure what it buys)."""
+    handover: HandoverConfig | None = field(default_factory=HandoverConfig)
+    """Refuse or repair a plan in which a robot has too little time to get round an object between two of its
+    impacts (:class:`HandoverConfig`); None: not checked."""
     _: KW_ONLY
     time_limit_s: InitVar[Any] = NOT_GIVEN
     """Deprecated: ``solver_options.time_limit_s``."""
@@ -115,6 +142,7 @@ class PlannerConfig:
             check_flag(self, name, PlannerError)
         check_choice(self, "solver", PlannerError, SOLVERS)
         check_instance(self, "warm_start", PlannerError, Plan, what="a Plan", none="a cold start")
+        check_instance(self, "handover", PlannerError, HandoverConfig, what="a HandoverConfig", none="not checked")
 
 
 @dataclass(frozen=True)

@@ -135,7 +135,7 @@ def staged_model(built: IRModel) -> StagedModel:
     return StagedModel(built.model, built.delta, "delta", sum(built.impacts.z.values(), LinExpr()),
                        built.acceleration_cost, _acceleration_scale(built.robots),
                        [r.acceleration_points(k) for r in built.robots for k in range(built.grid.intervals)],
-                       refine_acceleration=False)
+                       refine_acceleration=False, impacts=built.impacts, grid_dt_s=built.grid.dt_s)
 
 
 def plan_impact_robust(scenario: Scenario, config: IRPlannerConfig | None = None) -> Plan:

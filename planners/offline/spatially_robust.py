@@ -100,7 +100,8 @@ def staged_model(built: BuiltModel) -> StagedModel:
     """What the lexicographic stages need from the spatially robust model."""
     return StagedModel(built.model, built.rho, "robustness", sum(built.impacts.z.values(), LinExpr()),
                        built.acceleration_cost, _acceleration_scale(built.robots),
-                       [r.acceleration_points(k) for r in built.robots for k in range(built.grid.intervals)])
+                       [r.acceleration_points(k) for r in built.robots for k in range(built.grid.intervals)],
+                       impacts=built.impacts, grid_dt_s=built.grid.dt_s)
 
 
 def plan_spatially_robust(scenario: Scenario, config: PlannerConfig | None = None) -> Plan:

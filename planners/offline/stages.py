@@ -12,7 +12,9 @@ velocity error) and then, keeping it, prefer plans with fewer impacts and less a
    accelerations), which also removes the integrality tolerance's leak through big-M rows.
 
 A planner hands its model over as a :class:`StagedModel`; :func:`solve_to_plan` runs the stages and ends the
-planner the same way for both (read the plan back, check it, report a time limit).
+planner the same way for both (read the plan back, check it and its hand-overs, report a time limit). A plan
+whose robot has too little time to get round an object between two impacts (:mod:`planners.plan.handover`)
+is re-solved with that hand-over cut out (``config.handover``).
 """
 
 from __future__ import annotations
@@ -25,15 +27,20 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from planners.errors import InfeasiblePlanError, PlannerError, PlanTimeoutError
+from planners.errors import InfeasiblePlanError, PlannerError, PlanTimeoutError, UnflyableHandoverError
 from planners.offline.config import PlannerConfig
+from planners.offline.milp.impacts import ImpactVars
 from planners.offline.milp.model import LinExpr, Model
 from planners.offline.solvers import solve
 from planners.offline.solvers.base import SolveResult, SolverOptions, Status
+from planners.plan.handover import handovers
 
 if TYPE_CHECKING:
     from impact_env.transport.scenario import Scenario
     from planners.plan import Plan
+    from planners.plan.handover import Handover
+
+HANDOVER_GROUP = "hand-over flyability"  # the constraint group of the cuts (named by an infeasibility diagnosis)
 
 DIAGNOSE_NODES = 100  # branch-and-bound nodes per check of the infeasibility diagnosis
 DIAGNOSE_SAFETY_S = 20.0  # and a time limit per check that only a pathological model reaches
@@ -58,6 +65,8 @@ class StagedModel:
     acceleration_points: list[list[tuple[LinExpr, LinExpr]]]
     refine_heuristics: bool = True
     refine_acceleration: bool = True
+    impacts: ImpactVars | None = None
+    grid_dt_s: float | None = None
 
 
 @dataclass
@@ -114,22 +123,74 @@ def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario
                   warm_start: np.ndarray | None = None) -> Plan:
     """Run the stages (:func:`solve_stages`, reporting to ``config.solver_options.progress``) and end a planner
     with their answer: ``extract(x, solver, solve_time_s, mip_gap)`` reads the plan back, its stages'
-    statistics join its stats, and it is checked against the scenario (:meth:`Plan.check`, 1e-6).
+    statistics join its stats, and it is checked against the scenario (:meth:`Plan.check`, 1e-6) and for its
+    hand-overs (``config.handover``): one with too little time is cut out of the model (:func:`cut_handover`)
+    and the stages run again, up to ``config.handover.repairs`` times. ``plan.stats["handovers"]`` lists the
+    plan's hand-overs and ``plan.stats["handovers_cut"]`` what was cut (each robot, object, times, least time
+    needed and time there is); the repaired plan is optimal among the plans without those hand-overs.
 
-    Raises what :func:`solve_stages` raises, and PlanTimeoutError when the time limit cut stage 1 after it
-    found a plan: ``.plan`` is that plan, ``.mip_gap`` its gap, and the message ends with ``best(plan)``
-    (e.g. ``"best robustness 0.1234 m"``).
+    Raises what :func:`solve_stages` raises; UnflyableHandoverError when a hand-over is still too short after
+    the repairs, or no plan without the cut ones satisfies the task; and PlanTimeoutError when the time limit
+    cut stage 1 after it found a plan: ``.plan`` is that plan, ``.mip_gap`` its gap, and the message ends with
+    ``best(plan)`` (e.g. ``"best robustness 0.1234 m"``).
     """
-    solution = solve_stages(staged, config, scenario.name, warm_start=warm_start,
-                            progress=config.solver_options.progress)
-    result = solution.result
-    plan = extract(solution.x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
-    plan.stats.update(solution.stats)
-    plan.check(scenario, tol=1e-6)
+    handover = config.handover if staged.impacts is not None and staged.grid_dt_s is not None else None
+    cut: list[Handover] = []
+    rounds = 0
+    while True:
+        try:
+            solution = solve_stages(staged, config, scenario.name, warm_start=warm_start,
+                                    progress=config.solver_options.progress)
+        except InfeasiblePlanError as exc:
+            if not cut:
+                raise
+            raise UnflyableHandoverError(
+                f"no plan of {scenario.name!r} satisfies the task without a hand-over its robot cannot fly (cut: "
+                + "; ".join(h.describe(handover.margin) for h in cut) + ")", cut,
+                groups=list(dict.fromkeys([*exc.groups, HANDOVER_GROUP]))) from exc
+        result = solution.result
+        plan = extract(solution.x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
+        plan.stats.update(solution.stats)
+        plan.check(scenario, tol=1e-6)
+        if handover is None:
+            break
+        found = handovers(plan, scenario)
+        bad = [h for h in found if not h.flyable(handover.margin)]
+        if not bad:
+            if found:
+                plan.stats["handovers"] = [h.to_dict() for h in found]
+            if cut:
+                plan.stats["handovers_cut"] = [h.to_dict() for h in cut]
+            break
+        if rounds >= handover.repairs:
+            what = "refuses it" if handover.repairs == 0 else f"could not repair it in {handover.repairs} re-solves"
+            raise UnflyableHandoverError(
+                f"the plan of {scenario.name!r} has a hand-over its robot cannot fly: "
+                + "; ".join(h.describe(handover.margin) for h in bad) + f" (HandoverConfig(repairs="
+                f"{handover.repairs}) {what})", bad, plan=plan)
+        for h in bad:
+            cut_handover(staged, h)
+        cut += bad
+        rounds += 1
+        warm_start = None  # the last solution has the hand-over that is now cut
     if result.status == Status.TIME_LIMIT:
         raise PlanTimeoutError(f"time limit of {config.solver_options.time_limit_s} s reached with gap "
                                f"{result.mip_gap:.3g}; {best(plan)}", plan=plan, mip_gap=result.mip_gap)
     return plan
+
+
+def cut_handover(staged: StagedModel, handover: Handover) -> None:
+    """Exclude ``handover`` from ``staged.model``: its robot may not hit its object at both of its knots unless
+    the robot or the object is hit in between (a row of group :data:`HANDOVER_GROUP`). The row cuts every plan
+    with that pair of impacts, also one whose velocity changes make no side switch: a flyability test inside
+    the MILP would need the product of the two changes."""
+    z, dt = staged.impacts.z, staged.grid_dt_s
+    k1, k2 = round(handover.t1_s / dt), round(handover.t2_s / dt)
+    row = z[(handover.robot, handover.object, k1)] + z[(handover.robot, handover.object, k2)]
+    for (robot, obj, k), hit in z.items():
+        if k1 < k < k2 and (robot == handover.robot or obj == handover.object):
+            row = row - hit
+    staged.model.add(row <= 1, group=HANDOVER_GROUP)
 
 
 def copy_model(m: Model, name: str, integer: bool = True) -> Model:

@@ -7,8 +7,10 @@ robot-object impact and every ``check_period_s``, (1) the rest of the episode is
 states as the local layer will fly it, without the impacts the robot provably cannot reach
 (:mod:`planners.online.reachability`); (2) when the task's predicted robustness fails the test of
 :class:`MissionConfig`, (3) the offline planner re-plans the rest from the current state (a derived scenario
-with the task progressed to now) and the new plan is spliced after the executed part, unless it is no better
-or has a side switch the robot has no time for (:mod:`planners.online.side_switch`).
+with the task progressed to now; an impact-robust plan with the impact-robust planner) and the new plan is
+spliced after the executed part, unless it is no better than the prediction or the robots cannot fly it with
+a margin (next contacts, side switches: :mod:`planners.online.side_switch`). A stopped object drifting out
+of a held goal is trimmed by a smaller re-plan (:mod:`planners.online.station_keeping`).
 
 The compute budget is a node count and the solver's threads are pinned (``MissionConfig.solver_options``), so
 the same observations give the same re-plan on any machine; a re-plan cut by the time limit is discarded.
@@ -36,14 +38,21 @@ from impact_env.config_checks import (
 )
 from impact_env.stl import progress, robustness, without_constants
 from impact_env.transport.scenario import Body, Scenario
-from planners import bezier
-from planners.errors import PlannerError
+from planners.errors import PlannerError, PlanTimeoutError
 from planners.offline.solvers.base import SolverOptions
 from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
-from planners.online.reachability import POSITION_TOLERANCE_M, VELOCITY_TOLERANCE_MPS, Reachability, contact_reachable
+from planners.online.reachability import (
+    POSITION_TOLERANCE_M,
+    VELOCITY_TOLERANCE_MPS,
+    Reachability,
+    contact_reachable,
+    next_contacts,
+)
 from planners.online.sampling import PlanSampler
 from planners.online.side_switch import SideSwitch, side_switches, unflyable_side_switches
-from planners.plan import BodyPlan, Plan, Segment
+from planners.online.splicing import initial_state, resample_plan, splice, without_end_states
+from planners.online.station_keeping import StationKeeper, StationKeepingConfig, held_goals
+from planners.plan import Plan
 
 
 def _replan_budget() -> SolverOptions:
@@ -87,6 +96,17 @@ class MissionConfig:
     :func:`planners.online.reachability.contact_reachable`; larger is more conservative)."""
     reach_tolerance_mps: float = VELOCITY_TOLERANCE_MPS
     """How close to the contact's velocity (m/s, per axis) counts as making it."""
+    flyability_margin: float = 0.8
+    """A re-plan is accepted only if every robot can fly its next segment with this share (in (0, 1]) of its
+    thrust, within its speed bound, and every side switch with this share of the time between its impacts
+    (:func:`planners.online.reachability.next_contacts`, :func:`unflyable_side_switches`)."""
+    station_keeping: StationKeepingConfig | None = field(default_factory=StationKeepingConfig)
+    """Trim a stopped object's drift during a held goal with a small re-plan of the nearest free robot
+    (:mod:`planners.online.station_keeping`); None: off."""
+    impact_robust_replans: bool = True
+    """Re-plan an impact-robust plan with the impact-robust planner (under the same node budget), falling back
+    to the spatially robust one, with the reason in the record, when that finds no delta > 0; False: always
+    the spatially robust planner."""
     _: KW_ONLY
     node_limit: InitVar[Any] = NOT_GIVEN
     """Deprecated: ``solver_options.node_limit``."""
@@ -115,6 +135,10 @@ class MissionConfig:
             check_flag(self, name, PlannerError)
         for name in ("reach_tolerance_m", "reach_tolerance_mps"):
             check_number(self, name, PlannerError, low=0)
+        check_number(self, "flyability_margin", PlannerError, low=0, low_open=True, high=1)
+        check_instance(self, "station_keeping", PlannerError, StationKeepingConfig, what="a StationKeepingConfig",
+                       none="off")
+        check_flag(self, "impact_robust_replans", PlannerError)
 
 
 @dataclass
@@ -131,86 +155,10 @@ class ReplanRecord:
     impacts_added: int = 0
     task: str = ""
     unreachable: list[str] = dataclasses.field(default_factory=list)  # impacts the prediction dropped
-
-
-# ------------------------------------------------------------------------------------------- plans
-def resample_plan(plan: Plan, t0: float, tf: float, intervals: int, degree: int) -> Plan:
-    """The plan's motion on [t0, tf] expressed on a new grid of ``intervals`` equal intervals (time 0 = t0):
-    robots as degree-``degree`` Bezier segments (least-squares fit of the old curve), objects as straight
-    segments between their old positions at the new knots, impacts moved to the nearest new knot. A warm
-    start for the planner, not a flyable plan."""
-    sampler = PlanSampler(plan)
-    knots = np.linspace(t0, tf, intervals + 1)
-    m = 3 * (degree + 1)
-    phases = np.linspace(0.0, 1.0, m)
-    fit = np.linalg.pinv(bezier.bernstein(degree, phases))  # (d+1, m)
-    bodies = {}
-    for name, body in plan.bodies.items():
-        segments = []
-        for a, b in zip(knots[:-1], knots[1:]):
-            if body.kind == "robot":
-                pts = sampler.state(name, a + phases * (b - a))[:, :2]
-                cp = fit @ pts
-            else:
-                cp = sampler.state(name, np.array([a, b]))[:, :2]
-            segments.append(Segment(a - t0, b - t0, cp))
-        bodies[name] = BodyPlan(name, body.kind, segments)
-    dt = (tf - t0) / intervals
-    impacts = [dataclasses.replace(i, time_s=round((i.time_s - t0) / dt) * dt) for i in plan.impacts
-               if t0 < i.time_s <= tf and 1 <= round((i.time_s - t0) / dt) <= intervals]
-    return Plan(plan.scenario, plan.planner, plan.robustness, bodies, impacts)
-
-
-def _clip_segment(seg: Segment, t: float) -> Segment | None:
-    """The part of ``seg`` before time ``t`` (None if none)."""
-    if t <= seg.t0_s + 1e-12:
-        return None
-    if t >= seg.t1_s:
-        return seg
-    left, _ = bezier.split(seg.control_points, (t - seg.t0_s) / seg.duration_s)
-    return Segment(seg.t0_s, t, left)
-
-
-def splice(executed: Plan, remainder: Plan, t: float) -> tuple[Plan, set[int]]:
-    """``executed`` on [0, t] followed by ``remainder`` (planned from time 0 = t) shifted to absolute time.
-
-    Returns the spliced plan and the indices of its impacts that lie in the past (they count as done: the
-    ones that happened were observed, the ones that did not will not be flown any more)."""
-    bodies = {}
-    for name, body in executed.bodies.items():
-        past = [s for s in (_clip_segment(seg, t) for seg in body.segments) if s is not None]
-        future = [Segment(s.t0_s + t, s.t1_s + t, np.asarray(s.control_points, float).copy())
-                  for s in remainder.bodies[name].segments]
-        bodies[name] = BodyPlan(name, body.kind, past + future)
-    old = [i for i in executed.impacts if i.time_s <= t + 1e-9]
-    new = [dataclasses.replace(i, time_s=i.time_s + t) for i in remainder.impacts]
-    spliced = Plan(executed.scenario, remainder.planner, remainder.robustness, bodies, old + new,
-                   remainder.solver, remainder.solve_time_s, remainder.build_time_s, remainder.mip_gap,
-                   {**remainder.stats, "spliced_at_s": t})
-    return spliced, set(range(len(old)))
-
-
-def _initial_state(body: Body, position: np.ndarray, velocity: np.ndarray, scenario: Scenario) -> Body:
-    """The body with the observed state as its initial state, nudged inside the planner's allowed box and
-    with a velocity bound no smaller than its observed speed (else the derived problem starts infeasible)."""
-    xmin, xmax, ymin, ymax = scenario.world_box
-    x0, x1, y0, y1 = xmin + body.radius_m, xmax - body.radius_m, ymin + body.radius_m, ymax - body.radius_m
-    eps = 1e-6  # the planner's box for a centre (the world shrunk by the radius), strictly inside
-    p = (float(np.clip(position[0], x0 + eps, x1 - eps)), float(np.clip(position[1], y0 + eps, y1 - eps)))
-    v = (float(velocity[0]), float(velocity[1]))
-    bound = body.velocity_bound_mps
-    if bound is not None:
-        bound = (max(bound[0], abs(v[0]) * 1.01), max(bound[1], abs(v[1]) * 1.01))
-    return dataclasses.replace(body, position_m=p, velocity_mps=v, velocity_bound_mps=bound)
-
-
-def _without_end_states(scenario: Scenario) -> Scenario:
-    """The scenario with no final position or velocity for any body (only the task is left)."""
-    def free(body: Body) -> Body:
-        return dataclasses.replace(body, final_position_m=None, final_velocity_mps=None)
-
-    return dataclasses.replace(scenario, robots=tuple(free(b) for b in scenario.robots),
-                               objects=tuple(free(b) for b in scenario.objects))
+    predicted_without_drops_m: float | None = None  # the prediction with them kept (when some were dropped)
+    planner: str = ""  # the accepted remainder's planner ("sr" or "ir")
+    impact_robust: str = ""  # why a re-plan of an impact-robust plan is not impact-robust
+    rejected: list[str] = dataclasses.field(default_factory=list)  # re-plans found and not flown, and why
 
 
 # ---------------------------------------------------------------------------------------- planner
@@ -245,6 +193,10 @@ class MissionPlanner:
         self.degree = int(plan.stats.get("robot_degree") or
                           len(plan.bodies[scenario.robots[0].name].segments[0].control_points) - 1)
         self.grid_dt = scenario.tf_s / self.intervals
+        keeping = self.config.station_keeping
+        self.station = (StationKeeper(scenario, keeping, self._solve, self.grid_dt)
+                        if keeping is not None and held_goals(self.formula, {o.name for o in scenario.objects})
+                        else None)
         self.reset(plan)
 
     def reset(self, plan: Plan) -> None:
@@ -258,10 +210,12 @@ class MissionPlanner:
         self._last_check = -math.inf
         self._sampler: PlanSampler | None = None
         self._sampler_plan: Plan | None = None
+        if self.station is not None:
+            self.station.reset()
 
     # ------------------------------------------------------------------------------------ monitor
     def reachability(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan, done: set[int],
-                     model) -> list[Reachability]:
+                     model, thrust_scale: float = 1.0) -> list[Reachability]:
         """The verdict on each object's next pending impact (time > t) that can be tested (step 1): its
         robot has no earlier impact pending and neither has a late one still approached (within
         ``late_grace_s`` of its time). ``model(robot, object)``: the pair's (restitution, (m_robot, m_object)),
@@ -280,7 +234,7 @@ class MissionPlanner:
             out.append(contact_reachable(t, first, plan, self.scenario.body(first.robot), states[index[first.robot]],
                                          body, states[index[body.name]], restitution, masses,
                                          self.aim_final_position, self.config.reach_tolerance_m,
-                                         self.config.reach_tolerance_mps, self.late_grace_s))
+                                         self.config.reach_tolerance_mps, self.late_grace_s, thrust_scale))
         return out
 
     def predicted_trace(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan,
@@ -342,19 +296,34 @@ class MissionPlanner:
         if not impact_observed and t - self._last_check < cfg.check_period_s - 1e-9:
             return None
         self._last_check = t
-        if len(self.records) >= cfg.max_replans or self.scenario.tf_s - t < cfg.min_remaining_s:
+        if self.scenario.tf_s - t < cfg.min_remaining_s:
             return None
         pending = [i for k, i in enumerate(plan.impacts) if k not in book.done]
         if any(abs(i.time_s - t) < cfg.quiet_s for i in pending):
             return None
+        if self.station is not None:
+            trimmed = self.station.step(t, states, index, plan, book.done, self.trace, self.names,
+                                        lambda new, at, robots: self.unflyable(new, at, states, index, model,
+                                                                               robots))
+            if trimmed is not None:
+                return trimmed
+        if len(self.records) >= cfg.max_replans:
+            return None
         self.checks += 1
         predicted = self.predicted_robustness(t, states, index, plan, book.done, model)
+        optimistic = None
         if any(not v.reachable for v in self.verdicts):
             self.unreachable += 1
+            lost = [id(v.impact) for v in self.verdicts if not v.reachable]
+            beyond = self.reachability(t, states, index, plan, book.done, model, 1.0 / cfg.flyability_margin)
+            if any(id(v.impact) in lost and v.reachable for v in beyond):  # not decisively lost: a re-plan must
+                verdicts = self.verdicts  # also beat the prediction that keeps the dropped impacts
+                optimistic = self.predicted_robustness(t, states, index, plan, book.done)
+                self.verdicts = verdicts
         threshold = max(cfg.min_robustness_m, cfg.robustness_fraction * self.plan_robustness)
-        if predicted >= threshold:
-            return None
-        return self._replan(t, states, index, plan, predicted, threshold)
+        if predicted >= threshold or (optimistic is not None and optimistic >= threshold):
+            return None  # (an impact dropped without being decisively lost does not trigger a re-plan)
+        return self._replan(t, states, index, plan, predicted, threshold, optimistic, model)
 
     # ------------------------------------------------------------------------------------ re-plan
     def derived_scenario(self, t: float, states: np.ndarray, index: dict[str, int]) -> tuple[Scenario, int] | None:
@@ -371,7 +340,7 @@ class MissionPlanner:
 
         def moved(body: Body) -> Body:
             s = states[index[body.name]]
-            return _initial_state(body, s[:2], s[3:5], sc)
+            return initial_state(body, s[:2], s[3:5], sc)
 
         derived = dataclasses.replace(sc, tf_s=remaining, task=str(task), robots=tuple(moved(b) for b in sc.robots),
                                       objects=tuple(moved(b) for b in sc.objects), planner_intervals=intervals,
@@ -379,11 +348,14 @@ class MissionPlanner:
         return derived, intervals
 
     def _replan(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan, predicted: float,
-                threshold: float) -> tuple[Plan, set[int]] | None:
-        from planners.errors import InfeasiblePlanError, PlanTimeoutError
-
+                threshold: float, optimistic: float | None = None, model=None) -> tuple[Plan, set[int]] | None:
+        """Re-plan the rest (step 3): the derived scenario, then, if that is infeasible or its plan cannot be
+        flown, the derived scenario without end states. The first plan that beats the prediction (and the
+        prediction with the dropped impacts kept, ``optimistic``) and can be flown (:meth:`unflyable`) is
+        spliced in; else the current plan is kept."""
         record = ReplanRecord(t, predicted, threshold, "kept",
-                              unreachable=[v.describe() for v in self.verdicts if not v.reachable])
+                              unreachable=[v.describe() for v in self.verdicts if not v.reachable],
+                              predicted_without_drops_m=optimistic)
         self.records.append(record)
         built = self.derived_scenario(t, states, index)
         if built is None:
@@ -391,58 +363,141 @@ class MissionPlanner:
             return None
         derived, intervals = built
         record.intervals, record.task = intervals, derived.task
+        bar = predicted if optimistic is None else max(predicted, optimistic)
+        start = time.perf_counter()
+        outcome = "kept: no plan"
+        for label, scenario in (("", derived), (" (end states relaxed)", None)):
+            if scenario is None:  # the task outranks the end states: late in the mission, going home (or the
+                scenario = without_end_states(derived)  # object's rest at tf) can be what stands in the way
+            solved = self._solve(scenario, t, plan, intervals, record)
+            record.solve_s = time.perf_counter() - start
+            if isinstance(solved, str):
+                if solved.startswith("kept: time limit"):
+                    record.status = solved
+                    return None
+                outcome = solved
+                if solved == "kept: InfeasiblePlanError":
+                    continue
+                break
+            remainder = solved
+            if remainder.robustness <= bar:
+                record.new_robustness = remainder.robustness
+                outcome = ("kept: no better than the current plan" if optimistic is None or remainder.robustness
+                           <= predicted else "kept: no better than the current plan with its dropped impacts")
+                break
+            spliced, done = splice(plan, remainder, t)
+            reasons = self.unflyable(spliced, t, states, index, model)
+            if reasons:
+                record.rejected.append(f"{remainder.robustness:+.3f} m{label}: " + "; ".join(reasons))
+                record.new_robustness = remainder.robustness
+                outcome = "kept: " + ("side switch" if all(r.startswith("side switch") for r in reasons)
+                                      else "not flyable")
+                if any(r.startswith("side switch") for r in reasons):
+                    outcome = "kept: side switch (" + "; ".join(r[len("side switch "):] for r in reasons
+                                                                if r.startswith("side switch")) + ")"
+                continue
+            record.status = "accepted" + label
+            record.new_robustness = remainder.robustness
+            record.planner = remainder.planner
+            record.impacts_added = len(remainder.impacts) - sum(1 for i in plan.impacts if i.time_s > t)
+            self.plan_robustness = remainder.robustness
+            return spliced, done
+        record.status = outcome
+        return None
+
+    def _solve(self, scenario: Scenario, t: float, plan: Plan, intervals: int, record: ReplanRecord) -> Plan | str:
+        """The remainder's plan, or the reason there is none (``"kept: ..."``). An impact-robust plan is
+        re-planned impact-robust first (``impact_robust_replans``); when that finds no delta > 0 within the
+        budget, the spatially robust planner, with the reason in ``record.impact_robust``."""
         cfg = self.config
-        warm = resample_plan(plan, t, self.scenario.tf_s, intervals, self.degree)
         budget = cfg.solver_options
+        warm = resample_plan(plan, t, self.scenario.tf_s, intervals, self.degree)
         config = dataclasses.replace(self.planner_config, intervals=intervals, robot_degree=self.degree,
                                      solver_options=budget, refine_nodes=cfg.refine_nodes,
                                      refine_time_s=budget.time_limit_s, warm_start=warm,
                                      diagnose_infeasibility=False)
-        start = time.perf_counter()
-        try:
-            try:
-                remainder = plan_spatially_robust(derived, config)
-            except InfeasiblePlanError:
-                # the task outranks the end states: late in the mission, going home (or the object's rest at
-                # tf) can be what makes the rest infeasible; try once more without them
-                record.status = "relaxed end states"
-                remainder = plan_spatially_robust(_without_end_states(derived), config)
-        except PlanTimeoutError:
-            record.solve_s = time.perf_counter() - start
-            if record.solve_s >= cfg.solver_options.time_limit_s * 0.99:
+        started = time.perf_counter()
+        if plan.planner == "ir" and cfg.impact_robust_replans:
+            why = self._solve_impact_robust(scenario, config)
+            if isinstance(why, Plan):
+                return why
+            record.impact_robust = why
+            if why.startswith("time limit"):
                 self.timeouts += 1
-                record.status = "kept: time limit (safety net)"
-            else:
-                record.status = "kept: no plan within the node budget"
-            return None
+                return "kept: time limit (safety net)"
+        try:
+            remainder = plan_spatially_robust(scenario, config)
+        except PlanTimeoutError:
+            if time.perf_counter() - started >= budget.time_limit_s * 0.99:
+                self.timeouts += 1
+                return "kept: time limit (safety net)"
+            return "kept: no plan within the node budget"
         except PlannerError as exc:
-            record.solve_s = time.perf_counter() - start
-            record.status = f"kept: {type(exc).__name__}"
-            return None
-        record.solve_s = time.perf_counter() - start
+            return f"kept: {type(exc).__name__}"
         if remainder.stats.get("refine_status") == "time_limit":
             self.timeouts += 1
-            record.status = "kept: time limit (safety net)"
-            return None
-        record.new_robustness = remainder.robustness
-        if remainder.robustness <= predicted:
-            record.status = "kept: no better than the current plan"
-            return None
-        spliced, done = splice(plan, remainder, t)
-        switches = [] if cfg.allow_side_switches else unflyable_side_switches(spliced, self.scenario, t)
-        if switches:
-            record.status = "kept: side switch (" + "; ".join(
-                f"{sw.robot} round {sw.object} between {sw.t1_s:.1f} and {sw.t2_s:.1f} s" for sw in switches) + ")"
-            return None
-        record.status = "accepted" + (" (end states relaxed)" if record.status == "relaxed end states" else "")
-        record.impacts_added = len(remainder.impacts) - sum(1 for i in plan.impacts if i.time_s > t)
-        self.plan_robustness = remainder.robustness
-        return spliced, done
+            return "kept: time limit (safety net)"
+        return remainder
+
+    def _solve_impact_robust(self, scenario: Scenario, config: PlannerConfig) -> Plan | str:
+        """The impact-robust remainder (delta > 0), or why there is none."""
+        from planners.offline.config import IRPlannerConfig
+        from planners.offline.impact_robust import plan_impact_robust
+
+        ir = IRPlannerConfig(intervals=config.intervals, robot_degree=config.robot_degree,
+                             thrust_fraction=config.thrust_fraction, solver=config.solver,
+                             solver_options=config.solver_options, refine_nodes=config.refine_nodes,
+                             refine_time_s=config.refine_time_s, diagnose_infeasibility=False)
+        started = time.perf_counter()
+        try:
+            remainder = plan_impact_robust(scenario, ir)
+        except PlanTimeoutError:
+            if time.perf_counter() - started >= config.solver_options.time_limit_s * 0.99:
+                return "time limit (safety net) of the impact-robust planner"
+            return "the impact-robust planner found no plan within the node budget"
+        except PlannerError as exc:
+            return f"the impact-robust planner: {type(exc).__name__}: {exc}".split("\n")[0]
+        if remainder.stats.get("refine_status") == "time_limit":
+            return "time limit (safety net) of the impact-robust planner"
+        if not (remainder.delta_mps or 0.0) > 0.0:
+            return f"the impact-robust planner found delta {remainder.delta_mps} m/s"
+        return remainder
+
+    def unflyable(self, plan: Plan, t: float, states: np.ndarray, index: dict[str, int], model,
+                  robots: set[str] | None = None) -> list[str]:
+        """Why the robots (or only ``robots``) cannot fly ``plan`` from the observed states at ``t`` (empty: they
+        can): a robot whose next contact is out of reach with ``flyability_margin`` of its thrust within its
+        speed bound, a side switch without the time or the thrust (unless ``allow_side_switches``)."""
+        cfg = self.config
+        sc = self.scenario
+        by_name = {name: states[index[name]] for name in self.names}
+        if model is None:
+            def model(robot: str, obj: str):
+                return sc.restitution, (sc.body(robot).mass_kg, sc.body(obj).mass_kg)
+        reasons = []
+        if cfg.allow_side_switches is False:
+            for sw in unflyable_side_switches(plan, sc, t, cfg.flyability_margin, by_name, model,
+                                              (cfg.reach_tolerance_m, cfg.reach_tolerance_mps)):
+                if robots is None or sw.robot in robots:
+                    reasons.append(f"side switch {sw.robot} round {sw.object} between {sw.t1_s:.1f} and "
+                                   f"{sw.t2_s:.1f} s")
+        chosen = [r for r in sc.robots if robots is None or r.name in robots]
+        for verdict in next_contacts(t, plan, chosen, sc.body, by_name, model, self.aim_final_position,
+                                     cfg.flyability_margin, cfg.reach_tolerance_m, cfg.reach_tolerance_mps):
+            if not verdict.reachable:
+                reasons.append(f"next contact {verdict.impact.robot}-{verdict.impact.object} at "
+                               f"{verdict.impact.time_s:.2f} s out of reach with {100 * cfg.flyability_margin:g} % "
+                               "of the thrust")
+        return reasons
 
     def report(self) -> dict[str, Any]:
-        return {"checks": self.checks, "replans": sum(r.status.startswith("accepted") for r in self.records),
-                "attempts": len(self.records), "timeouts": self.timeouts, "unreachable": self.unreachable,
-                "records": [dataclasses.asdict(r) for r in self.records]}
+        out = {"checks": self.checks, "replans": sum(r.status.startswith("accepted") for r in self.records),
+               "attempts": len(self.records), "timeouts": self.timeouts, "unreachable": self.unreachable,
+               "records": [dataclasses.asdict(r) for r in self.records]}
+        if self.station is not None:
+            out["trims"] = self.station.trims()
+            out["trim_records"] = self.station.report()
+        return out
 
 
 __all__ = ["MissionConfig", "MissionPlanner", "ReplanRecord", "SideSwitch", "resample_plan", "side_switches", "splice",

@@ -16,6 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from impact_env.transport.scenario import Body, Scenario
+from planners.online.impact_model import required_contact
+from planners.online.reachability import box_reachable, robot_acceleration_bound
+from planners.online.segment_qp import DEGREE
 from planners.plan import Plan
 
 
@@ -69,14 +72,67 @@ def side_switches(plan: Plan, after_s: float = -math.inf) -> list[SideSwitch]:
     return out
 
 
-def unflyable_side_switches(plan: Plan, scenario: Scenario, after_s: float = -math.inf) -> list[SideSwitch]:
-    """The side switches (second impact after ``after_s``) for which the robot has less time between
-    ``max(t1, after_s)`` and t2 than :meth:`SideSwitch.time_to_get_round_s` says it needs. The planner's
+def unflyable_side_switches(plan: Plan, scenario: Scenario, after_s: float = -math.inf, margin: float = 1.0,
+                            robot_states: dict[str, np.ndarray] | None = None, model=None,
+                            tolerances: tuple[float, float] = (0.0, 0.0)) -> list[SideSwitch]:
+    """The side switches (second impact after ``after_s``) the robot cannot fly, with ``margin`` (in (0, 1]):
+    it has less than ``time_to_get_round_s / margin`` between ``max(t1, after_s)`` and t2. The planner's
     point robot flies through the object; the disc robot, held off it by its keep-off, does not get round
-    an object that moves away from it unless it has that time (measured on ``two_objects``)."""
-    return [sw for sw in side_switches(plan, after_s)
-            if sw.time_to_get_round_s(scenario.body(sw.robot), scenario.body(sw.object))
-            > sw.t2_s - max(sw.t1_s, after_s)]
+    an object that moves away from it unless it has that time (measured on ``two_objects``).
+
+    With ``robot_states`` (name -> observed ``[x, y, theta, vx, vy, omega]`` at ``after_s``) and ``model``
+    (``model(robot, object)`` -> (restitution, (m_robot, m_object))), also those whose way from the first
+    contact to the second has no segment within ``margin`` of the robot's thrust and within its speed bound
+    (:func:`switch_segment_feasible`, the closed form of :mod:`planners.online.segment_feasibility`), when the
+    first contact is still ahead (once it is past, the second is the robot's next contact, which the mission
+    layer tests from the observed state, :func:`planners.online.reachability.next_contacts`)."""
+    out = []
+    for sw in side_switches(plan, after_s):
+        robot, obj = scenario.body(sw.robot), scenario.body(sw.object)
+        if sw.time_to_get_round_s(robot, obj) > margin * (sw.t2_s - max(sw.t1_s, after_s)):
+            out.append(sw)
+        elif robot_states is not None and sw.t1_s > after_s and not switch_segment_feasible(
+                sw, plan, robot, obj, after_s, robot_states[sw.robot], model, margin, tolerances):
+            out.append(sw)
+    return out
 
 
-__all__ = ["SideSwitch", "side_switches", "unflyable_side_switches"]
+def switch_segment_feasible(sw: SideSwitch, plan: Plan, robot: Body, obj: Body, t: float, robot_state, model,
+                            thrust_fraction: float, tolerances: tuple[float, float] = (0.0, 0.0)) -> bool:
+    """Is there a replanner segment (degree ``DEGREE``) from the robot's state after the switch's first contact
+    (its observed ``robot_state`` at ``t`` if that contact is past) to its state at the second, within
+    ``thrust_fraction`` of its full thrust and within its speed bound (raised to its speed at either end where
+    that is faster), ending within ``tolerances`` (m, m/s per axis) of the second contact? The contacts are the
+    disc law's inverse (Eq. 6-7) of the planned object velocities, with ``model``'s restitution and masses.
+    A necessary condition only: the segment may pass through the object; the time to get round it is
+    :meth:`SideSwitch.time_to_get_round_s`."""
+    def impact_at(time_s: float):
+        return next(i for i in plan.impacts if i.robot == sw.robot and i.object == sw.object
+                    and abs(i.time_s - time_s) < 1e-9)
+
+    restitution, (m_r, m_o) = model(sw.robot, sw.object)
+
+    def contact(imp):
+        return required_contact(imp.position, imp.object_velocity_before, imp.object_velocity_after, m_r,
+                                robot.radius_m, m_o, obj.radius_m, restitution)
+
+    state = np.asarray(robot_state, float)
+    first, second = contact(impact_at(sw.t1_s)), contact(impact_at(sw.t2_s))
+    if second is None:
+        return True
+    if sw.t1_s > t and first is not None:
+        start, p0, v0 = sw.t1_s, first.robot_position, first.robot_velocity_after
+    else:
+        start, p0, v0 = t, state[:2], state[3:5]
+    if sw.t2_s - start <= 1e-9:
+        return True
+    acceleration = thrust_fraction * np.asarray(robot_acceleration_bound(robot, float(state[2])))
+    speed = None
+    if robot.velocity_bound_mps is not None:
+        speed = np.maximum.reduce([np.asarray(robot.velocity_bound_mps, float), np.abs(v0),
+                                   np.abs(second.robot_velocity_before)])
+    return box_reachable(p0, v0, second.robot_position, second.robot_velocity_before, sw.t2_s - start, DEGREE,
+                         acceleration, tolerances[0], tolerances[1], velocity_bound=speed)
+
+
+__all__ = ["SideSwitch", "side_switches", "switch_segment_feasible", "unflyable_side_switches"]

@@ -3,10 +3,15 @@
     impact-env plan L [--method reachability|smt] [--rule region|line_of_sight] [--out plan.json]
                       [--plot plan.png] [--drh automaton.drh] [--quiet]
 
-``reachability`` (default) is the exact planner: fewest pulls, or a proof that no plan exists (exit code 4).
-``smt`` is the thesis's divide and conquer with z3 under the anchor ``--rule``. ``--drh`` also writes the
-thesis's automaton (``k = 1``) in dReach's language. The plan runs with
-``impact-env run L --controller expert --plan plan.json``.
+``reachability`` (default) is the exact planner: fewest pulls, or a proof that no plan exists. ``smt`` is the
+thesis's divide and conquer with z3 under the anchor ``--rule``. ``--drh`` also writes the thesis's automaton
+(``k = 1``) in dReach's language. The plan runs with ``impact-env run L --controller expert --plan plan.json``.
+
+Exit codes: 0 a plan (checked, written with ``--out``); 4 proved infeasible (the exact planner's fixed point:
+no sequence of pulls of any length reaches the goal); 5 no plan found within the budget (the exact planner's
+``max_pulls`` while its reachable set still grew, or the z3 pipeline's bounds: its message names the region
+paths, the rule and z3's verdicts, ``unknown`` being a time-out); 2 bad input (``impact_env.cli.main``'s
+one-line error).
 """
 
 from __future__ import annotations
@@ -14,7 +19,8 @@ from __future__ import annotations
 import argparse
 import time
 
-EXIT_INFEASIBLE = 4
+EXIT_INFEASIBLE = 4  # proved: no sequence of pulls reaches the goal
+EXIT_NO_PLAN = 5  # none found within the budget (not a proof)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -28,7 +34,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def plan_station(args: argparse.Namespace) -> int:
     from impact_env.tether.station import load_station
-    from planners.tether.errors import TetherInfeasibleError
+    from planners.tether.errors import PlannerError, SmtNoPlanError, TetherInfeasibleError
     from planners.tether.reachability import ReachabilityPlanner
 
     st = load_station(args.scenario)
@@ -44,6 +50,9 @@ def plan_station(args: argparse.Namespace) -> int:
         except TetherInfeasibleError as exc:
             print(f"infeasible (proved): {exc}")
             return EXIT_INFEASIBLE
+        except PlannerError as exc:
+            print(f"no plan within the budget: {exc}")
+            return EXIT_NO_PLAN
         levels = planner.levels
     else:
         from planners.tether.automaton import build_thesis_map
@@ -51,7 +60,11 @@ def plan_station(args: argparse.Namespace) -> int:
 
         config = SmtConfig(rule=args.rule)
         tmap = build_thesis_map(st, args.rule, config.clearance_m)
-        plan = plan_smt(st, config, tmap=tmap)
+        try:
+            plan = plan_smt(st, config, tmap=tmap)
+        except SmtNoPlanError as exc:
+            print(f"no plan within the budget: {exc}")
+            return EXIT_NO_PLAN
         regions = tmap.regions
     wall = time.perf_counter() - t0
     plan.check(st)

@@ -20,13 +20,20 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import shapely
 
+from impact_env.errors import brief
 from impact_env.tether.station import Station
+from impact_env.toml_fields import is_finite
 from planners.errors import PlannerError
 from planners.plan.files import read_plan_json, write_plan_json
 from planners.tether.errors import TetherPlanCheckError
 
-FORMAT = "impact_env.tether_plan/1"
+FORMAT = "impact_env.tether_plan/2"  # /2 adds the hold schedule; /1 files (none) still load
+FORMATS = ("impact_env.tether_plan/1", FORMAT)
+MAX_PULLS = 1000  # a plan file with more is refused (the planners need a few; a check costs time per pull)
+CHECK_SAMPLES = 200_000  # the most cargo positions TetherPlan.check tests: it coarsens its spacing beyond
+MAX_COORDINATE_M = 1e6
 
 
 @dataclass(frozen=True)
@@ -45,6 +52,20 @@ class Pull:
         return {"anchor": self.anchor, "start_m": list(self.start_m), "end_m": list(self.end_m)}
 
 
+@dataclass(frozen=True)
+class HoldSchedule:
+    """How the last pull ends: the cargo comes to rest at ``stop_m`` (the last pull's end, in the goal box),
+    stopped by a held tether toward ``brake_anchor``, an anchor behind the motion (the expert attaches it
+    ``t_switch`` ahead, holds it, and holds the pulling tether when the cargo is its braking distance from the
+    stop point). ``brake_anchor`` None: no anchor lies behind; the pull's own tether is held at the stop."""
+
+    stop_m: tuple[float, float]
+    brake_anchor: int | None
+
+    def to_dict(self) -> dict:
+        return {"stop_m": list(self.stop_m), "brake_anchor": self.brake_anchor}
+
+
 @dataclass
 class TetherPlan:
     """Pulls from ``start_m`` into ``goal_box`` (xmin, xmax, ymin, ymax), at pulling speed ``pull_speed_mps``."""
@@ -58,6 +79,7 @@ class TetherPlan:
     method: str = ""
     solve_time_s: float = 0.0
     stats: dict[str, Any] = field(default_factory=dict)
+    hold: HoldSchedule | None = None
 
     @property
     def switches(self) -> int:
@@ -93,10 +115,23 @@ class TetherPlan:
     def check(self, station: Station, spacing_m: float = 0.01, tol_m: float = 1e-6) -> None:
         """Sample every pull each ``spacing_m``: the disc inside the station, the anchor in line of sight, the
         motion straight toward the anchor and outside its stop radius, pulls joined end to start, the last end in
-        the goal box. Raises :class:`TetherPlanCheckError` listing every violation."""
+        the goal box, and the hold schedule (its brake anchor in sight of the stop point, outside its stop radius,
+        behind the motion). Raises :class:`TetherPlanCheckError` listing every violation.
+
+        Bounded in time: at most :data:`CHECK_SAMPLES` positions in all (the spacing grows for a longer plan), each
+        test vectorised over a pull's samples, and a plan of more than :data:`MAX_PULLS` pulls is refused.
+        """
         bad: list[str] = []
         if station.name != self.station:
             bad.append(f"the plan is for station {self.station!r}, not {station.name!r}")
+        if len(self.pulls) > MAX_PULLS:
+            raise TetherPlanCheckError([f"the plan has {len(self.pulls)} pulls; at most {MAX_PULLS} are checked"])
+        numbers = [*self.start_m] + [v for p in self.pulls for v in (*p.start_m, *p.end_m)]
+        if not all(math.isfinite(v) and abs(v) <= MAX_COORDINATE_M for v in numbers):
+            raise TetherPlanCheckError([f"the plan has a coordinate that is not a finite number within "
+                                        f"+-{MAX_COORDINATE_M:g} m"])
+        total = sum(p.length_m for p in self.pulls)
+        spacing = max(spacing_m, total / CHECK_SAMPLES)
         x0, x1, y0, y1 = station.goal_box
         here = self.start_m
         for i, p in enumerate(self.pulls):
@@ -115,20 +150,47 @@ class TetherPlan:
             if d1 < station.stop_radius_m - tol_m:
                 bad.append(f"pull {i} ends {d1:.3g} m from anchor {p.anchor}, inside its stop radius "
                            f"{station.stop_radius_m} m")
-            n = max(2, int(math.ceil(p.length_m / spacing_m)) + 1)
-            for t in np.linspace(0.0, 1.0, n):
-                x = s + t * (e - s)
-                if not station.cargo_inside(x, tol_m=tol_m):
-                    bad.append(f"pull {i}: the cargo disc at {x.round(4).tolist()} is not inside the station")
-                    break
-                if not station.line_of_sight(x, [p.anchor])[0]:
-                    bad.append(f"pull {i}: anchor {p.anchor} is not in line of sight from {x.round(4).tolist()}")
-                    break
+            n = max(2, int(math.ceil(p.length_m / spacing)) + 1)
+            xs = s + np.linspace(0.0, 1.0, n)[:, None] * (e - s)
+            inside = station.cargo_inside_many(xs, tol_m=tol_m)
+            if not inside.all():
+                bad.append(f"pull {i}: the cargo disc at {xs[int(np.argmin(inside))].round(4).tolist()} is not inside "
+                           "the station")
+            else:
+                seen = _sees_from(station, xs, p.anchor)
+                if not seen.all():
+                    bad.append(f"pull {i}: anchor {p.anchor} is not in line of sight from "
+                               f"{xs[int(np.argmin(seen))].round(4).tolist()}")
             here = p.end_m
         if not (x0 - tol_m <= here[0] <= x1 + tol_m and y0 - tol_m <= here[1] <= y1 + tol_m):
             bad.append(f"the plan ends at {list(here)}, outside the goal box {list(station.goal_box)}")
+        if self.hold is not None:
+            bad += self._check_hold(station, here, tol_m)
         if bad:
             raise TetherPlanCheckError(bad)
+
+    def _check_hold(self, station: Station, here: tuple[float, float], tol_m: float) -> list[str]:
+        hold, bad = self.hold, []
+        if math.dist(hold.stop_m, here) > tol_m:
+            bad.append(f"the hold's stop point {list(hold.stop_m)} is not where the last pull ends ({list(here)})")
+        b = hold.brake_anchor
+        if b is None:
+            return bad
+        if not 0 <= b < station.n_anchors:
+            return bad + [f"the hold's brake anchor {b} does not exist (0..{station.n_anchors - 1})"]
+        stop = np.asarray(hold.stop_m, dtype=float)
+        pos = station.anchor_positions[b]
+        if not station.line_of_sight(stop, [b])[0]:
+            bad.append(f"the hold's brake anchor {b} is not in line of sight from the stop point")
+        if float(np.linalg.norm(pos - stop)) <= station.stop_radius_m:
+            bad.append(f"the stop point is inside the stop radius of the brake anchor {b}")
+        if self.pulls:
+            last = self.pulls[-1]
+            motion = np.asarray(last.end_m) - np.asarray(last.start_m)
+            behind = pos - stop
+            if np.linalg.norm(motion) > 0 and float(motion @ behind) >= 0:
+                bad.append(f"the hold's brake anchor {b} is not behind the last pull's motion")
+        return bad
 
     # ------------------------------------------------------------------------------------------ JSON
     def to_dict(self) -> dict[str, Any]:
@@ -136,6 +198,7 @@ class TetherPlan:
                 "goal_box": list(self.goal_box), "pull_speed_mps": self.pull_speed_mps,
                 "switch_time_s": self.switch_time_s, "method": self.method, "solve_time_s": self.solve_time_s,
                 "pulls": [p.to_dict() for p in self.pulls], "stats": _jsonable(self.stats),
+                "hold": None if self.hold is None else self.hold.to_dict(),
                 "summary": {"switches": self.switches, "path_length_m": self.path_length_m,
                             "travel_time_s": {str(k): self.travel_time_s(k) for k in (1, 2, 3)}}}
 
@@ -147,23 +210,79 @@ class TetherPlan:
         if not isinstance(data, dict):
             raise PlannerError(f"not a tether plan: a JSON {type(data).__name__}, expected an object with format "
                                f"{FORMAT!r}")
-        if data.get("format") != FORMAT:
-            raise PlannerError(f"not a tether plan: format is {data.get('format')!r}, expected {FORMAT!r}")
+        if data.get("format") not in FORMATS:
+            raise PlannerError(f"not a tether plan: format is {brief(data.get('format'))}, expected {FORMAT!r}")
         try:
-            pulls = [Pull(anchor=int(p["anchor"]), start_m=tuple(map(float, p["start_m"])),
-                          end_m=tuple(map(float, p["end_m"]))) for p in data["pulls"]]
-            return cls(station=str(data["station"]), start_m=tuple(map(float, data["start_m"])),
-                       goal_box=tuple(map(float, data["goal_box"])), pulls=pulls,
-                       pull_speed_mps=float(data["pull_speed_mps"]), switch_time_s=float(data["switch_time_s"]),
-                       method=str(data.get("method", "")), solve_time_s=float(data.get("solve_time_s", 0.0)),
-                       stats=dict(data.get("stats", {})))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise PlannerError(f"malformed tether plan: {exc!r}") from None
+            raw = data["pulls"]
+            if not isinstance(raw, list):
+                raise PlannerError(f"malformed tether plan: pulls must be a list, got {brief(raw)}")
+            if len(raw) > MAX_PULLS:
+                raise PlannerError(f"malformed tether plan: {len(raw)} pulls; at most {MAX_PULLS} are supported")
+            pulls = [Pull(anchor=_index(p["anchor"], f"pulls[{i}].anchor"),
+                          start_m=_point(p["start_m"], f"pulls[{i}].start_m"),
+                          end_m=_point(p["end_m"], f"pulls[{i}].end_m")) for i, p in enumerate(raw)]
+            hold = data.get("hold")
+            if hold is not None:
+                brake = hold["brake_anchor"]
+                hold = HoldSchedule(stop_m=_point(hold["stop_m"], "hold.stop_m"),
+                                    brake_anchor=None if brake is None else _index(brake, "hold.brake_anchor"))
+            stats = data.get("stats", {})
+            if not isinstance(stats, dict):
+                raise PlannerError(f"malformed tether plan: stats must be an object, got {brief(stats)}")
+            return cls(station=_text(data["station"], "station"), start_m=_point(data["start_m"], "start_m"),
+                       goal_box=_box(data["goal_box"]), pulls=pulls,
+                       pull_speed_mps=_number(data["pull_speed_mps"], "pull_speed_mps"),
+                       switch_time_s=_number(data["switch_time_s"], "switch_time_s"),
+                       method=_text(data.get("method", ""), "method"),
+                       solve_time_s=_number(data.get("solve_time_s", 0.0), "solve_time_s"),
+                       stats=dict(stats), hold=hold)
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:
+            raise PlannerError(f"malformed tether plan: {brief(exc)}") from None
 
     @classmethod
     def load(cls, path: str | Path) -> TetherPlan:
         """Read a plan file written by :meth:`save`; any problem is a :class:`PlannerError` naming it."""
         return cls.from_dict(read_plan_json(path, PlannerError, what="tether plan"))
+
+
+def _number(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not is_finite(value) \
+            or abs(value) > MAX_COORDINATE_M:
+        raise PlannerError(f"malformed tether plan: {where} must be a finite number within +-{MAX_COORDINATE_M:g}, "
+                           f"got {brief(value)}")
+    return float(value)
+
+
+def _point(value: Any, where: str) -> tuple[float, float]:
+    if not isinstance(value, list) or len(value) != 2:
+        raise PlannerError(f"malformed tether plan: {where} must be [x, y], got {brief(value)}")
+    return (_number(value[0], f"{where}[0]"), _number(value[1], f"{where}[1]"))
+
+
+def _box(value: Any) -> tuple[float, float, float, float]:
+    if not isinstance(value, list) or len(value) != 4:
+        raise PlannerError(f"malformed tether plan: goal_box must be [xmin, xmax, ymin, ymax], got {brief(value)}")
+    return tuple(_number(v, f"goal_box[{i}]") for i, v in enumerate(value))
+
+
+def _index(value: Any, where: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 1_000_000:
+        raise PlannerError(f"malformed tether plan: {where} must be an anchor index (an integer >= 0), got "
+                           f"{brief(value)}")
+    return value
+
+
+def _text(value: Any, where: str) -> str:
+    if not isinstance(value, str):
+        raise PlannerError(f"malformed tether plan: {where} must be a string, got {brief(value)}")
+    return value
+
+
+def _sees_from(station: Station, points: np.ndarray, anchor: int) -> np.ndarray:
+    """Whether ``anchor`` is in line of sight from each of (n, 2) points (bool, n), in one shapely call."""
+    a = station.anchor_positions[anchor]
+    coords = np.stack([np.broadcast_to(a, points.shape), points], axis=1)
+    return np.asarray(shapely.covers(station._sight_polygon, shapely.linestrings(coords)), dtype=bool)
 
 
 def is_tether_plan_file(path: str | Path) -> bool:
@@ -172,7 +291,7 @@ def is_tether_plan_file(path: str | Path) -> bool:
         data = read_plan_json(path, PlannerError, what="tether plan")
     except PlannerError:
         return False
-    return isinstance(data, dict) and data.get("format") == FORMAT
+    return isinstance(data, dict) and data.get("format") in FORMATS
 
 
 def _jsonable(value: Any) -> Any:

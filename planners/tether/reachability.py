@@ -24,6 +24,7 @@ from shapely.geometry.base import BaseGeometry
 from impact_env.config_checks import check_integer, check_number
 from impact_env.tether.station import Station
 from planners.errors import PlannerError
+from planners.tether.braking import with_hold
 from planners.tether.errors import TetherInfeasibleError
 from planners.tether.geometry import (
     AREA_EPS_M2,
@@ -73,20 +74,26 @@ class ReachabilityPlanner:
     """
 
     def __init__(self, station: Station, config: ReachabilityConfig | None = None,
-                 anchors: list[int] | None = None) -> None:
+                 anchors: list[int] | None = None, _parent: ReachabilityPlanner | None = None) -> None:
         self.station = station
         self.config = config or ReachabilityConfig()
         t0 = time.perf_counter()
-        self.free = clean(free_space_polygon(station, self.config.clearance_m))
         self.stop_m = station.stop_radius_m + self.config.stop_margin_m
         self.anchor_ids = list(range(station.n_anchors)) if anchors is None else sorted(set(anchors))
         self._far = far_distance(station)
-        # the free space each anchor sees; its radial cells are cut the first time a level's frontier is in sight
-        self.seen = {a: seen_free_space(station, a, self.free) for a in self.anchor_ids}
+        if _parent is not None:  # the anchors' visibility and radial cells do not depend on the other anchors
+            self.free = _parent.free
+            self.seen = {a: _parent.seen[a] for a in self.anchor_ids}
+            self.cells = {a: c for a, c in _parent.cells.items() if a in self.seen}
+        else:
+            self.free = clean(free_space_polygon(station, self.config.clearance_m))
+            # the free space each anchor sees; its radial cells are cut the first time a level's frontier is in sight
+            self.seen = {a: seen_free_space(station, a, self.free) for a in self.anchor_ids}
+            self.cells: dict[int, RadialCells] = {}
         self.usable = [a for a in self.anchor_ids if not self.seen[a].is_empty]
-        for a in self.usable:
-            shapely.prepare(self.seen[a])
-        self.cells: dict[int, RadialCells] = {}
+        if _parent is None:
+            for a in self.usable:
+                shapely.prepare(self.seen[a])
         x0, x1, y0, y1 = station.goal_box
         m = self.config.goal_margin_m
         inner = shapely.box(x0 + m, y0 + m, x1 - m, y1 - m) if x1 - x0 > 2 * m and y1 - y0 > 2 * m else None
@@ -97,6 +104,13 @@ class ReachabilityPlanner:
         self.fixed_point = goal.is_empty
         self.setup_s = time.perf_counter() - t0
         self.level_s = 0.0
+
+    def without(self, anchors: set[int] | list[int]) -> ReachabilityPlanner:
+        """A planner for the same station without ``anchors`` (failed ones): it shares this one's free space,
+        visibility polygons and radial cells (each anchor's own), so only the levels are computed again."""
+        gone = set(anchors)
+        return ReachabilityPlanner(self.station, self.config, [a for a in self.anchor_ids if a not in gone],
+                                   _parent=self)
 
     # ----------------------------------------------------------------------------------- levels
     def pre(self, anchor: int, target: BaseGeometry) -> BaseGeometry:
@@ -228,11 +242,12 @@ class ReachabilityPlanner:
             here = end
             n = self.level_of(here)
             targets.append(n)
-        return TetherPlan(station=st.name, start_m=(float(x[0]), float(x[1])), goal_box=st.goal_box, pulls=pulls,
+        plan = TetherPlan(station=st.name, start_m=(float(x[0]), float(x[1])), goal_box=st.goal_box, pulls=pulls,
                           pull_speed_mps=st.pull_speed_mps, switch_time_s=st.switch_time_s, method="reachability",
                           solve_time_s=time.perf_counter() - t0,
                           stats={"levels": len(self.levels), "setup_s": self.setup_s, "level_s": self.level_s,
                                  "clearance_m": self.config.clearance_m, "targets": targets})
+        return with_hold(plan, st, self.usable)
 
     def pull_end(self, here: np.ndarray, anchor: int, level: int) -> np.ndarray | None:
         """Where a pull toward ``anchor`` from ``here`` should end to land in level ``level`` (deepest point of

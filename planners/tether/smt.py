@@ -80,6 +80,8 @@ class SmtStats:
     solve_s: float = 0.0
     paths_tried: int = 0
     log: list[str] = field(default_factory=list)
+    verdicts: list[str] = field(default_factory=list)  # of every check, in order
+    failures: list[dict] = field(default_factory=list)  # per region path that gave no plan: where and why
 
 
 def _val(model, v) -> float:
@@ -146,11 +148,12 @@ class _Encoder:
         t0 = time.perf_counter()
         result = str(solver.check())
         dt = time.perf_counter() - t0
+        result = result if result in ("sat", "unsat") else "unknown"  # unknown: z3 hit its time limit
         self.stats.checks += 1
         self.stats.solve_s += dt
-        setattr(self.stats, result if result in ("sat", "unsat") else "unknown",
-                getattr(self.stats, result if result in ("sat", "unsat") else "unknown") + 1)
+        setattr(self.stats, result, getattr(self.stats, result) + 1)
         self.stats.log.append(f"{what}: {result} in {dt:.3f} s")
+        self.stats.verdicts.append(result)
         return result
 
 
@@ -230,9 +233,12 @@ def plan_smt(station: Station, config: SmtConfig | None = None, tmap: ThesisMap 
             target = _target(tmap, path, i, config)
             if target.is_empty:
                 ok = False
+                enc.stats.failures.append({"path": list(path), "region": region, "why": "no transition zone",
+                                           "verdicts": []})
                 break
             if target.distance(Point(*here)) < 1e-12:
                 continue  # already in the transition zone: zero pulls
+            first = len(enc.stats.verdicts)
             for n in range(1, config.max_pulls_per_region + 1):
                 got = _solve_region(enc, region, here, target, n)
                 if got is not None:
@@ -241,6 +247,8 @@ def plan_smt(station: Station, config: SmtConfig | None = None, tmap: ThesisMap 
                     break
             else:
                 ok = False
+                enc.stats.failures.append({"path": list(path), "region": region, "why": "no pulls",
+                                           "verdicts": enc.stats.verdicts[first:]})
                 enc.stats.log.append(f"path {path}: region {region} has no solution with up to "
                                      f"{config.max_pulls_per_region} pulls")
                 break
@@ -251,10 +259,31 @@ def plan_smt(station: Station, config: SmtConfig | None = None, tmap: ThesisMap 
                               solve_time_s=time.perf_counter() - t0,
                               stats={"path": path, "regions": len(tmap.regions), "checks": enc.stats.checks,
                                      "z3_s": enc.stats.solve_s, "unknown": enc.stats.unknown})
-    raise SmtNoPlanError(f"station {station.name!r}: the thesis pipeline ({config.rule} rule) found no plan on "
-                         f"{len(paths)} region path(s) with up to {config.max_pulls_per_region} pulls per region "
-                         f"({enc.stats.checks} z3 checks, {enc.stats.unknown} unknown)",
-                         stats={"log": enc.stats.log, "checks": enc.stats.checks})
+    raise SmtNoPlanError(no_plan_message(station, config, paths, enc.stats),
+                         stats={"log": enc.stats.log, "checks": enc.stats.checks, "failures": enc.stats.failures,
+                                "sat": enc.stats.sat, "unsat": enc.stats.unsat, "unknown": enc.stats.unknown})
+
+
+def no_plan_message(station: Station, config: SmtConfig, paths: list[list[int]], stats: SmtStats) -> str:
+    """Why the divide and conquer gave no plan: the rule, each region path and the region it stopped at with
+    its z3 verdicts (pulls 1, 2, ...), and the verdicts' totals; ``unknown`` is z3 hitting its time limit."""
+    if not paths:
+        where = "the region graph has no path from the start's region to a goal region"
+    else:
+        parts = []
+        for f in stats.failures:
+            if f["why"] == "no transition zone":
+                parts.append(f"path {f['path']} stops at region {f['region']}: no overlap with the next region")
+            else:
+                verdicts = ", ".join(f"{n} pull{'s' if n > 1 else ''} {v}" for n, v in enumerate(f["verdicts"], 1))
+                parts.append(f"path {f['path']} stops at region {f['region']} ({verdicts})")
+        where = "; ".join(parts)
+    timeouts = (f"; unknown means z3 reached its {config.timeout_s:g} s limit, so a plan may exist: raise "
+                "SmtConfig.timeout_s" if stats.unknown else "")
+    return (f"station {station.name!r}: the thesis pipeline ({config.rule} rule) found no plan within its budget "
+            f"({len(paths)} region path(s), up to {config.max_pulls_per_region} pulls per region): {where}. z3 "
+            f"verdicts: {stats.sat} sat, {stats.unsat} unsat, {stats.unknown} unknown{timeouts}. Not a proof "
+            "that no plan exists (the exact planner, --method reachability, decides that)")
 
 
 @dataclass

@@ -57,8 +57,8 @@ class TransportSB3VecEnv(VecEnv):
         self.render_width_px = render_width_px
         observation_space = spaces.Box(w.obs_low, w.obs_high, dtype=np.float32)
         action_space = spaces.Box(-1.0, 1.0, shape=(w.action_size,), dtype=np.float32)
+        self.render_mode = "rgb_array"  # read by VecEnv.__init__ (through get_attr)
         super().__init__(num_envs, observation_space, action_space)
-        self.render_mode = "rgb_array"
         self.metadata = dict(self.metadata, render_fps=round(1.0 / w.dt_s))
         self.scenario = w.scenario
         self._actions: torch.Tensor | None = None

@@ -91,7 +91,8 @@ class TransportTorchRLEnv(EnvBase):
                  "info": TensorDict({"robustness": world.robustness.reshape(N, 1, 1).expand(N, R, 1),
                                      "is_success": (world.robustness > 0.0).reshape(N, 1, 1).expand(N, R, 1)},
                                     batch_size=(N, R), device=world.device),
-                 "done": done.reshape(N, 1, 1).expand(N, R, 1), "terminated": terminated.reshape(N, 1, 1).expand(N, R, 1),
+                 "done": done.reshape(N, 1, 1).expand(N, R, 1),
+                 "terminated": terminated.reshape(N, 1, 1).expand(N, R, 1),
                  "truncated": truncated.reshape(N, 1, 1).expand(N, R, 1)}
         if reward is not None:
             group["reward"] = reward.reshape(N, 1, 1).expand(N, R, 1)

@@ -18,8 +18,10 @@ Gymnasium's vector form (``infos["robustness"]`` and the mask ``infos["_robustne
 (set by ``make_vec`` from the id's registration) truncates as Gymnasium's ``TimeLimit`` does: at the horizon
 an episode is both terminated and truncated.
 
-``render_mode="rgb_array"`` draws the envs of ``render_env_indices`` (default the first): ``render()`` returns a
-tuple of uint8 (H, W, 3) frames, one per chosen env, which ``gymnasium.wrappers.vector.RecordVideo`` tiles.
+``render_mode="rgb_array"``: ``render()`` returns a sequence of ``num_envs`` uint8 (H, W, 3) frames that draws
+an env's frame only when it is read, so ``gymnasium.wrappers.vector.RecordVideo(envs, folder,
+record_first_only=True)`` draws one env per step of a batch of thousands (without ``record_first_only`` it
+tiles every env: keep such batches small).
 torch is imported here only: ``import impact_env`` stays free of it, and the id's registration names this
 module as a string.
 """
@@ -44,6 +46,30 @@ from impact_env.transport.scenario import Scenario
 INFO_KEYS = ("robustness", "is_success", "fuel_Ns", "time_s", "impacts")
 
 
+class BatchFrames(Sequence[np.ndarray]):
+    """``num_envs`` frames of the batch's state when it was made; frame i is drawn when it is first read
+    (RecordVideo reads all of them, or only the first with ``record_first_only=True``)."""
+
+    def __init__(self, envs: TransportVectorEnv) -> None:
+        self._envs, self._world, self._frames = envs, envs.world, {}
+        self._moves = envs._moves  # to refuse a frame read after the batch moved on
+
+    def __len__(self) -> int:
+        return self._world.num_envs
+
+    def __getitem__(self, index: Any) -> Any:
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not -len(self) <= index < len(self):
+            raise IndexError(f"env index must be an integer in 0..{len(self) - 1}, got {index!r}")
+        i = int(index) % len(self)
+        if i not in self._frames:
+            if self._envs._moves != self._moves:
+                raise EnvConfigError("these frames were made before the last step or reset; call render() again")
+            self._frames[i] = self._world.render_rgb(i, self._envs.render_width_px)
+        return self._frames[i]
+
+
 class TransportVectorEnv(VectorEnv):
     """``num_envs`` envs of one scenario as a Gymnasium VectorEnv (module docstring).
 
@@ -51,7 +77,6 @@ class TransportVectorEnv(VectorEnv):
         scenario: a shipped scenario name, a path to a TOML file or a Scenario (the ids set it).
         num_envs: N.
         render_mode: None or ``"rgb_array"``.
-        render_env_indices: the envs ``render()`` draws (default ``(0,)``).
         render_width_px: width of a frame.
         max_episode_steps: truncate episodes after this many steps (``make_vec`` passes the id's).
         device, dtype, compile, contact_iterations: the batched world's (default CPU, float32, eager).
@@ -62,7 +87,7 @@ class TransportVectorEnv(VectorEnv):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10, "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, scenario: Scenario | str | None = None, num_envs: int = 1, *, render_mode: str | None = None,
-                 render_env_indices: Sequence[int] = (0,), render_width_px: int = 600,
+                 render_width_px: int = 600,
                  max_episode_steps: int | None = None, device: torch.device | str | None = None,
                  dtype: torch.dtype = torch.float32, compile: bool = False, contact_iterations: int = 10,
                  **options: Any) -> None:
@@ -75,11 +100,6 @@ class TransportVectorEnv(VectorEnv):
         w = self.world
         self.scenario = w.scenario
         self.num_envs = num_envs
-        indices = tuple(render_env_indices)
-        if not indices or any(isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not 0 <= i < num_envs
-                              for i in indices):
-            raise EnvConfigError(f"render_env_indices must be env indices in 0..{num_envs - 1}, got {indices!r}")
-        self.render_env_indices = tuple(int(i) for i in indices)
         self.render_mode, self.render_width_px = render_mode, render_width_px
         self.metadata = dict(self.metadata, render_fps=round(1.0 / w.dt_s))
         self.max_episode_steps = max_episode_steps
@@ -89,6 +109,7 @@ class TransportVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._autoreset = np.zeros(num_envs, dtype=bool)
         self._elapsed = np.zeros(num_envs, dtype=np.int64)
+        self._moves = 0  # steps and resets so far (BatchFrames)
 
     @property
     def dt_s(self) -> float:
@@ -111,6 +132,7 @@ class TransportVectorEnv(VectorEnv):
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every env (``seed``: env i gets seed + i, or one seed per env); ``options`` must be None or
         ``{"reset_mask": [N] bool}`` (Gymnasium's partial reset)."""
+        self._moves += 1
         mask = None
         if options:
             unknown = set(options) - {"reset_mask"}
@@ -130,6 +152,7 @@ class TransportVectorEnv(VectorEnv):
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """One step of every env; the envs whose episode ended at the previous step are reset instead."""
+        self._moves += 1
         resetting = self._autoreset.copy()
         a = torch.as_tensor(np.asarray(actions), device=self.world.device)
         if resetting.any():
@@ -149,16 +172,19 @@ class TransportVectorEnv(VectorEnv):
         rewards = reward.detach().cpu().numpy().astype(np.float64)
         return obs.cpu().numpy(), rewards, terminated, truncated, self._infos(info, np.ones(self.num_envs, bool))
 
-    def render(self) -> tuple[np.ndarray, ...] | None:
-        """One uint8 (H, W, 3) frame per env of ``render_env_indices`` (``render_mode="rgb_array"``)."""
+    def render(self) -> BatchFrames | None:
+        """The envs' frames now (``render_mode="rgb_array"``): a sequence of ``num_envs`` uint8 (H, W, 3)
+        arrays, each drawn when it is first read."""
         if self.render_mode is None:
             return None
-        return tuple(self.world.render_rgb(i, self.render_width_px) for i in self.render_env_indices)
+        return BatchFrames(self)
 
     def close_extras(self, **kwargs: Any) -> None:
-        for renderer in self.world._renderers.values():
-            renderer.close()
-        self.world._renderers.clear()
+        world = getattr(self, "world", None)  # None: the constructor raised
+        if world is not None:
+            for renderer in world._renderers.values():
+                renderer.close()
+            world._renderers.clear()
 
 
 def make_vector_env(scenario: Scenario | str | None = None, num_envs: int = 1, **kwargs: Any) -> TransportVectorEnv:

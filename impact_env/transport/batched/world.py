@@ -89,8 +89,12 @@ class BatchedTransportWorld:
         num_envs: number of envs N (>= 1).
         device: torch device of every tensor (default CPU).
         dtype: torch.float32 (default) or torch.float64 for the physics and the STL monitor.
-        reward_mode, fuel_penalty, restitution, thrust_noise, initial_position_noise_m,
-            impact_velocity_noise_mps: as :class:`~impact_env.transport.core.TransportCore`, which checks them.
+        reward_mode: as :class:`~impact_env.transport.core.TransportCore`, which checks it and the five below.
+        fuel_penalty: as TransportCore.
+        restitution: as TransportCore.
+        thrust_noise: as TransportCore.
+        initial_position_noise_m: as TransportCore.
+        impact_velocity_noise_mps: as TransportCore.
         contact_iterations: impulse passes per substep where a body has several contacts (chipmunk: 10).
         compile: run each control period and the step's bookkeeping through torch.compile (CPU: inductor's
             C++). The first step compiles, about 2.5 minutes per scenario, num_envs, dtype and thread count on a

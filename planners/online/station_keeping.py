@@ -1,0 +1,232 @@
+"""Station keeping: trim a stopped object's drift during a held goal (the mission layer's small re-plan).
+
+A held goal is a conjunct ``G[a, b] in(O, region)`` of the task. Once the object's planned impacts are over it
+flies freely, and a stop that was not exact (post-impact noise, a restitution the model does not have) leaves
+it drifting: nothing in the plan brings it back. At each of the mission monitor's checks, for each held goal
+still open, the object's free flight from its observed state is predicted (:func:`drift_margin`); when it
+comes closer than ``margin_m`` to the region's edge before ``b``, the nearest robot with no impact left plans
+a trim: the offline planner on a scenario of that robot and that object alone (the rest of the task that
+reads only those two, progressed to now, as the task), under the mission's node budget. Its impacts and the
+two bodies' curves are spliced into the plan; every other body keeps its own. A trim is flown only when its
+robustness beats the drift's and the robot can fly its next segment (the mission layer's flyability check).
+Why, and what was measured: ``docs/expert_design.md#station-keeping``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from impact_env.config_checks import check_integer, check_number
+from impact_env.stl import Always, And, Formula, InRegion, conjuncts, progress, without_constants
+from impact_env.transport.scenario import Body, Scenario
+from planners.errors import PlannerError
+from planners.online.splicing import initial_state, splice, without_end_states
+from planners.plan import BodyPlan, Plan, Segment
+
+MIN_TRIM_INTERVAL_S = 1.0  # the finest grid a trim is planned on (s)
+
+
+@dataclass(frozen=True)
+class StationKeepingConfig:
+    """When a drifting object in a held goal is trimmed (see the module docstring)."""
+
+    margin_m: float = 0.05
+    """Trim when the object's free drift is predicted to come closer than this to the region's edge (m) before
+    the held goal's window ends."""
+    max_trims: int = 6
+    """Trims per episode."""
+    min_window_left_s: float = 2.0
+    """No trim is planned when less than this is left of the window (s): there is no time to get there."""
+
+    def __post_init__(self) -> None:
+        check_number(self, "margin_m", PlannerError, low=0)
+        check_integer(self, "max_trims", PlannerError, low=0)
+        check_number(self, "min_window_left_s", PlannerError, low=0)
+
+
+@dataclass(frozen=True)
+class HeldGoal:
+    """A conjunct ``G[a_s, b_s] in(body, region)`` of the task (times from the episode's start)."""
+
+    body: str
+    region: str
+    a_s: float
+    b_s: float
+
+
+def held_goals(formula: Formula, objects: set[str] | frozenset[str]) -> list[HeldGoal]:
+    """The task's held goals on ``objects`` (its conjuncts of the form ``G[a, b] in(O, region)``)."""
+    return [HeldGoal(part.child.body, part.child.region, part.a_s, part.b_s) for part in conjuncts(formula)
+            if isinstance(part, Always) and isinstance(part.child, InRegion) and part.child.body in objects]
+
+
+def drift_margin(goal: HeldGoal, polygon, t: float, position, velocity, dt: float,
+                 margin_m: float = 0.0) -> tuple[float, float, float]:
+    """The object's free drift from ``position``, ``velocity`` (observed at ``t``) over the rest of the goal's
+    window, sampled every ``dt``: (the least signed distance to the region's edge, m, positive inside; the
+    time it is reached; the first time it is below ``margin_m``, inf if never; s)."""
+    start = max(t, goal.a_s)
+    times = start + dt * np.arange(max(0, math.floor((goal.b_s - start) / dt + 1e-9)) + 1)
+    points = np.asarray(position, float) + np.outer(times - t, np.asarray(velocity, float))
+    distance = polygon.signed_distance(points)
+    k = int(np.argmin(distance))
+    below = np.flatnonzero(distance < margin_m)
+    return float(distance[k]), float(times[k]), float(times[below[0]]) if len(below) else math.inf
+
+
+@dataclass
+class TrimRecord:
+    """One station-keeping decision: which goal, the drift's predicted margin, what the trim gave."""
+
+    time_s: float
+    goal: str
+    robot: str
+    drift_margin_m: float
+    status: str  # "accepted", "kept: <reason>"
+    new_robustness: float | None = None
+    impacts_added: int = 0
+
+
+class StationKeeper:
+    """Plans the trims of held goals (see the module docstring) for :class:`planners.online.mission.MissionPlanner`.
+
+    Args:
+        scenario: the episode's scenario.
+        config: :class:`StationKeepingConfig`.
+        solve: ``solve(derived_scenario, t, plan, intervals, record)`` -> Plan or a reason string: the mission
+            planner's re-plan of a derived scenario under its node budget.
+        grid_dt: the offline plan's grid interval (s); a trim's grid has intervals as long.
+    """
+
+    def __init__(self, scenario: Scenario, config: StationKeepingConfig, solve, grid_dt: float) -> None:
+        self.scenario = scenario
+        self.config = config
+        self.solve = solve
+        self.grid_dt = grid_dt
+        self.goals = held_goals(scenario.formula, frozenset(o.name for o in scenario.objects))
+        self.regions = scenario.region_map()
+        self.records: list[TrimRecord] = []
+
+    def reset(self) -> None:
+        self.records = []
+
+    def trims(self) -> int:
+        return sum(r.status == "accepted" for r in self.records)
+
+    def step(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan, done: set[int],
+             trace: list[np.ndarray], names: list[str], unflyable) -> tuple[Plan, set[int]] | None:
+        """Check every open held goal; plan and splice a trim for the first that drifts out. ``trace``: the
+        observed positions so far (one (n_bodies, 2) array per control step, the last one now, bodies in the
+        order of ``names``); ``unflyable(plan, t, robots)``: the mission layer's reasons those robots cannot fly a
+        plan."""
+        cfg = self.config
+        if self.trims() >= cfg.max_trims:
+            return None
+        pending = [i for k, i in enumerate(plan.impacts) if k not in done and i.time_s > t]
+        for goal in self.goals:
+            if goal.b_s - t < cfg.min_window_left_s or any(i.object == goal.body for i in pending):
+                continue
+            s = states[index[goal.body]]
+            margin, at, leaves = drift_margin(goal, self.regions[goal.region], t, s[:2], s[3:5],
+                                              self.scenario.control_period_s, cfg.margin_m)
+            if margin >= cfg.margin_m or at <= max(t, goal.a_s) + 1e-9:
+                continue  # it stays in, or it is closest to the edge now (moving inward): nothing to trim
+            free = [r for r in self.scenario.robots if not any(i.robot == r.name for i in pending)]
+            if not free:
+                continue
+            robot = min(free, key=lambda r: float(np.hypot(*(states[index[r.name]][:2] - s[:2]))))
+            return self._trim(t, goal, robot, margin, leaves, states, index, plan, done, trace, names, unflyable)
+        return None
+
+    def _trim(self, t, goal: HeldGoal, robot: Body, margin: float, leaves: float, states, index, plan: Plan,
+              done: set[int], trace, names, unflyable) -> tuple[Plan, set[int]] | None:
+        record = TrimRecord(t, f"G[{goal.a_s:g},{goal.b_s:g}] in({goal.body}, {goal.region})", robot.name, margin,
+                            "kept")
+        self.records.append(record)
+        sc = self.scenario
+        obj = sc.body(goal.body)
+        task = self._task(trace, names, {robot.name, obj.name})
+        if task is None:
+            record.status = "kept: the past decided the task"
+            return None
+        remaining = sc.tf_s - t
+        # the grid's knots are where the planner can put the trim: at least two before the drift leaves the
+        # margin (the offline grid can be coarser than the time the drift leaves), no finer than 1 s
+        step = min(self.grid_dt, max(MIN_TRIM_INTERVAL_S, (min(leaves, goal.b_s) - t) / 2))
+        intervals = max(2, math.ceil(remaining / step - 1e-9))
+
+        def moved(body: Body) -> Body:
+            s = states[index[body.name]]
+            return initial_state(body, s[:2], s[3:5], sc)
+
+        derived = dataclasses.replace(sc, tf_s=remaining, task=str(task), robots=(moved(robot),),
+                                      objects=(moved(obj),), planner_intervals=intervals)
+        pair = _two_bodies(plan, robot.name, obj.name)
+        for scenario in (derived, without_end_states(derived)):
+            solved = self.solve(scenario, t, pair, intervals, record)
+            if isinstance(solved, str):
+                record.status = solved
+                if solved == "kept: InfeasiblePlanError":
+                    continue
+                return None
+            record.new_robustness = solved.robustness
+            if not solved.impacts:
+                record.status = "kept: the trim has no impact"
+                return None
+            if solved.robustness <= margin:
+                record.status = "kept: no better than the drift"
+                return None
+            trimmed, _ = splice(pair, solved, t)
+            spliced = _merged(plan, trimmed, t, {robot.name, obj.name})
+            reasons = unflyable(spliced, t, {robot.name})
+            if reasons:
+                record.status = "kept: not flyable (" + "; ".join(reasons) + ")"
+                continue
+            record.status = "accepted"
+            record.impacts_added = len(solved.impacts)
+            return spliced, set(done)
+        return None
+
+    def _task(self, trace, names: list[str], bodies: set[str]) -> Formula | None:
+        """The rest of the task that reads only ``bodies``, progressed to now (the mission's derived task)."""
+        k = len(trace) - 1
+        positions = np.array(trace)
+        rest = without_constants(progress(self.scenario.formula,
+                                          {name: positions[:, i] for i, name in enumerate(names)},
+                                          self.regions, self.scenario.control_period_s, k))
+        if rest is None:
+            return None
+        parts = [p for p in conjuncts(rest) if p.bodies() <= bodies]
+        if not parts:
+            return None
+        return parts[0] if len(parts) == 1 else And(tuple(parts))
+
+    def report(self) -> list[dict]:
+        return [dataclasses.asdict(r) for r in self.records]
+
+
+def _two_bodies(plan: Plan, robot: str, obj: str) -> Plan:
+    """The plan restricted to one robot and one object (their curves, no impacts: both have none left), as a
+    spatially robust plan: a trim is one small impact, re-planned spatially robust even in an impact-robust
+    plan (whose copies then cover the other impacts, and the trim is flown by the plan's contact rule)."""
+    bodies = {name: plan.bodies[name] for name in (robot, obj)}
+    return Plan(plan.scenario, "sr", plan.robustness, bodies, [], plan.solver, stats=dict(plan.stats))
+
+
+def _merged(plan: Plan, trimmed: Plan, t: float, names: set[str]) -> Plan:
+    """``plan`` with the curves of ``names`` from ``trimmed`` and its impacts after ``t`` added (at the end, so
+    the indices of the plan's own impacts, done or not, stay)."""
+    bodies: dict[str, BodyPlan] = {}
+    for name, body in plan.bodies.items():
+        source = trimmed.bodies[name] if name in names else body
+        bodies[name] = BodyPlan(name, body.kind, [Segment(s.t0_s, s.t1_s, s.control_points) for s in source.segments])
+    added = [i for i in trimmed.impacts if i.time_s > t + 1e-9]
+    return dataclasses.replace(plan, bodies=bodies, impacts=list(plan.impacts) + added,
+                               stats={**plan.stats, "trimmed_at_s": t})
+
+
+__all__ = ["HeldGoal", "StationKeeper", "StationKeepingConfig", "TrimRecord", "drift_margin", "held_goals"]

@@ -1,0 +1,219 @@
+"""Hand-overs: a robot that hits one object twice in a row from opposite sides must get round it in between.
+
+The planners' bodies are points, so a plan can have a robot push an object from behind and then stop it from
+the front: the point robot flies through the object. A disc robot has to get round it, in the object's frame
+(inertial while nothing else hits the object) from its contact at the first impact to its contact at the
+second, outside the disc of radius r_R + r_O. :func:`least_handover_time_s` is a lower bound of the time that
+takes at the robot's thrust limit (and within its speed bound): the larger of two relaxations, each exact for
+a one-dimensional double integrator with the box of body-frame thrusts and per-axis speeds projected on it:
+
+- along the first contact normal the robot must move from -d to -d cos(angle) (behind the object to in
+  front of it), starting and ending with its planned relative velocities;
+- on the way round it must cross the ray through the middle of the arc it goes round, at least d out.
+
+:func:`handovers` lists a plan's hand-overs with the least time and the time there is; the offline planners
+refuse or repair a plan whose hand-over has less than ``1 + margin`` times the least time
+(:class:`planners.offline.config.HandoverConfig`). Derivation: ``docs/planner_design.md#hand-overs``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from impact_env.transport.scenario import Body, Scenario
+from planners.plan.types import PlanLike, PlannedImpact
+
+__all__ = ["Handover", "handovers", "least_handover_time_s", "least_time_1d_s", "unflyable_handovers"]
+
+_EPS = 1e-9
+
+
+@dataclass
+class Handover:
+    """Two consecutive impacts of ``robot`` on ``object`` (nothing else hits the object in between) whose
+    velocity changes are more than 90 degrees apart, so the robot must get round the object.
+
+    ``needed_s``: the least time getting round takes (:func:`least_handover_time_s`; inf if the object is
+    faster than the robot can be); ``available_s``: the time between the impacts."""
+
+    robot: str
+    object: str
+    t1_s: float
+    t2_s: float
+    angle_rad: float
+    needed_s: float
+
+    @property
+    def available_s(self) -> float:
+        return self.t2_s - self.t1_s
+
+    def flyable(self, margin: float) -> bool:
+        """True if the time between the impacts is at least ``1 + margin`` times the least time."""
+        return self.available_s >= (1.0 + margin) * self.needed_s - 1e-9
+
+    def describe(self, margin: float | None = None) -> str:
+        need = "can never get round (the object is faster than it can be)" if math.isinf(self.needed_s) else (
+            f"needs at least {self.needed_s:.2f} s" + (f" ({(1 + margin) * self.needed_s:.2f} s with the "
+                                                      f"{100 * margin:g} % margin)" if margin else ""))
+        return (f"{self.robot} round {self.object} between its impacts at {self.t1_s:.2f} s and {self.t2_s:.2f} s "
+                f"({math.degrees(self.angle_rad):.0f} degrees apart): {need}, has {self.available_s:.2f} s")
+
+    def to_dict(self) -> dict:
+        """For ``plan.stats`` (finite numbers only: an infinite least time is None)."""
+        return {"robot": self.robot, "object": self.object, "t1_s": self.t1_s, "t2_s": self.t2_s,
+                "angle_deg": math.degrees(self.angle_rad),
+                "needed_s": None if math.isinf(self.needed_s) else self.needed_s, "available_s": self.available_s}
+
+
+def _unit(v: np.ndarray) -> np.ndarray | None:
+    size = float(np.linalg.norm(v))
+    return None if size <= 1e-6 else v / size
+
+
+def handovers(plan: PlanLike, scenario: Scenario) -> list[Handover]:
+    """The plan's hand-overs (see :class:`Handover`), in time order, with their least times."""
+    out = []
+    ordered = sorted(plan.impacts, key=lambda i: i.time_s)
+    for j, first in enumerate(ordered):
+        # the robot's next impact, and the object's
+        nxt_robot = next((i for i in ordered[j + 1:] if i.robot == first.robot), None)
+        nxt_object = next((i for i in ordered[j + 1:] if i.object == first.object), None)
+        if nxt_robot is None or nxt_robot is not nxt_object:
+            continue
+        second = nxt_robot
+        n1 = _unit(np.subtract(first.object_velocity_after, first.object_velocity_before))
+        n2 = _unit(np.subtract(second.object_velocity_after, second.object_velocity_before))
+        if n1 is None or n2 is None or float(n1 @ n2) >= 0.0:
+            continue
+        robot, obj = scenario.body(first.robot), scenario.body(first.object)
+        out.append(Handover(first.robot, first.object, first.time_s, second.time_s,
+                            math.acos(float(np.clip(n1 @ n2, -1.0, 1.0))),
+                            least_handover_time_s(robot, obj, first, second)))
+    return out
+
+
+def unflyable_handovers(plan: PlanLike, scenario: Scenario, margin: float) -> list[Handover]:
+    """The hand-overs with less than ``1 + margin`` times their least time."""
+    return [h for h in handovers(plan, scenario) if not h.flyable(margin)]
+
+
+def least_handover_time_s(robot: Body, obj: Body, first: PlannedImpact, second: PlannedImpact) -> float:
+    """A lower bound of the time ``robot`` needs from its contact at impact ``first`` to its contact at
+    ``second`` on ``obj``, going round the object's disc (module docstring). Velocities are the plan's; the
+    contact normal of an impact is the direction of the object's velocity change (Eq. 6-7)."""
+    d = robot.radius_m + obj.radius_m
+    n1 = _unit(np.subtract(first.object_velocity_after, first.object_velocity_before))
+    n2 = _unit(np.subtract(second.object_velocity_after, second.object_velocity_before))
+    if n1 is None or n2 is None:
+        return 0.0
+    v_obj = np.asarray(first.object_velocity_after, dtype=float)
+    u1 = np.subtract(first.robot_velocity_after, first.object_velocity_after)  # relative, after the first impact
+    u2 = np.subtract(second.robot_velocity_before, second.object_velocity_before)  # and before the second
+    r1, r2 = -d * n1, -d * n2  # the contacts in the object's frame
+    along = _projected_bvp_s(robot, v_obj, n1, float(r1 @ n1), float(u1 @ n1), float(r2 @ n1), float(u2 @ n1))
+    side = math.inf
+    angle = math.atan2(float(n1[0] * n2[1] - n1[1] * n2[0]), float(n1 @ n2))  # from -n1 to -n2, in (-pi, pi]
+    for arc in (angle, angle - math.copysign(2 * math.pi, angle)):  # round the short side, then the long one
+        mid = np.array(  # -n1 rotated by arc / 2
+            [-n1[0] * math.cos(arc / 2) + n1[1] * math.sin(arc / 2),
+             -n1[1] * math.cos(arc / 2) - n1[0] * math.sin(arc / 2)])
+        # reach m . r >= d from (r1, u1), and (backwards in time) from (r2, u2): any velocity in between
+        out_s = _projected_reach_s(robot, v_obj, mid, float(r1 @ mid), float(u1 @ mid), d)
+        back_s = _projected_reach_s(robot, -v_obj, mid, float(r2 @ mid), -float(u2 @ mid), d)
+        side = min(side, out_s + back_s)
+    return float(max(along, side))
+
+
+def _limits(robot: Body, v_obj: np.ndarray, n: np.ndarray) -> tuple[float, float, float]:
+    """Along unit direction n: the largest acceleration (m/s^2, the box of body-frame thrusts at the robot's
+    heading) and the range of the robot's velocity relative to the object (m/s, from the per-axis speed
+    bound; unbounded without one)."""
+    c, s = math.cos(robot.heading_rad), math.sin(robot.heading_rad)
+    fx, fy = robot.thrust_limit_N
+    accel = (fx * abs(n[0] * c + n[1] * s) + fy * abs(-n[0] * s + n[1] * c)) / robot.mass_kg
+    if robot.velocity_bound_mps is None:
+        return accel, -math.inf, math.inf
+    speed = robot.velocity_bound_mps[0] * abs(n[0]) + robot.velocity_bound_mps[1] * abs(n[1])
+    v_n = float(v_obj @ n)
+    return accel, -speed - v_n, speed - v_n
+
+
+def _projected_bvp_s(robot: Body, v_obj: np.ndarray, n: np.ndarray, x0: float, w0: float, x1: float,
+                     w1: float) -> float:
+    accel, low, high = _limits(robot, v_obj, n)
+    return least_time_1d_s(x1 - x0, w0, w1, accel, low, high)
+
+
+def _projected_reach_s(robot: Body, v_obj: np.ndarray, n: np.ndarray, x0: float, w0: float, target: float) -> float:
+    """The least time from (x0, w0) to x >= target along n, any end velocity (full thrust toward it)."""
+    accel, _, high = _limits(robot, v_obj, n)
+    gap = target - x0
+    if gap <= 0.0:
+        return 0.0
+    if accel <= _EPS:
+        return math.inf if w0 <= 0.0 else gap / w0
+    free = (-w0 + math.sqrt(w0 * w0 + 2.0 * accel * gap)) / accel  # full thrust all the way
+    if math.isinf(high):
+        return free
+    high = max(high, w0)  # already faster than the bound: it may keep that speed, not gain more
+    t_cap = (high - w0) / accel  # until the speed bound
+    gap_cap = w0 * t_cap + 0.5 * accel * t_cap ** 2
+    if gap <= gap_cap:
+        return free
+    return math.inf if high <= 0.0 else t_cap + (gap - gap_cap) / high
+
+
+def least_time_1d_s(distance: float, w0: float, w1: float, accel: float, low: float = -math.inf,
+                    high: float = math.inf) -> float:
+    """The least time (s) in which a one-dimensional double integrator with ``|a| <= accel`` (m/s^2) and its
+    velocity in ``[low, high]`` (m/s) moves ``distance`` (m) from velocity ``w0`` to ``w1``; inf if it cannot
+    (an end velocity outside the range, or no acceleration).
+
+    For a duration T >= |w1 - w0| / accel the reachable displacements form the interval [D_lo(T), D_hi(T)]:
+    D_hi accelerates to a peak (capped at ``high``) and brakes to w1, D_lo the mirror. D_hi is convex in T
+    (its slope is the peak velocity) and D_lo concave, so the least T is the shortest duration or a root of
+    D_hi(T) = distance or D_lo(T) = distance: each a quadratic or linear piece, solved in closed form."""
+    tol = 1e-12
+    if not (low - tol <= w0 <= high + tol and low - tol <= w1 <= high + tol):
+        return math.inf
+    if accel <= _EPS:
+        return 0.0 if abs(distance) < tol and abs(w1 - w0) < tol else (
+            distance / w0 if abs(w1 - w0) < tol and w0 != 0 and distance / w0 > 0 else math.inf)
+    t0 = abs(w1 - w0) / accel
+    candidates = [t0] + _roots(distance, w0, w1, accel, high) + _roots(-distance, -w0, -w1, accel, -low)
+    for t in sorted(c for c in candidates if c >= t0 - 1e-12):
+        t = max(t, t0)
+        lo = -_d_hi(t, -w0, -w1, accel, -low)
+        hi = _d_hi(t, w0, w1, accel, high)
+        scale = 1e-9 * max(1.0, abs(distance))
+        if lo - scale <= distance <= hi + scale:
+            return t
+    return math.inf
+
+
+def _d_hi(t: float, w0: float, w1: float, accel: float, high: float) -> float:
+    """The largest displacement in time t (>= |w1 - w0| / accel) from w0 to w1, velocity at most ``high``."""
+    peak = 0.5 * (accel * t + w0 + w1)
+    if peak <= high:
+        return (2.0 * peak * peak - w0 * w0 - w1 * w1) / (2.0 * accel)
+    t_up, t_down = (high - w0) / accel, (high - w1) / accel
+    return (2.0 * high * high - w0 * w0 - w1 * w1) / (2.0 * accel) + high * (t - t_up - t_down)
+
+
+def _roots(distance: float, w0: float, w1: float, accel: float, high: float) -> list[float]:
+    """The durations t at which D_hi(t) = distance: on the uncapped piece a quadratic in the peak velocity
+    (peak = (accel t + w0 + w1) / 2, peak^2 = accel distance + (w0^2 + w1^2) / 2), on the capped piece linear."""
+    out = []
+    square = accel * distance + 0.5 * (w0 * w0 + w1 * w1)
+    if square >= 0.0:
+        for peak in (math.sqrt(square), -math.sqrt(square)):
+            if peak <= high:
+                out.append((2.0 * peak - w0 - w1) / accel)
+    if math.isfinite(high) and high > _EPS:
+        t_up, t_down = (high - w0) / accel, (high - w1) / accel
+        base = (2.0 * high * high - w0 * w0 - w1 * w1) / (2.0 * accel)
+        out.append(t_up + t_down + (distance - base) / high)
+    return [t for t in out if math.isfinite(t) and t >= 0.0]
