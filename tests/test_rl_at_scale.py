@@ -159,3 +159,50 @@ def test_run_one_extends_a_finished_run_in_a_subprocess(tmp_path, trained):
     assert json.loads((folder / "result.json").read_text())["env_steps"] == 64
     assert curve_frames(folder) == [32, 64]
     assert "resuming" in (tmp_path / "logs" / f"{first.name}.log").read_text()
+
+
+# ------------------------------------------------------------------------------------------------- the report
+def synthetic_cell(algorithm: str, task: str, seed: int, success: float, robustness: float) -> dict:
+    """A cell as rl_at_scale publishes it, with a chosen pymunk success rate and robustness."""
+    return {"algorithm": algorithm, "task": task, "seed": seed, "env_steps": 1000, "budget_env_steps": 1000,
+            "wall_s": 60.0 * (seed + 1), "env_steps_per_s": 100.0, "run": f"{algorithm}__{task}__s{seed}",
+            "evaluation": {"episodes": 10, "batched": {"success_rate": success, "robustness_mean": robustness},
+                           "pymunk": {"success_rate": success, "robustness_mean": robustness}}}
+
+
+def test_report_interquartile_means_and_files(tmp_path):
+    pytest.importorskip("rliable")
+    from benchmarks.rl_at_scale_report import aggregate, markdown, write_report
+    from impact_env.results_store import CellStore
+
+    successes = {"a": [0.0, 0.2, 0.4, 1.0], "b": [1.0, 1.0, 1.0, 1.0]}
+    cells = [synthetic_cell("sb3_ppo", task, seed, s, s - 0.5) for task, values in successes.items()
+             for seed, s in enumerate(values)]
+    cells.append(synthetic_cell("mappo", "a", 0, 0.5, 0.0))  # one seed of one task only
+    numbers = aggregate(cells, reps=200)
+    rows = {(r["algorithm"], r["task"]): r for r in numbers["rows"]}
+    a = rows[("sb3_ppo", "a")]
+    assert a["success_iqm"] == pytest.approx(0.3)  # the middle half of 0, 0.2, 0.4, 1
+    assert a["success_ci"][0] <= 0.3 <= a["success_ci"][1]
+    assert a["robustness_iqm"] == pytest.approx(-0.2)
+    assert rows[("sb3_ppo", "b")]["success_ci"] == [1.0, 1.0]
+    assert a["seeds"] == [0, 1, 2, 3] and a["budget_env_steps"] == [1000] and a["wall_s"] == [60, 120, 180, 240]
+    overall = {o["algorithm"]: o for o in numbers["overall"]}
+    # runs x tasks: 0, 0.2, 0.4, 1, 1, 1, 1, 1 -> the middle half is 0.4, 1, 1, 1
+    assert overall["sb3_ppo"]["iqm"] == pytest.approx(0.85)
+    assert overall["sb3_ppo"]["mean"] == pytest.approx(np.mean(successes["a"] + successes["b"]))
+    assert overall["sb3_ppo"]["tasks"] == ["a", "b"] and overall["sb3_ppo"]["seeds"] == [0, 1, 2, 3]
+    assert overall["mappo"]["seeds"] == [0] and overall["mappo"]["iqm"] == pytest.approx(0.5)
+    text = markdown(numbers)
+    assert "| a | sb3_ppo | 0,1,2,3 | 1k |" in text and "0 / 20 / 40 / 100" in text
+
+    store = CellStore(tmp_path / "cells.jsonl", cell_key)
+    for cell in cells:
+        store.put(cell)
+    (tmp_path / "curves").mkdir()
+    (tmp_path / "curves" / "sb3_ppo__a__s0.jsonl").write_text(
+        "".join(json.dumps({"frames": f, "wall_s": f / 10, "success_rate": f / 1000}) + "\n" for f in (500, 1000)))
+    write_report(tmp_path, reps=200)
+    for name in ("summary.md", "summary.json", "curves_steps.png", "curves_wall.png", "profile.png"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    assert json.loads((tmp_path / "summary.json").read_text())["overall"][0]["algorithm"] == "sb3_ppo"

@@ -6,11 +6,12 @@ trained through :class:`~impact_env.transport.batched.sb3_vec_env.TransportSB3Ve
 One run is one folder: ``model.zip``, ``vecnormalize.json`` and ``train.json`` (the checkpoint, written every
 ``--checkpoint-frames`` env-steps, each file atomically, in the package's pickle-free form that ``impact-env
 bench`` reads as a controller), ``state.json`` (env-steps and wall clock at that checkpoint, written last),
-``curve.jsonl`` (one line per PPO rollout: env-steps, wall clock, the finished training episodes' mean return,
-success rate and final robustness) and, when the budget is spent, ``result.json`` (the configuration, the
-budget, the wall clock and the final deterministic evaluation). A killed run started again with the same
-arguments resumes from its last checkpoint: the curve lines after it are dropped and the episodes in flight
-restart (so a resumed run is not bit-identical to an uninterrupted one). A finished run is not trained again.
+``curve.jsonl`` (one line per PPO rollout: env-steps, wall clock, the mean reward per env-step, and the
+finished training episodes' mean return, success rate and final robustness) and, when the budget is spent,
+``result.json`` (the configuration, the budget, the wall clock and the final deterministic evaluation). A
+killed run started again with the same arguments resumes from its last checkpoint: the curve lines after it
+are dropped and the episodes in flight restart (so a resumed run is not bit-identical to an uninterrupted
+one). A finished run is not trained again.
 
 The hyperparameters are :class:`Sb3PpoConfig`'s, the same for every scenario: the package's PPO baseline
 (``baselines/hyperparams/ppo.yml``: ``log_std_init`` -0.5, gamma 0.999, observation and reward normalisation)
@@ -144,11 +145,15 @@ def _curve_callback(curve: Path, wall_before: float):
             self.t0 = time.perf_counter()
             self.returns: list[float] = []
             self.robustness: list[float] = []
+            self.reward_sum, self.reward_count = 0.0, 0
 
         def wall_s(self) -> float:
             return wall_before + time.perf_counter() - self.t0
 
         def _on_step(self) -> bool:
+            raw = self.training_env.get_original_reward()  # VecNormalize's: the world's reward of this step
+            self.reward_sum += float(raw.sum())
+            self.reward_count += raw.size
             dones = self.locals["dones"]
             if dones.any():
                 infos = self.locals["infos"]
@@ -163,11 +168,14 @@ def _curve_callback(curve: Path, wall_before: float):
             row = {"frames": int(self.num_timesteps), "wall_s": round(self.wall_s(), 2), "episodes": n,
                    "return_mean": float(np.mean(self.returns)) if n else None,
                    "success_rate": float((rob > 0).mean()) if n else None,
-                   "robustness_mean": float(rob.mean()) if n else None}
+                   "robustness_mean": float(rob.mean()) if n else None,
+                   # every env-step's reward: a curve even where no episode ends within a rollout (long horizons)
+                   "reward_per_step": self.reward_sum / max(self.reward_count, 1)}
             with curve.open("a", encoding="utf-8") as f:
                 f.write(json.dumps(row) + "\n")
             self.returns.clear()
             self.robustness.clear()
+            self.reward_sum, self.reward_count = 0.0, 0
 
     return CurveLogger()
 
