@@ -10,8 +10,9 @@ seeds; across scenarios, rliable's IQM, mean and optimality gap of the success r
 intervals (scenarios as tasks, seeds as runs; only the seeds that every scenario of the algorithm has, so that
 the score matrix is rectangular). Every row states its env-step budget, the wall clock per run and the seeds.
 Writes, each file atomically: ``summary.md`` (the tables), ``summary.json`` (the same numbers),
-``curves_steps.png`` and ``curves_wall.png`` (success rate of the finished training episodes against env-steps
-and against wall clock, per scenario: the mean over seeds, each seed thin) and ``profile.png`` (the
+``curves_steps.png`` and ``curves_wall.png`` (learning curves against env-steps and against wall clock, one
+panel a scenario, one line a seed: the reward per env-step of each rollout where the trainer logs it, else the
+finished training episodes' success rate) and ``profile.png`` (the
 performance profile of the success rate). Needs rliable and matplotlib (the ``[rl-analysis]`` extra).
 """
 
@@ -160,8 +161,21 @@ def _curves(out: Path) -> dict[str, list[dict]]:
     return curves
 
 
+def _curve_field(runs: list[list[dict]]) -> str:
+    """What a panel's curves show: the reward per env-step where the trainer logs it (every rollout has one),
+    else the training episodes' success rate, else their mean return (VMAS)."""
+    for field in ("reward_per_step", "success_rate", "return_mean"):
+        if any(r.get(field) is not None for run in runs for r in run):
+            return field
+    return "return_mean"
+
+
+LABELS = {"reward_per_step": "reward per env-step", "success_rate": "training success rate",
+          "return_mean": "training episode return"}
+
+
 def plot_curves(curves: dict[str, list[dict]], x: str, path: Path) -> Path | None:
-    """Success rate of the training episodes against ``x`` (``frames`` or ``wall_s``), one panel a task."""
+    """Learning curves against ``x`` (``frames`` or ``wall_s``), one panel a task (:func:`_curve_field`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -170,8 +184,7 @@ def plot_curves(curves: dict[str, list[dict]], x: str, path: Path) -> Path | Non
     by_task: dict[str, dict[str, list[list[dict]]]] = defaultdict(lambda: defaultdict(list))
     for name, rows in curves.items():
         algorithm, task, _ = name.split("__")
-        by_task[task][algorithm].append([r for r in rows if r.get("success_rate") is not None
-                                         or r.get("return_mean") is not None])
+        by_task[task][algorithm].append(rows)
     if not by_task:
         return None
     tasks = sorted(by_task)
@@ -180,19 +193,18 @@ def plot_curves(curves: dict[str, list[dict]], x: str, path: Path) -> Path | Non
     fig, axes = plt.subplots(rows_n, cols, figsize=(4 * cols, 3 * rows_n), squeeze=False)
     colours = {a: f"C{i}" for i, a in enumerate(_order({a for t in by_task.values() for a in t}))}
     for ax, task in zip(axes.flat, tasks):
-        for algorithm, runs in by_task[task].items():
-            field = "success_rate" if any(r.get("success_rate") is not None for run in runs for r in run) \
-                else "return_mean"
+        field = _curve_field([run for runs in by_task[task].values() for run in runs])
+        for algorithm, runs in sorted(by_task[task].items()):
             for run in runs:
                 pts = [(r[x], r[field]) for r in run if r.get(field) is not None]
                 if pts:
                     xs, ys = zip(*pts)
-                    ax.plot(np.array(xs) / (1e6 if x == "frames" else 60), ys, color=colours[algorithm], alpha=0.35,
-                            lw=0.8)
+                    ax.plot(np.array(xs) / (1e6 if x == "frames" else 60), ys, color=colours[algorithm], alpha=0.6,
+                            lw=0.9)
             ax.plot([], [], color=colours[algorithm], label=f"{algorithm} ({len(runs)} seeds)")
         ax.set_title(task, fontsize=9)
         ax.set_xlabel("env-steps (M)" if x == "frames" else "wall clock (min)")
-        ax.set_ylabel("training success rate")
+        ax.set_ylabel(LABELS[field], fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
     for ax in list(axes.flat)[len(tasks):]:
