@@ -194,7 +194,7 @@ def test_report_interquartile_means_and_files(tmp_path):
     assert overall["sb3_ppo"]["tasks"] == ["a", "b"] and overall["sb3_ppo"]["seeds"] == [0, 1, 2, 3]
     assert overall["mappo"]["seeds"] == [0] and overall["mappo"]["iqm"] == pytest.approx(0.5)
     text = markdown(numbers)
-    assert "| a | sb3_ppo | 0,1,2,3 | 1k |" in text and "0 / 20 / 40 / 100" in text
+    assert "| a | sb3_ppo | 0,1,2,3 | 1k | 2.5 | 100 | 10 |" in text and "0 / 20 / 40 / 100" in text
 
     store = CellStore(tmp_path / "cells.jsonl", cell_key)
     for cell in cells:
