@@ -111,7 +111,12 @@ def aggregate(cells: list[dict], reps: int = 2000, seed: int = 0) -> dict[str, A
                         **{name: float(point[algorithm][i]) for i, name in enumerate(AGGREGATES)},
                         **{f"{name}_ci": [float(interval[algorithm][0, i]), float(interval[algorithm][1, i])]
                            for i, name in enumerate(AGGREGATES)}})
-    return {"rows": rows, "overall": overall, "reps": reps}
+    gaps = [(abs(c["evaluation"]["batched"]["success_rate"] - c["evaluation"]["pymunk"]["success_rate"]), c["run"])
+            for c in cells if "batched" in c["evaluation"] and "pymunk" in c["evaluation"]]
+    transfer = None if not gaps else {"runs": len(gaps), "mean_abs_points": 100 * float(np.mean([g for g, _ in gaps])),
+                                      "max_abs_points": 100 * max(gaps)[0], "max_run": max(gaps)[1],
+                                      "within_5_points": sum(g <= 0.05 + 1e-12 for g, _ in gaps)}
+    return {"rows": rows, "overall": overall, "transfer": transfer, "reps": reps}
 
 
 def _fmt_ci(point: float, ci: list[float], scale: float = 1.0, digits: int = 0, sign: str = "") -> str:
@@ -154,6 +159,12 @@ def markdown(numbers: dict[str, Any]) -> str:
                      f"{', '.join(map(str, r['eval_episodes']))} | "
                      f"{_fmt_ci(r['success_iqm'], r['success_ci'], 100)} | {per_seed} | {batched} | "
                      f"{_fmt_ci(r['robustness_iqm'], r['robustness_ci'], 1, 3, '+')} |")
+    t = numbers.get("transfer")
+    if t:
+        lines += ["", f"Batched world against pymunk env, the same policy and seeds: the success rates differ by "
+                  f"{t['mean_abs_points']:.1f} points on average over {t['runs']} runs, at most "
+                  f"{t['max_abs_points']:.0f} ({t['max_run']}); {t['within_5_points']} of {t['runs']} runs within "
+                  "5 points."]
     lines += ["", "Each run's evaluation: the deterministic policy, `eval episodes` seeded episodes per world (seeds "
               "1,000,000 on), with the training's noise (thrust 5 %, objects start within 5 cm). The wall clock is "
               "training only (the evaluation is not in it), on the shared 2-core machine, one torch thread a run, "
