@@ -279,12 +279,43 @@ def write_report(out: Path = RESULTS, reps: int = 2000) -> dict[str, Any]:
     return numbers
 
 
+DOCS_BEGIN, DOCS_END = "<!-- results: made by python -m benchmarks.rl_at_scale_report --docs -->", "<!-- /results -->"
+
+
+def write_docs(out: Path, page: Path, images: Path, status: str = "") -> Path:
+    """Copy the report's tables (``summary.md``, its headings one level down) and figures into a docs page,
+    between its results markers (or in place of ``<!-- results -->``), and the figures into ``images``."""
+    for name in ("curves_steps.png", "curves_wall.png", "profile.png"):
+        if (out / name).exists():
+            write_atomic(images / name, (out / name).read_bytes())
+    rel = images.relative_to(page.parent)
+    body = (out / "summary.md").read_text(encoding="utf-8").replace("\n## ", "\n### ")
+    figures = "\n".join(f"![{alt}]({rel / name})" for name, alt in (
+        ("curves_steps.png", "learning curves against env-steps"), ("curves_wall.png", "learning curves against "
+         "wall clock"), ("profile.png", "performance profile of the success rate")) if (images / name).exists())
+    block = f"{DOCS_BEGIN}\n## Results\n\n{status}{body}\n{figures}\n{DOCS_END}"
+    text = page.read_text(encoding="utf-8")
+    if DOCS_BEGIN in text:
+        text = text[:text.index(DOCS_BEGIN)] + block + text[text.index(DOCS_END) + len(DOCS_END):]
+    else:
+        text = text.replace("<!-- results -->", block)
+    return write_atomic(page, text)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples")
+    parser.add_argument("--docs", action="store_true", help="also copy the tables and figures into "
+                        "docs/rl_at_scale.md and docs/img/rl_at_scale/")
+    parser.add_argument("--status", type=Path, default=None, help="--docs: a markdown file whose text goes first "
+                        "(what ran, what remains)")
     args = parser.parse_args(argv)
     numbers = write_report(args.out, args.reps)
+    if args.docs:
+        docs = Path(__file__).resolve().parents[1] / "docs"
+        status = args.status.read_text(encoding="utf-8") + "\n" if args.status else ""
+        write_docs(args.out, docs / "rl_at_scale.md", docs / "img" / "rl_at_scale", status)
     print(markdown(numbers))
 
 
