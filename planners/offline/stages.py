@@ -108,7 +108,8 @@ def solve_stages(staged: StagedModel, config: PlannerConfig, scenario_name: str,
         raise PlanTimeoutError(f"no plan found within the time limit of {config.solver_options.time_limit_s} s "
                                f"(try a longer --time-limit or fewer intervals)")
     x = result.x
-    stats: dict[str, Any] = {"refine_status": "skipped"}
+    stats: dict[str, Any] = {"refine_status": "skipped", "stage1_status": result.status.value,
+                             "stage1_nodes": result.nodes}
     if result.status == Status.OPTIMAL and config.refine_nodes != 0 and config.refine_time_s > 0:
         x, refine_stats = refine(staged, x, config)
         stats.update(refine_stats)
@@ -225,7 +226,7 @@ def refine(staged: StagedModel, x: np.ndarray, config: PlannerConfig) -> tuple[n
     if result.x is not None and result.status in stopped and not m.check(result.x, 1e-5):
         x = result.x
     return x, {"refine_s": result.solve_time_s, "refine_status": result.status.value,
-               "refine_objective": float(m.objective.value(x))}
+               "refine_objective": float(m.objective.value(x)), "refine_nodes_explored": result.nodes}
 
 
 def polish(staged: StagedModel, x: np.ndarray, config: PlannerConfig) -> np.ndarray:
