@@ -4,7 +4,8 @@ Both planners maximise one quantity (rho, the STL spatial robustness, or delta, 
 velocity error) and then, keeping it, prefer plans with fewer impacts and less acceleration:
 
 1. stage 1: maximise the primary quantity, to proven optimality or to ``solver_options.node_limit`` nodes
-   (the mission replanner's budget; stage 2 then runs only if it proved optimality);
+   (the offline planners' default budget and the mission replanner's; stage 2 then runs only if it proved
+   optimality), with a time limit as a safety net;
 2. stage 2: keep it (>= its optimum - 1e-7), minimise the number of impacts plus the L1 acceleration
    (Eq. 28), warm-started from stage 1, cut after ``refine_nodes`` branch-and-bound nodes: the same work on
    every machine, so the same plan however busy the machine is (``docs/planner_design.md#lexicographic-stages``);
@@ -105,6 +106,9 @@ def solve_stages(staged: StagedModel, config: PlannerConfig, scenario_name: str,
         raise PlannerError(f"solver {config.solver} failed on {scenario_name!r}: {result.status.value} "
                            f"{result.message}")
     if not result.has_solution:
+        if result.status == Status.NODE_LIMIT:
+            raise PlanTimeoutError(f"no plan found within the node budget of {config.solver_options.node_limit} "
+                                   f"nodes (try a larger --node-limit or fewer intervals)")
         raise PlanTimeoutError(f"no plan found within the time limit of {config.solver_options.time_limit_s} s "
                                f"(try a longer --time-limit or fewer intervals)")
     x = result.x
