@@ -94,10 +94,15 @@ class ResultsFileError(ImpactEnvError, ValueError):
     a complete cell: names the file and line, and what to do (usually: delete the line, rerun its cell)."""
 
 
+class GeneratedTaskError(ScenarioError):
+    """A generated task (:mod:`impact_env.transport.generate`) breaks one of its rules (names the body or region
+    and the rule), its family or seed is not one the generator knows, or no draw met the placement rules."""
+
+
 TYPED_ERRORS: tuple[type[ImpactEnvError], ...] = (
     ImpactEnvError, ScenarioError, STLError, STLSyntaxError, STLBindingError, STLUnsupportedError, ActionError,
     EnvConfigError, ControllerError, TetherError, HyperparameterError, ModelFileError, UntrustedFileError, EngineError,
-    ResultsFileError,
+    ResultsFileError, GeneratedTaskError,
 )
 
 
