@@ -66,6 +66,26 @@ def test_build_dataset_writes_both_sides_with_padded_spaces(tmp_path, monkeypatc
         assert not episode.actions[:, 3 * len(sc.robots):].any()  # the padding robots do nothing
         assert bool(episode.infos["is_success"][-1]) == split["episodes"][dataset_id][0]["success"]
 
+    # behaviour cloning on it (baselines/task_bc.py): the saved policy acts on the padded layout, in [-1, 1]
+    import torch
+
+    from baselines.task_bc import TaskBCConfig, TaskBCPolicy, _network, train_task_bc
+
+    run = train_task_bc(TaskBCConfig("throw_and_catch", datasets_dir=str(tmp_path / "ds"), epochs=2,
+                                     out=str(tmp_path / "bc")))
+    train = json.loads((run / "train.json").read_text())
+    assert train["steps"] == round(generate_task("throw_and_catch", int(split["train"][0].rsplit("_", 1)[1])).tf_s
+                                   / 0.1) and train["final_loss"] > 0
+    policy = TaskBCPolicy.load(run)
+    obs = minari.load_dataset(dataset_ids("throw_and_catch")[1]).sample_episodes(1)[0].observations[5]
+    action = policy.act(obs)
+    assert action.shape == (12,) and np.all(np.abs(action) <= 1) and np.array_equal(action, policy.act(obs))
+    payload = torch.load(run / "policy.pt", weights_only=True)
+    net = _network(payload["n_in"], payload["n_out"], tuple(payload["hidden"]))
+    net.load_state_dict(payload["state_dict"])
+    reference = net(torch.as_tensor((obs - policy.mean) / policy.std)[None]).detach().numpy()[0]
+    assert np.allclose(action, reference, atol=1e-5)  # the numpy forward pass is the network's
+
 
 def test_a_folder_with_too_few_tasks_is_refused(tmp_path, monkeypatch):
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "ds"))
