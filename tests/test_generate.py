@@ -97,10 +97,10 @@ def test_different_seeds_give_different_tasks():
 
 # The files of seed 0: a change here means every seed's task changed, so bump GENERATOR_VERSION.
 SEED_0_SHA256 = {
-    "throw_and_catch": "6a3e5a29729e56d7024cdd2246fbbeada923df9a7fbfbd749303990618ae6c46",
-    "obstacle_avoidance": "8557e4e19a2bd41d905194ee25839f420dcdf73c27332c0ffe182ec63e83916d",
-    "gaps": "0c4d212a8bf5659d463d73fd003a37d08884006339d741fcc731e52d658b4164",
-    "timed_visits": "7af10203a13b6b03e7f00e7bccf7b7f8aced6338f32e1835a7f17b3b309e2d92",
+    "throw_and_catch": "e73c194a65af57eec79a32fec34b250b399013a6c7ee4da5effec3f8a8762b49",
+    "obstacle_avoidance": "011e8c4ccbd92a9d3d97ec72cbd9795c82b8b7918587e4afe2e15c6bb7d88c5a",
+    "gaps": "e37fd2894e5ba779dea3ef0aed145e0f9f2f4ce1e102105e508bf26162d76b93",
+    "timed_visits": "c882ef31285cb51dba9dd93f5134a829f792e305a84c7904e4967574b283da3f",
 }
 
 

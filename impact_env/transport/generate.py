@@ -10,7 +10,8 @@ Families (:data:`FAMILIES`; sizes and ranges in :data:`FAMILY_LIMITS` and ``docs
   first between an object and its goal; no body may enter one;
 - ``gaps``: a wall across the table with one or two gaps of random height and width (the corridor family);
   objects start on one side and end in goals on the other;
-- ``timed_visits``: objects visit random regions, each within its own time window, and end held in the last.
+- ``timed_visits``: O1 visits one or two random regions, each within its own time window, and ends held in a
+  third; a second object is held in a goal of its own.
 
 Every task has 2-4 robots (the paper's freeflyer: 16.8 kg, 0.2 m, 2.8 N per axis, 0.3 m/s) and 1-2
 objects, and is drawn from ``random.Random`` seeded with the family and seed, using only ``random()``,
@@ -38,13 +39,14 @@ from impact_env.transport.scenario_toml import scenario_from_toml, scenario_to_t
 __all__ = ["FAMILIES", "FAMILY_LIMITS", "GENERATOR_VERSION", "FamilyLimits", "GeneratedTaskError", "check_family",
            "check_task", "generate_task", "generate_toml", "task_name", "write_task"]
 
-GENERATOR_VERSION = 1  # bumped whenever a seed's file changes
+GENERATOR_VERSION = 2  # bumped whenever a seed's file changes (2: timed visits' windows allow the first push)
 FAMILIES = ("throw_and_catch", "obstacle_avoidance", "gaps", "timed_visits")
 GRID_M = 0.05  # every drawn coordinate is a multiple of this
 HOLD_S = 5.0  # every task ends with each object held in its last region for this long
 CLEARANCE_M = 0.2  # free space between any two discs, a disc and a wall or obstacle, at the start and end
 MAX_REDRAWS = 200
-PACE_MPS = 0.25  # timed visits: windows open when an object at this speed could be there (bound 0.35 m/s)
+PACE_MPS = 0.15  # timed visits: windows open when an object at this speed could be there (bound 0.35 m/s)
+FIRST_HIT_S = 8.0  # timed visits: time allowed before the first push (a robot must reach the object first)
 MAX_TIMED_TF_S = 80.0
 
 ROBOT = {"mass_kg": 16.8, "radius_m": 0.2, "inertia_kgm2": 0.1594, "velocity_bound_mps": (0.3, 0.3),
@@ -68,7 +70,7 @@ FAMILY_LIMITS = {
     "throw_and_catch": FamilyLimits(robots=4, objects=2, regions=2, obstacles=0, obstacle_vertices=0),
     "obstacle_avoidance": FamilyLimits(robots=4, objects=2, regions=2, obstacles=2, obstacle_vertices=6),
     "gaps": FamilyLimits(robots=4, objects=2, regions=2, obstacles=3, obstacle_vertices=4),
-    "timed_visits": FamilyLimits(robots=4, objects=2, regions=5, obstacles=0, obstacle_vertices=0),
+    "timed_visits": FamilyLimits(robots=4, objects=2, regions=4, obstacles=0, obstacle_vertices=0),
 }
 
 
@@ -319,32 +321,32 @@ def _timed_visits(draw: _Draw) -> dict:
     n_robots, n_objects = draw.integer(2, 4), draw.integer(1, 2)
     layout = _Layout(width, height)
     starts = [layout.free_point(draw) for _ in range(n_objects)]
-    regions, windows, holds, arrivals = [], [], [], []
-    for i in range(n_objects):
-        # O1 visits 2 or 3 regions, O2 two; each object's last region is the one it is held in
-        t, pos = 0.0, starts[i]
-        n = draw.integer(2, 3) if i == 0 else 2
-        for k in range(n):
-            name = f"V{i + 1}{chr(ord('A') + k)}"
-            b = layout.free_box(draw, draw.grid(0.8, 1.1, 0.1), far_from=(pos, 1.2))
-            centre = ((b[0] + b[1]) / 2, (b[2] + b[3]) / 2)
-            t = float(math.ceil(t + math.dist(pos, centre) / PACE_MPS))  # earliest arrival at the visit pace
-            regions.append((name, b))
-            if k < n - 1:
-                windows.append((f"O{i + 1}", name, t, t + draw.grid(8.0, 12.0, 1.0)))
-            else:
-                holds.append((f"O{i + 1}", name))
-                arrivals.append(t)
-            pos = centre
-    tf = max(max(arrivals) + draw.grid(5.0, 10.0, 1.0), max(w[3] for w in windows))
+    regions, windows = [], []
+    # O1 visits 1 or 2 regions, each within its window, and is held in a third; O2 (if any) is held in a goal
+    t, pos = FIRST_HIT_S, starts[0]
+    n = draw.integer(2, 3)
+    for k in range(n):
+        name = f"V{chr(ord('A') + k)}"
+        b = layout.free_box(draw, draw.grid(1.0, 1.2, 0.1), far_from=(pos, 1.2))
+        centre = ((b[0] + b[1]) / 2, (b[2] + b[3]) / 2)
+        t = float(math.ceil(t + math.dist(pos, centre) / PACE_MPS))  # earliest arrival at the visit pace
+        regions.append((name, b))
+        if k < n - 1:
+            windows.append(("O1", name, t, t + draw.grid(12.0, 16.0, 1.0)))
+        pos = centre
+    tf = max(t + draw.grid(6.0, 10.0, 1.0), max(w[3] for w in windows))
+    holds = [("O1", regions[-1][0])]
+    if n_objects == 2:
+        regions.append(("goal2", layout.free_box(draw, draw.grid(1.0, 1.2, 0.1), far_from=(starts[1], 1.5))))
+        holds.append(("O2", "goal2"))
     if tf > MAX_TIMED_TF_S:
         raise _Redraw
     clauses = [f"F{_window(a, b)} in({obj}, {name})" for obj, name, a, b in windows] + _holds(holds, tf)
     objects = [_body(f"O{i + 1}", p, robot=False) for i, p in enumerate(starts)]
     return {"world": (width, height), "tf_s": tf, "regions": regions, "obstacles": [], "objects": objects,
             "robots": _robots(draw, layout, n_robots), "task": clauses,
-            "description": f"{n_robots} robots take {n_objects} object(s) through timed visits, each held in its last "
-                           "region."}
+            "description": f"{n_robots} robots: O1 visits {n - 1} region(s), each within its window, and is held in "
+                           f"a last one{'; O2 is held in its goal' if n_objects == 2 else ''}."}
 
 
 _FAMILY_DRAWS = {"throw_and_catch": _throw_and_catch, "obstacle_avoidance": _obstacle_avoidance, "gaps": _gaps,
