@@ -50,8 +50,9 @@ class FilterConfig:
 
     node_limit: int = 2000
     """Branch-and-bound nodes of stage 1 (the deterministic budget)."""
-    time_limit_s: float = 300.0
-    """Wall-clock safety net of stage 1 (s); a verdict it decided is marked ``budget = "time"``."""
+    time_limit_s: float = 1800.0
+    """Wall-clock safety net of stage 1 (s), far above what the node budget takes on an idle machine (10-60 s);
+    a verdict it decided is marked ``budget = "time"``."""
     min_robustness_m: float = 1e-3
     """Keep a task only if the plan's rho exceeds this (m): "rho > 0" beyond the solver's tolerances."""
     threads: int = 1
