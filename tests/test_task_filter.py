@@ -47,7 +47,7 @@ def test_cli_filter_keeps_a_planned_task_with_its_plan_and_resumes(tmp_path, cap
     assert main(["filter", "--family", "throw_and_catch", "--seeds", "0", "--out", str(out)]) == 0
 
 
-def test_a_budget_too_small_for_a_plan_drops_the_task_with_its_reason():
+def test_a_plan_below_the_robustness_floor_drops_the_task_with_its_reason():
     verdict, plan = filter_task("throw_and_catch", 0, FilterConfig(min_robustness_m=10.0))
     assert plan is None and not verdict.kept and verdict.reason == "low_robustness"
     assert verdict.robustness_m is not None and verdict.robustness_m < 10.0
