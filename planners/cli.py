@@ -11,7 +11,8 @@ single files (for one scenario). A comma-separated list of scenarios is planned 
 engine (planners/offline/batch.py), one ``<scenario>.json`` and ``.png`` each in ``--out``. Every output path is
 checked before the solve.
 
-Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``); prints the model size,
+Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``), with ``impact-env filter``
+(:mod:`planners.task_filter`); prints the model size,
 progress at most once a second, then the robustness, solve time, gap and one line per planned impact. Exit
 codes: 0 plan found (optimal within the gap); 3 node budget or time limit reached with a plan (still written,
 with a warning giving its gap); 2 any error that ``impact_env.cli.main`` reports in one line (bad options,
@@ -102,6 +103,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     add_engine_arguments(p)  # a list of scenarios (impact-env plan a,b,c) is planned side by side
     p.set_defaults(func=_cmd_plan)
+    from planners.task_filter import register as register_filter
+
+    register_filter(subparsers)  # impact-env filter: generated tasks kept if the MILP plans them
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
