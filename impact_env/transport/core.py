@@ -247,7 +247,7 @@ class TransportCore:
         limits are never exceeded); NaN or infinite values raise :class:`ActionError`, since no clipping can
         make sense of them.
         """
-        if isinstance(action, np.ndarray) and action.dtype.kind == "f" and action.shape == self._action_shapes[0]:
+        if type(action) is np.ndarray and action.dtype.kind == "f" and action.shape == self._action_shapes[0]:
             values = action.tolist()  # the common case, kept fast
         else:
             values = numbers_of(action, self._action_shapes, "action", "Fx, Fy, torque per robot")
