@@ -21,13 +21,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("stable_baselines3")
-
-from baselines import model_files  # noqa: E402
-from impact_env.cli import main  # noqa: E402
-from impact_env.errors import ModelFileError  # noqa: E402
-from tests.helpers import one_line_error  # noqa: E402
+from baselines import model_files
+from impact_env.cli import main
+from impact_env.errors import ModelFileError
+from tests.helpers import one_line_error
+from tests.optional import requires
 from tests.paths import DATA
+
+pytestmark = requires("stable_baselines3")  # looked up, not imported: the tests import it when they run
 
 MODELS = DATA / "models"
 

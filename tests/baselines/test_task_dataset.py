@@ -12,14 +12,15 @@ import shutil
 import numpy as np
 import pytest
 
-pytest.importorskip("minari")
-
-from baselines.task_dataset import DatasetConfig, build_dataset, dataset_ids, is_heldout, split_tasks  # noqa: E402
-from impact_env.cli import main  # noqa: E402
-from impact_env.errors import ImpactEnvError  # noqa: E402
-from impact_env.transport.generate import FAMILY_LIMITS, generate_task  # noqa: E402
-from impact_env.transport.task_observation import TaskObservation  # noqa: E402
+from baselines.task_dataset import DatasetConfig, build_dataset, dataset_ids, is_heldout, split_tasks
+from impact_env.cli import main
+from impact_env.errors import ImpactEnvError
+from impact_env.transport.generate import FAMILY_LIMITS, generate_task
+from impact_env.transport.task_observation import TaskObservation
+from tests.optional import requires
 from tests.paths import DATA
+
+pytestmark = requires("minari")  # looked up, not imported: the tests import it when they run
 
 GENERATED = DATA / "generated"
 

@@ -9,15 +9,20 @@ import json
 import shutil
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
 
-pytest.importorskip("stable_baselines3")
+from benchmarks import rl_at_scale
+from benchmarks.rl_at_scale import Run, cell_key, publish, queue, run_one, status
+from tests.optional import requires
 
-from baselines.batched.sb3_ppo import Sb3PpoConfig, run  # noqa: E402
-from benchmarks import rl_at_scale  # noqa: E402
-from benchmarks.rl_at_scale import Run, cell_key, publish, queue, run_one, status  # noqa: E402
+if TYPE_CHECKING:
+    from baselines.batched.sb3_ppo import Sb3PpoConfig
+
+# SB3 (and torch) looked up, not imported, while the suite is collected: the tests import the trainer when they run
+pytestmark = requires("stable_baselines3")
 
 SCENARIO = "throw_and_catch_exp"  # the shortest horizon (200 steps): the final evaluation stays cheap
 TINY = {"num_envs": 4, "n_steps": 8, "batch_size": 16, "n_epochs": 1, "checkpoint_frames": 32, "eval_episodes": 2,
@@ -25,7 +30,16 @@ TINY = {"num_envs": 4, "n_steps": 8, "batch_size": 16, "n_epochs": 1, "checkpoin
 
 
 def tiny(frames: int, seed: int = 0, **kw) -> Sb3PpoConfig:
+    from baselines.batched.sb3_ppo import Sb3PpoConfig
+
     return Sb3PpoConfig(SCENARIO, seed=seed, frames=frames, **{**TINY, **kw})
+
+
+def run(config: Sb3PpoConfig, folder: Path, **kw):
+    """baselines.batched.sb3_ppo.run, imported when a test trains."""
+    from baselines.batched.sb3_ppo import run as train
+
+    return train(config, folder, **kw)
 
 
 def curve_frames(folder: Path) -> list[int]:
@@ -89,6 +103,8 @@ def test_sb3_run_refuses_a_folder_of_other_settings(tmp_path, trained):
 
 
 def test_sb3_config_errors():
+    from baselines.batched.sb3_ppo import Sb3PpoConfig
+
     with pytest.raises(ValueError, match="batch_size"):
         Sb3PpoConfig(SCENARIO, num_envs=4, n_steps=8, batch_size=5)
     with pytest.raises(ValueError, match="frames"):
