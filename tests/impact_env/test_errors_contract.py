@@ -23,12 +23,21 @@ def exception_classes() -> dict[str, Path]:
     found: dict[str, Path] = {}
     for package in ("impact_env", "planners", "baselines"):
         for path in sorted((ROOT / package).rglob("*.py")):
-            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            for node in ast.walk(tree):
                 if isinstance(node, ast.ClassDef):
                     bases = {b.id if isinstance(b, ast.Name) else getattr(b, "attr", "") for b in node.bases}
-                    if bases & known or node.name.endswith("Error"):
+                    if (bases & known or node.name.endswith("Error")) and not internal_signal(node.name, tree):
                         found[node.name] = path
     return found
+
+
+def internal_signal(name: str, tree: ast.Module) -> bool:
+    """A private exception its own module raises and catches (impact_env.stl.compiled's ``_NotCompilable``:
+    "fall back to the Python monitor"): control flow inside one module, never what a caller sees."""
+    caught = {n.id for h in ast.walk(tree) if isinstance(h, ast.ExceptHandler) and h.type is not None
+              for n in ast.walk(h.type) if isinstance(n, ast.Name)}
+    return name.startswith("_") and name in caught
 
 
 def test_every_exception_class_is_defined_in_an_errors_module_and_listed():

@@ -14,7 +14,6 @@ import pytest
 
 from impact_env.cli import main
 from impact_env.transport.scenario import load_scenario
-from planners.cli import format_progress, progress_printer
 from planners.errors import PlanTimeoutError
 from planners.offline.solvers.base import Progress
 from planners.plan import Plan
@@ -115,6 +114,8 @@ def test_a_node_budget_reached_keeps_the_plan_warns_and_exits_3(tmp_path, capsys
 
 
 def test_progress_lines_are_throttled_to_one_per_period(capsys):
+    from planners.cli import format_progress, progress_printer  # matplotlib comes with it: not at collection
+
     now = [0.0]
     report = progress_printer(period_s=1.0, clock=lambda: now[0])
     for t in (0.0, 0.3, 0.9, 1.0, 1.5, 2.2):

@@ -9,7 +9,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from scipy import stats
 
 from impact_env.envs import TransportEnv
 from impact_env.transport.batched import BatchedTransportWorld
@@ -43,6 +42,8 @@ def batched_finals(name: str, episodes: int) -> np.ndarray:
 
 
 def check(name: str, episodes: int) -> None:
+    from scipy import stats  # imported when a test runs: collecting the suite does not need scipy.stats
+
     ref, got = pymunk_finals(name, episodes), batched_finals(name, episodes)
     result = stats.ks_2samp(ref, got)
     print(f"{name}: KS p = {result.pvalue:.3f} ({episodes} episodes each; mean final robustness "

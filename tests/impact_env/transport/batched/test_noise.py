@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from scipy import stats
 
 from impact_env.transport.batched import BatchedTransportWorld, episode
 from impact_env.transport.scenario import load_scenario, scenario_from_dict
@@ -15,6 +14,8 @@ from tests.helpers import two_body_dict
 
 
 def test_starts_are_uniform_in_the_noise_disc_and_clear():
+    from scipy import stats  # imported when the test runs, not while the suite is collected
+
     sc = load_scenario("two_objects")
     noise = 0.3
     world = BatchedTransportWorld(sc, 4000, dtype=torch.float64, initial_position_noise_m=noise)
@@ -51,6 +52,8 @@ def test_starts_next_to_an_obstacle_are_redrawn():
 
 
 def test_thrust_noise_is_multiplicative_and_clipped_to_the_limits():
+    from scipy import stats  # imported when the test runs, not while the suite is collected
+
     limits = torch.tensor([2.8, 2.8, 0.2], dtype=torch.float64).reshape(3, 1, 1)
     n = 20000
     seeds = torch.arange(n)
@@ -70,6 +73,8 @@ def test_thrust_noise_is_multiplicative_and_clipped_to_the_limits():
 def test_post_impact_velocity_error_is_uniform_on_top_of_eq5():
     """Head-on robot-object impacts in 2000 envs: the object leaves with Eq. (5) plus a uniform draw per axis
     in [-noise, noise]; the robot's own velocity is Eq. (5) unchanged."""
+    from scipy import stats  # imported when the test runs, not while the suite is collected
+
     noise, e = 0.02, 0.5
     sc = scenario_from_dict(two_body_dict(e=e, robot_vel=(0.3, 0.0), control_period_s=0.01, substeps=1))
     world = BatchedTransportWorld(sc, 2000, dtype=torch.float64, impact_velocity_noise_mps=noise)

@@ -6,14 +6,18 @@ import numpy as np
 import pytest
 import torch
 
-pytest.importorskip("stable_baselines3")
+from impact_env.errors import EnvConfigError
+from impact_env.transport.batched import BatchedTransportWorld
+from tests.optional import requires
 
-from stable_baselines3 import PPO  # noqa: E402
-from stable_baselines3.common.vec_env import VecMonitor, VecNormalize  # noqa: E402
+# SB3 looked up, not imported, while the suite is collected (it brings tensorboard's stubs): the tests import it
+pytestmark = requires("stable_baselines3")
 
-from impact_env.errors import EnvConfigError  # noqa: E402
-from impact_env.transport.batched import BatchedTransportWorld  # noqa: E402
-from impact_env.transport.batched.sb3_vec_env import TransportSB3VecEnv  # noqa: E402
+
+def TransportSB3VecEnv(*args, **kwargs):  # noqa: N802 - stands for the class, imported when a test runs
+    from impact_env.transport.batched.sb3_vec_env import TransportSB3VecEnv
+
+    return TransportSB3VecEnv(*args, **kwargs)
 
 SCENARIO = "throw_and_catch_exp"  # 200 steps per episode
 
@@ -24,6 +28,8 @@ def actions_for(venv, seed: int, steps: int) -> np.ndarray:
 
 
 def test_spaces_and_one_step():
+    from stable_baselines3.common.vec_env import VecMonitor
+
     venv = TransportSB3VecEnv(SCENARIO, 3)
     assert venv.num_envs == 3 and venv.render_mode == "rgb_array"
     assert venv.observation_space.shape == (22,) and venv.action_space.shape == (6,)
@@ -93,6 +99,9 @@ def test_images_are_the_chosen_envs():
 def test_ppo_learns_a_few_hundred_steps_through_vec_monitor_and_vec_normalize():
     """SB3's own use of a VecEnv: PPO's rollouts (with episode ends inside them), VecMonitor's episode records
     and VecNormalize's running statistics, for 4 x 256 env steps."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
     venv = VecNormalize(VecMonitor(TransportSB3VecEnv(SCENARIO, 4, thrust_noise=0.05)))
     venv.seed(0)
     model = PPO("MlpPolicy", venv, n_steps=64, batch_size=128, n_epochs=2, seed=0, device="cpu",
