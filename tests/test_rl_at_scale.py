@@ -128,6 +128,15 @@ def test_status_and_publish(tmp_path, trained):
     assert sorted(p.name for p in (out / "curves").iterdir()) == [f"{trained.name}.jsonl", f"{partial.name}.jsonl"]
 
 
+def test_status_markdown_says_what_ran_and_what_remains(tmp_path, trained):
+    runs_dir = tmp_path / "runs"
+    shutil.copytree(trained, runs_dir / trained.name)
+    runs = queue(["sb3"], [0, 1], 64, [SCENARIO])
+    text = rl_at_scale.status_markdown(runs, runs_dir, "python -m benchmarks.rl_at_scale --frames 64")
+    assert "1 of the 2 runs of `python -m benchmarks.rl_at_scale --frames 64` finished" in text
+    assert "What remains:** sb3_ppo__throw_and_catch_exp__s1." in text
+
+
 def test_run_one_skips_a_finished_run_and_extends_a_smaller_budget(tmp_path, trained):
     runs_dir = tmp_path / "runs"
     shutil.copytree(trained, runs_dir / trained.name)
