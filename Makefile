@@ -1,6 +1,6 @@
 # Two entry points from a fresh clone (only Python 3.11 needed):
 #   make demo   - create .venv, install the package, run the main demo (video + JSON + plots in out/)
-#   make test   - create .venv, install with the [rl,dev,scip,tether,ray] extras, run the default (fast) test suite
+#   make test   - create .venv, install with the [rl,marl,rl-analysis,dev,scip,tether,ray] extras, run the default (fast) test suite
 # Further targets: make test-slow (long checks), make fuzz (10 minutes of property-based fuzzing),
 #   make bench (benchmarks), make bench-ray (local processes vs Ray, RLlib vs SB3 sampling), make lint,
 #   make wheel-check (sdist + wheel, smoke test of the wheel in a fresh venv), make docs (the documentation
@@ -35,7 +35,7 @@ $(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml setup.py impact_
 # test tools. torch is pinned again on the line that pulls RLlib.
 $(VENV)/.dev-installed: $(VENV)/.base-installed
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,dev,scip,tether,ray]'
+	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,marl,rl-analysis,dev,scip,tether,ray]'
 	touch $@
 
 # The main demo: plan the corridor (MILP, HiGHS), fly it with the expert (replanner + MPC) in the
@@ -90,7 +90,7 @@ results: $(VENV)/.dev-installed
 
 # the docs tools on top of the dev install (torch stays the pinned CPU build installed above)
 $(VENV)/.docs-installed: $(VENV)/.dev-installed
-	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,dev,scip,tether,ray,docs]'
+	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,marl,rl-analysis,dev,scip,tether,ray,docs]'
 	touch $@
 
 wheel-check: $(VENV)/.dev-installed

@@ -1,5 +1,5 @@
 """``impact-env train`` (baselines/train.py), ``bench`` (baselines/bench.py), ``record`` (baselines/record.py),
-``bc`` (baselines/bc.py), ``curves`` (baselines/curves.py)."""
+``dataset`` (baselines/task_dataset.py), ``bc`` (baselines/bc.py), ``curves`` (baselines/curves.py)."""
 
 from __future__ import annotations
 
@@ -112,6 +112,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_quiet(p, "no line per epoch")
     p.set_defaults(func=_bc)
 
+    p = subparsers.add_parser("dataset", help="expert episodes on a family's kept generated tasks as Minari datasets "
+                                              "(training and held-out)",
+                              description="Fly the plans of the kept tasks in TASKS_DIR (impact-env filter --out) "
+                                          "with the expert and store the episodes, padded to the family's "
+                                          "goal-conditioned layout, as two Minari datasets: "
+                                          "impact_env/generated_<family>/expert-v0 and .../heldout-v0.")
+    p.add_argument("--family", required=True, help="the task family")
+    p.add_argument("--tasks", required=True, metavar="TASKS_DIR", help="the folder impact-env filter --out wrote")
+    p.add_argument("--episodes-per-task", type=int, default=1, help="expert episodes per task (env seeds 0, 1, ...)")
+    p.add_argument("--heldout", type=float, default=0.2, help="share of tasks held out (default 0.2)")
+    p.add_argument("--split-seed", type=int, default=0, help="seed of the held-out split (default 0)")
+    p.add_argument("--max-tasks", type=int, default=None, help="use at most this many kept tasks (seed order)")
+    p.add_argument("--out", default=None, metavar="DIR", help="where the datasets go (default: Minari's own folder)")
+    p.add_argument("--thrust-noise", type=float, default=0.0, metavar="STD",
+                   help="multiplicative thrust noise of the episodes (0.05 = 5%%)")
+    p.add_argument("--initial-position-noise-m", type=float, default=0.0, metavar="R",
+                   help="objects start uniformly within this radius (m) of their position")
+    p.set_defaults(func=_dataset)
+
     p = subparsers.add_parser("curves", help="plot the evaluation curves of training runs")
     p.add_argument("runs", nargs="+", help="run folders written by `impact-env train` (its --out)")
     add_out(p, "curves.png and, with --table, the table (default: the current folder)")
@@ -161,6 +180,20 @@ def _curves(args: argparse.Namespace) -> int:
         write_atomic(args.table, training_table(curves) + "\n")
         print(f"wrote {args.table}")
     print(f"wrote {args.plot}")
+    return 0
+
+
+def _dataset(args: argparse.Namespace) -> int:
+    from baselines.task_dataset import DatasetConfig, build_dataset
+
+    options = {k: v for k, v in (("thrust_noise", args.thrust_noise),
+                                 ("initial_position_noise_m", args.initial_position_noise_m)) if v}
+    config = DatasetConfig(episodes_per_task=args.episodes_per_task, heldout_share=args.heldout,
+                           split_seed=args.split_seed, max_tasks=args.max_tasks, env_options=options or None)
+    train, heldout = build_dataset(args.family, args.tasks, config, out=args.out)
+    for dataset in (train, heldout):
+        if dataset is not None:
+            print(f"wrote {dataset.spec.dataset_id}: {dataset.total_episodes} episodes, {dataset.total_steps} steps")
     return 0
 
 

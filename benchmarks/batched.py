@@ -9,13 +9,15 @@ torch.compile's first compilation):
   subprocess in the Python given by ``--vmas-python`` or ``$VMAS_PYTHON`` (a venv with ``vmas`` and
   ``torch==2.13.0``: vmas pulls the legacy ``gym``, so it never enters this package's install); skipped with a
   message when neither is given;
-- the pymunk Gymnasium env (``TransportEnv``, one process), measured before and after the batched rows.
+- the pymunk Gymnasium env (``TransportEnv``, one process), measured before and after the batched rows, of
+  this tree and of the reference commit ``--ref`` (default 0378a64, the batched world's starting point, exported
+  with :func:`benchmarks.git_tree.export_tree` and run in its own process).
 
 Prints a markdown table and appends one JSON line per measurement to ``results/batched/throughput.jsonl``
 (rewritten atomically: temporary file, then ``os.replace``). Run from the repository's top folder:
 
     python -m benchmarks.batched [--scenario corridor] [--num-envs 1 16 256 1024 4096 16384] [--threads 2]
-        [--seconds 5] [--dtype float32] [--eager] [--vmas-python PATH]
+        [--seconds 5] [--dtype float32] [--eager] [--vmas-python PATH] [--ref 0378a64 | --ref ""]
 
 On a shared machine, compare rows of the same run (the load average is recorded with every line).
 """
@@ -34,6 +36,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
+
+from benchmarks.git_tree import export_tree, run_in_tree
 
 RESULTS = Path(__file__).resolve().parents[1] / "results" / "batched" / "throughput.jsonl"
 POOL = 64  # random action batches drawn up front and cycled, for every backend alike
@@ -86,6 +90,8 @@ def measure_batched(scenario: str, num_envs: int, seconds: float, dtype: str, de
 
 
 def measure_pymunk(scenario: str, seconds: float) -> dict:
+    """The Gym env's rate (one process), random actions, resets at the horizon. It imports the env from
+    ``impact_env.envs``, which both this tree and the reference commit's have, so that it runs in either."""
     from impact_env.envs import TransportEnv
 
     env = TransportEnv(scenario)
@@ -139,6 +145,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--eager", action="store_true", help="the batched world without torch.compile")
     parser.add_argument("--vmas-python", default=os.environ.get("VMAS_PYTHON"),
                         help="python of a venv with vmas (default: $VMAS_PYTHON)")
+    parser.add_argument("--ref", default="0378a64",
+                        help="commit whose pymunk Gym env is measured in the same run ('' to skip)")
     parser.add_argument("--no-write", action="store_true", help="print only, do not append to the results")
     args = parser.parse_args(argv)
 
@@ -155,7 +163,15 @@ def main(argv: list[str] | None = None) -> None:
         lines.append({**run, **result, "backend": backend, "num_envs": num_envs,
                       "load_average_1min": round(os.getloadavg()[0], 2)})
 
-    record("pymunk-gym", 1, measure_pymunk(args.scenario, args.seconds))
+    tree = export_tree(args.ref) if args.ref else None
+
+    def pymunk_rows() -> None:
+        record("pymunk-gym", 1, measure_pymunk(args.scenario, args.seconds))
+        if tree is not None:
+            record(f"pymunk-gym@{args.ref}", 1,
+                   run_in_tree(tree, "benchmarks.batched:measure_pymunk", args.scenario, args.seconds))
+
+    pymunk_rows()
     if not args.vmas_python:
         print("VMAS not measured: pass --vmas-python PATH (a venv with vmas and torch==2.13.0) or set VMAS_PYTHON")
     for n in args.num_envs:
@@ -170,7 +186,7 @@ def main(argv: list[str] | None = None) -> None:
             else:
                 record("vmas-cpu", n, result)
                 print(f"VMAS N={n}: {result['env_steps_per_s']:,.0f} env-steps/s", flush=True)
-    record("pymunk-gym", 1, measure_pymunk(args.scenario, args.seconds))
+    pymunk_rows()
     print_table(lines)
     if not args.no_write:
         append_results(lines)
@@ -178,22 +194,28 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def print_table(lines: list[dict]) -> None:
-    pymunk = [line["env_steps_per_s"] for line in lines if line["backend"] == "pymunk-gym"]
-    pymunk_rate = sum(pymunk) / len(pymunk)
+    """The run's markdown table: one row per num_envs, the batched rates against the pymunk env's (the mean of
+    its rows; of this tree and of the reference commit) and VMAS's at the same num_envs."""
+    pymunk_backends = sorted({line["backend"] for line in lines if line["backend"].startswith("pymunk-gym")})
+    pymunk_rate = {b: float(np.mean([line["env_steps_per_s"] for line in lines if line["backend"] == b]))
+                   for b in pymunk_backends}
     rates: dict[tuple[str, int], float] = {(line["backend"], line["num_envs"]): line["env_steps_per_s"]
-                                           for line in lines if line["backend"] != "pymunk-gym"}
+                                           for line in lines if not line["backend"].startswith("pymunk-gym")}
     backends = sorted({b for b, _ in rates}, key=lambda b: (b.startswith("vmas"), b))
     first = lines[0]
+    pymunk_text = "; ".join(f"{b}: {r:,.0f}" for b, r in pymunk_rate.items())
     print(f"\n{first['scenario']}, dense STL reward, {first['dtype']}, {first['threads']} torch threads; pymunk "
-          f"Gymnasium env (one process): {pymunk_rate:,.0f} env-steps/s (mean of {len(pymunk)})\n")
+          f"Gymnasium env (one process, mean of the runs before and after), env-steps/s: {pymunk_text}\n")
     batched = [b for b in backends if b.startswith("batched")]
     header = ["num_envs", *[f"{b} env-steps/s" for b in backends]]
-    header += [f"{b} / pymunk" for b in batched] + ([f"{b} / VMAS" for b in batched] if "vmas-cpu" in backends else [])
+    header += [f"{b} / {p}" for b in batched for p in pymunk_backends]
+    header += [f"{b} / VMAS" for b in batched] if "vmas-cpu" in backends else []
     print("| " + " | ".join(header) + " |")
     print("|" + "---:|" * len(header))
     for n in sorted({n for _, n in rates}):
         cells = [str(n)] + [f"{rates[(b, n)]:,.0f}" if (b, n) in rates else "-" for b in backends]
-        cells += [f"{rates[(b, n)] / pymunk_rate:.1f}x" if (b, n) in rates else "-" for b in batched]
+        cells += [f"{rates[(b, n)] / pymunk_rate[p]:.1f}x" if (b, n) in rates else "-" for b in batched
+                  for p in pymunk_backends]
         if "vmas-cpu" in backends:
             cells += [f"{rates[(b, n)] / rates[('vmas-cpu', n)]:.1f}x" if (b, n) in rates and ("vmas-cpu", n) in rates
                       else "-" for b in batched]

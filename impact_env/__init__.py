@@ -6,7 +6,9 @@ Importing the package registers the Gymnasium environments: one id per shipped s
 ``gym.make`` can import the package itself: ``gym.make("impact_env:impact_env/Corridor-v0")``. Where
 PettingZoo's registry exists it also registers ``impact_env/transport-v0``. PettingZoo's versioned module is
 :mod:`impact_env.transport_v0` (``parallel_env``, ``env``, ``raw_env``); ``impact_env.parallel_env``,
-``impact_env.env`` and ``impact_env.raw_env`` are the same functions.
+``impact_env.env`` and ``impact_env.raw_env`` are the same functions. Every transport id also has a vector entry
+point, the batched torch world (``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``,
+the ``[rl]`` extra: :mod:`impact_env.transport.batched.vector_env`); torch is imported only when one is made.
 
 Tether (anchor-pull) transport: ``impact_env/Tether-v1`` with ``station=`` (a shipped name or a path; its
 ``max_episode_steps`` from that file) and one id per shipped station (``TETHER_GYM_IDS``, e.g.
@@ -95,14 +97,30 @@ def _horizon_steps(task_source) -> int:
     return OnlineMonitor(task_source.formula, task_source.region_map(), task_source.control_period_s).horizon_steps
 
 
+TRANSPORT_ENTRY_POINT = "impact_env.transport.gym_env:TransportEnv"
+# the batched torch world behind gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point"); a
+# string, so that torch is imported only when a vector env is made
+TRANSPORT_VECTOR_ENTRY_POINT = "impact_env.transport.batched.vector_env:make_vector_env"
+
+
+def _add_vector_entry_points() -> None:
+    """Every registered id of the transport env (the shipped scenarios' ids, ``Transport-v0`` and any id registered
+    with ``scenario=``) gets the batched world as its vector entry point, unless it names one of its own."""
+    for spec in gymnasium.registry.values():
+        if spec.entry_point == TRANSPORT_ENTRY_POINT and spec.vector_entry_point is None:
+            spec.vector_entry_point = TRANSPORT_VECTOR_ENTRY_POINT
+
+
 def _register() -> None:
     for env_id, scenario in GYM_IDS.items():
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point="impact_env.transport.gym_env:TransportEnv",
-                               kwargs={"scenario": scenario},
+            gymnasium.register(id=env_id, entry_point=TRANSPORT_ENTRY_POINT, kwargs={"scenario": scenario},
+                               vector_entry_point=TRANSPORT_VECTOR_ENTRY_POINT,
                                max_episode_steps=_horizon_steps(load_scenario(scenario)))
     if "impact_env/Transport-v0" not in gymnasium.registry:
-        gymnasium.register(id="impact_env/Transport-v0", entry_point="impact_env.transport.gym_env:make_with_horizon")
+        gymnasium.register(id="impact_env/Transport-v0", entry_point="impact_env.transport.gym_env:make_with_horizon",
+                           vector_entry_point=TRANSPORT_VECTOR_ENTRY_POINT)
+    _add_vector_entry_points()
     for ids, cls in ((TETHER_GYM_IDS, "TetherEnv"), (TETHER_GYM_IDS_V0, "TetherEnvV0")):
         for env_id, station in ids.items():
             if env_id not in gymnasium.registry:

@@ -1,6 +1,7 @@
 """The ``impact-env`` command: list, draw and run scenarios and stations.
 
     impact-env scenarios
+    impact-env generate --family F --seed S --out task.toml [--count N]
     impact-env show SCENARIO [--plot setup.png | --out DIR]
     impact-env run SCENARIO --controller zero|random|expert|path/to/model.zip [--seed N] [--episodes K]
                    [--out DIR | --json result.json --plot run.png] [--video out.mp4] [--quiet]
@@ -95,6 +96,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return run_scenario(args)
 
 
+def _cmd_generate(args: argparse.Namespace) -> int:
+    from impact_env.transport.generate import task_name, write_task
+
+    if args.count < 1:
+        raise ImpactEnvError(f"--count must be >= 1, got {args.count}")
+    if args.seed < 0:
+        raise ImpactEnvError(f"--seed must be >= 0, got {args.seed}")
+    if args.count == 1 and args.out.endswith(".toml"):
+        paths = [write_task(args.family, args.seed, args.out)]
+    else:  # a folder of <family>_<seed>.toml
+        paths = [write_task(args.family, seed, f"{args.out}/{task_name(args.family, seed)}.toml")
+                 for seed in range(args.seed, args.seed + args.count)]
+    for path in paths if len(paths) <= 3 else paths[:1]:
+        print(f"wrote {path}")
+    if len(paths) > 3:
+        print(f"wrote {len(paths)} tasks (seeds {args.seed}..{args.seed + args.count - 1}) to {args.out}/")
+    return 0
+
+
 def _version() -> str:
     from impact_env import __version__
 
@@ -110,6 +130,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("scenarios", help="list the shipped scenarios and tether stations")
     p.set_defaults(func=_cmd_scenarios)
+
+    from impact_env.transport.generate import FAMILIES
+
+    p = sub.add_parser("generate", help="draw a random task of a family and write it as a scenario file",
+                       description="Draw task SEED of a family (the same file on every machine) and write it as an "
+                                   "ordinary scenario file, checked. Families: " + ", ".join(FAMILIES) + ".")
+    p.add_argument("--family", required=True, help=f"one of {', '.join(FAMILIES)}")
+    p.add_argument("--seed", type=int, default=0, help="the task's seed (the first one with --count)")
+    p.add_argument("--count", type=int, default=1, help="tasks to write, seeds SEED, SEED + 1, ... (default 1)")
+    p.add_argument("--out", default="task.toml",
+                   help="a .toml file, or a folder of <family>_<seed>.toml files (always a folder with --count > 1)")
+    p.set_defaults(func=_cmd_generate)
 
     p = sub.add_parser("show", help="draw a scenario or station (world, obstacles, regions, bodies, start and end)")
     p.add_argument("scenario", help="a shipped scenario or station name (impact-env scenarios) or a .toml file")

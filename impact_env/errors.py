@@ -102,10 +102,15 @@ class OutputPathError(ImpactEnvError, OSError):
     ``OSError`` too, so code that caught the file system's errors still catches it."""
 
 
+class GeneratedTaskError(ScenarioError):
+    """A generated task (:mod:`impact_env.transport.generate`) breaks one of its rules (names the body or region
+    and the rule), its family or seed is not one the generator knows, or no draw met the placement rules."""
+
+
 TYPED_ERRORS: tuple[type[ImpactEnvError], ...] = (
     ImpactEnvError, ScenarioError, STLError, STLSyntaxError, STLBindingError, STLUnsupportedError, ActionError,
     EnvConfigError, ControllerError, TetherError, HyperparameterError, ModelFileError, UntrustedFileError, EngineError,
-    ResultsFileError, OutputPathError,
+    ResultsFileError, OutputPathError, GeneratedTaskError,
 )
 
 

@@ -41,7 +41,8 @@ class UnflyableHandoverError(InfeasiblePlanError):
 
 
 class PlanTimeoutError(PlannerError):
-    """The solver hit its time limit. ``plan`` is the best plan found (or None) and ``mip_gap`` its gap."""
+    """The solver hit its time limit, or its node budget before it found any plan. ``plan`` is the best plan found
+    (or None) and ``mip_gap`` its gap."""
 
     def __init__(self, message: str, plan: Any = None, mip_gap: float | None = None) -> None:
         super().__init__(message)

@@ -162,6 +162,53 @@ def test_cells_flown_with_another_config_are_marked():
     assert robustness.flown_with(cells[0]) == robustness.config_fingerprint("paper")
 
 
+class FakePool(FakeEngine):
+    """The impact-robust benchmark's process pool, flying nothing (each job answered with a made-up episode)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__()
+        FakePool.last = self
+
+    def map(self, fn, jobs):
+        jobs = list(jobs)
+        self.jobs += jobs
+        return [{"seed": j[-1], "success": True, "robustness": 0.2, "impacts": 2, "final_speed": 0.01,
+                 "in_final_box": True, "mission_replans": 0, "wall_s": 0.0} for j in jobs]
+
+
+def test_the_impact_robust_benchmark_flies_a_part_of_the_grid_and_again_the_cells_of_another_config(tmp_path,
+                                                                                                   monkeypatch):
+    out = tmp_path / "ir"
+    for planner, source in (("sr", DATA / "plans" / "bench"), ("ir", DATA / "plans" / "ir")):
+        (out / "plans" / planner).mkdir(parents=True)
+        shutil.copy(source / "throw_and_catch_exp.json", out / "plans" / planner)  # no planning
+    monkeypatch.setattr(impact_robust, "ProcessPoolExecutor", FakePool)
+    grid = dict(scenarios=["throw_and_catch_exp"], stacks=["all", "paper"], seeds=3, out=out, workers=1)
+    impact_robust.run(factors=(1.0,), planners=("ir",), **grid)  # the guarantee's cells only
+    delta = json.loads((out / "plans" / "ir" / "throw_and_catch_exp.json").read_text())["delta_mps"]
+    assert [(j[1], j[2], j[4], j[5], j[6]) for j in FakePool.last.jobs] == [
+        ("ir", stack, "noise", delta, seed) for stack in ("all", "paper") for seed in range(3)]
+    store = impact_robust.cell_store(out)
+    assert len(store) == 2 and all(c["config"] == impact_robust.config_fingerprint(c["stack"]) for c in store.cells())
+    impact_robust.run(factors=(1.0,), planners=("ir",), stale=("all", "paper"), **grid)
+    assert FakePool.last.jobs == []  # flown with today's configs: not stale
+    cell = store.get(impact_robust.cell_key("throw_and_catch_exp", "ir", "all", "noise", delta))
+    store.put({key: value for key, value in cell.items() if key != "config"})  # as cells before 0.4
+    assert "| throw_and_catch_exp | impact noise 1 delta (0.05 m/s) | all * | ir | 3 |" in impact_robust.table(
+        store.cells(), ["throw_and_catch_exp"])
+    impact_robust.run(factors=(1.0,), planners=("ir",), **grid)
+    assert FakePool.last.jobs == []  # not asked to fly it again
+    impact_robust.run(factors=(1.0,), planners=("ir",), stale=("all",), **grid)
+    assert [(j[2], j[6]) for j in FakePool.last.jobs] == [("all", 0), ("all", 1), ("all", 2)]
+    assert "*" not in impact_robust.table(impact_robust.cell_store(out).cells(), ["throw_and_catch_exp"])
+    impact_robust.run(**{**grid, "seeds": 5, "stacks": ["paper"]}, factors=(1.0,), planners=("ir",))
+    assert [j[6] for j in FakePool.last.jobs] == [3, 4]  # more seeds asked: only the missing ones flown
+    cell = impact_robust.cell_store(out).get(impact_robust.cell_key("throw_and_catch_exp", "ir", "paper", "noise",
+                                                                   delta))
+    assert cell["episodes_requested"] == 5 and [e["seed"] for e in cell["episodes"]] == list(range(5))
+    assert [c[:3] for c in impact_robust.conditions(0.01, 50)[:2]] == [("nominal", 0.0, 1), ("noise", 0.01, 50)]
+
+
 def test_benchmarks_run_as_modules(tmp_path):
     out = tmp_path / "cells"
     convert_cells.convert("robustness", old_folder(tmp_path, "robustness"), out)

@@ -4,7 +4,8 @@
   (the README's quick start is also on the site) runs once, under the first place it appears.
 - A block that cannot run in a test is not a ```python block: commands are ```bash blocks. A python block that
   must not run here, or only in the slow suite, says so on the line above its fence, with its reason:
-  ``<!-- test: skip, why -->`` or ``<!-- test: slow, why -->``. No page needs either today.
+  ``<!-- test: skip, why -->`` or ``<!-- test: slow, why -->`` (docs/batched.md skips its compiled example
+  and runs its BenchMARL one in the slow suite).
 - Every ``impact-env ...`` line of a ```bash block parses with :func:`impact_env.cli.build_parser` (parsed, not
   run).
 - What the text names exists: the scripts run as ``python path.py`` or ``python -m module``, the repository

@@ -47,7 +47,8 @@ def test_environment_page_is_written_from_the_environment(page):
 
 def test_cli_page_has_every_subcommand():
     text = hooks.cli_help()
-    for name in ("scenarios", "show", "run", "train", "bench", "record", "bc", "curves", "plan"):
+    for name in ("scenarios", "generate", "show", "run", "train", "bench", "record", "bc", "dataset", "curves", "plan",
+                 "filter"):
         assert f"## {name}\n" in text and f"usage: impact-env {name}" in text
     page = (ROOT / "docs" / "cli.md").read_text()
     assert page.count("<!-- cli-help -->") == 1

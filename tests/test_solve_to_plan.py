@@ -15,6 +15,7 @@ from planners.offline.impact_robust import plan_impact_robust
 from planners.offline.solvers.base import Status
 from planners.offline.spatially_robust import plan_spatially_robust
 
+CUT_SCENARIO = "obstacle_avoidance"  # stage 1 does not prove its optimum at the root node
 PLANNERS = {
     "sr": (plan_spatially_robust, lambda plan: f"best robustness {plan.robustness:.4f} m"),
     "ir": (plan_impact_robust, lambda plan: f"best delta {plan.delta_mps:.5f} m/s"),
@@ -44,3 +45,23 @@ def test_a_time_limit_after_a_plan_raises_with_the_plan_the_stages_found(monkeyp
     assert str(info.value) == f"time limit of 60.0 s reached with gap 0.25; {best(plan)}"
     assert plan.stats["refine_status"] == plain.stats["refine_status"] != "skipped"
     assert "polish_s" in plan.stats
+
+
+def test_the_default_budget_is_work_and_a_node_cut_returns_the_same_plan_every_time():
+    """Stage 1's default budget is a node count (a time limit only as a safety net); a stage 1 cut by its node
+    limit is not an error: its best plan comes back, unproven, with how stage 1 ended, and the same work gives
+    the same plan on every call."""
+    from planners.offline.config import DEFAULT_NODE_BUDGET, DEFAULT_SAFETY_NET_S, PlannerConfig
+    from planners.offline.solvers.base import SolverOptions
+
+    budget = PlannerConfig().solver_options
+    assert (budget.node_limit, budget.time_limit_s) == (DEFAULT_NODE_BUDGET, DEFAULT_SAFETY_NET_S)
+    scenario = load_scenario(CUT_SCENARIO)
+    config = PlannerConfig(solver_options=SolverOptions(node_limit=1, time_limit_s=600.0), refine_nodes=0)
+    plans = [plan_spatially_robust(scenario, config) for _ in range(2)]
+    for plan in plans:
+        assert plan.stats["stage1_status"] == "node_limit" and plan.stats["stage1_nodes"] >= 1
+        assert plan.mip_gap > 1e-4 and plan.stats["refine_status"] == "skipped"  # stage 2 only after a proof
+    assert plans[0].fingerprint() == plans[1].fingerprint()
+    proven = plan_spatially_robust(scenario, PlannerConfig(refine_nodes=0))
+    assert proven.stats["stage1_status"] == "optimal" and proven.robustness > plans[0].robustness

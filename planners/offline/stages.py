@@ -4,7 +4,8 @@ Both planners maximise one quantity (rho, the STL spatial robustness, or delta, 
 velocity error) and then, keeping it, prefer plans with fewer impacts and less acceleration:
 
 1. stage 1: maximise the primary quantity, to proven optimality or to ``solver_options.node_limit`` nodes
-   (the mission replanner's budget; stage 2 then runs only if it proved optimality);
+   (the offline planners' default budget and the mission replanner's; stage 2 then runs only if it proved
+   optimality), with a time limit as a safety net;
 2. stage 2: keep it (>= its optimum - 1e-7), minimise the number of impacts plus the L1 acceleration
    (Eq. 28), warm-started from stage 1, cut after ``refine_nodes`` branch-and-bound nodes: the same work on
    every machine, so the same plan however busy the machine is (``docs/planner_design.md#lexicographic-stages``);
@@ -105,10 +106,14 @@ def solve_stages(staged: StagedModel, config: PlannerConfig, scenario_name: str,
         raise PlannerError(f"solver {config.solver} failed on {scenario_name!r}: {result.status.value} "
                            f"{result.message}")
     if not result.has_solution:
+        if result.status == Status.NODE_LIMIT:
+            raise PlanTimeoutError(f"no plan found within the node budget of {config.solver_options.node_limit} "
+                                   f"nodes (try a larger --node-limit or fewer intervals)")
         raise PlanTimeoutError(f"no plan found within the time limit of {config.solver_options.time_limit_s} s "
                                f"(try a longer --time-limit or fewer intervals)")
     x = result.x
-    stats: dict[str, Any] = {"refine_status": "skipped"}
+    stats: dict[str, Any] = {"refine_status": "skipped", "stage1_status": result.status.value,
+                             "stage1_nodes": result.nodes}
     if result.status == Status.OPTIMAL and config.refine_nodes != 0 and config.refine_time_s > 0:
         x, refine_stats = refine(staged, x, config)
         stats.update(refine_stats)
@@ -225,7 +230,7 @@ def refine(staged: StagedModel, x: np.ndarray, config: PlannerConfig) -> tuple[n
     if result.x is not None and result.status in stopped and not m.check(result.x, 1e-5):
         x = result.x
     return x, {"refine_s": result.solve_time_s, "refine_status": result.status.value,
-               "refine_objective": float(m.objective.value(x))}
+               "refine_objective": float(m.objective.value(x)), "refine_nodes_explored": result.nodes}
 
 
 def polish(staged: StagedModel, x: np.ndarray, config: PlannerConfig) -> np.ndarray:

@@ -263,16 +263,26 @@ class BatchedTransportWorld:
                               f"in [-1, 1]), got {a.dtype} {tuple(a.shape)}")
         return a.reshape(shapes[0]).to(self.dtype)
 
-    def step(self, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
-                                                    dict[str, torch.Tensor]]:
+    def step(self, actions: torch.Tensor, active: torch.Tensor | None = None) -> tuple[
+            torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
         """Apply actions [N, 3 R] (or [N, R, 3]) in [-1, 1] for one control period.
 
         Returns (obs [N, obs_size] float32, reward [N], terminated [N] bool, truncated [N] bool (all False:
         the horizon is part of the task), info) with info tensors ``robustness`` (m), ``is_success``,
         ``fuel_Ns`` (cumulative), ``time_s`` and ``impacts`` (contacts that ended in this step, int64).
+
+        ``active`` ([N] bool, default all): the envs outside it do not move (their state, clock and random
+        streams stay as they were; they return their current observation, reward 0, not terminated, 0
+        impacts), which is what Gymnasium's next-step autoreset needs for the envs it has just reset.
         """
         if self._obs is None:
             raise ImpactEnvError("call reset() before step()")
+        if active is not None:
+            active = self._mask(active)
+            if bool(active.all()):
+                active = None
+        if active is not None:
+            return self._step_active(actions, active)
         a = self._check_actions(actions)
         args = (a, self.ang, self.omg, self._key[0], self._key[1], self.step_count, self.episodes)
         if self._fused_period is None:
@@ -309,6 +319,36 @@ class BatchedTransportWorld:
         info = {"robustness": self.robustness, "is_success": self.robustness > 0.0, "fuel_Ns": self.fuel_Ns,
                 "time_s": self.step_count.to(self.dtype) * self.dt_s, "impacts": impacts}
         return obs, reward, terminated, torch.zeros_like(terminated), info
+
+    def _step_active(self, actions: Any, active: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """:meth:`step` of the envs of ``active`` only: every env is stepped (the others with zero actions, from
+        a clock held below the horizon), then the others get their state back."""
+        a = self._check_actions(actions)
+        keep = ~active
+        saved = (self.rows, self.ang, self.omg, self.last_wrenches, self.last_impact_step, self.step_count,
+                 self.fuel_Ns, self.robustness, self._potential, self.monitor.state, self._obs)
+        if bool(((self.step_count >= self.horizon_steps) & active).any()):
+            envs = ((self.step_count >= self.horizon_steps) & active).nonzero().squeeze(1).tolist()
+            raise ImpactEnvError(f"envs {envs[:10]}{' ...' if len(envs) > 10 else ''} reached the task's horizon "
+                                 f"({self.horizon_steps} steps); reset them first: reset(mask=terminated)")
+        self.step_count = torch.where(keep, torch.clamp(self.step_count, max=self.horizon_steps - 1), self.step_count)
+        obs, reward, terminated, truncated, info = self.step(torch.where(keep.unsqueeze(1), 0.0, a))
+
+        def back(new: torch.Tensor, old: torch.Tensor, env_last: bool = True) -> torch.Tensor:
+            return torch.where(keep if env_last else keep.reshape(-1, *([1] * (old.dim() - 1))), old, new)
+
+        (self.rows, self.ang, self.omg, self.last_wrenches, self.last_impact_step) = (
+            back(n, o) for n, o in zip((self.rows, self.ang, self.omg, self.last_wrenches, self.last_impact_step),
+                                       saved[:5]))
+        self.step_count, self.fuel_Ns, self.robustness, self._potential = (
+            back(n, o) for n, o in zip((self.step_count, self.fuel_Ns, self.robustness, self._potential), saved[5:9]))
+        self.monitor.state = tuple(back(n, o) for n, o in zip(self.monitor.state, saved[9]))
+        self._obs = obs = back(obs, saved[10], env_last=False)
+        reward = torch.where(keep, 0.0, reward)
+        terminated = terminated & active
+        info = {"robustness": self.robustness, "is_success": self.robustness > 0.0, "fuel_Ns": self.fuel_Ns,
+                "time_s": self.step_count.to(self.dtype) * self.dt_s, "impacts": torch.where(keep, 0, info["impacts"])}
+        return obs, reward, terminated, truncated, info
 
     def _reference_period(self, rows: torch.Tensor, w: torch.Tensor, force: torch.Tensor,
                           noise: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
