@@ -4,7 +4,7 @@ Table 1, sweeps: the episodes of ``impact-env bench`` (``baselines.bench._episod
 seeds) on throw_and_catch_exp with 5 % thrust noise and 5 cm start noise, run in this process one at a time
 (the baseline), on ``--workers`` local spawned processes, and as Ray tasks on a private local Ray instance with
 as many CPUs, twice: the first engine starts the instance, the second reuses it (``EngineConfig.keep_ray``), so
-its start-up row is what every Ray sweep after the first in a process costs (before 0.4 each one paid the
+its start-up row is what every Ray sweep after the first in a process costs (before 0.3.0 each one paid the
 first row's). Two workloads: ``zero`` and ``random`` controllers (a 200-step episode costs ~0.1 s, so the
 per-job overhead shows) and the ``expert`` (replanning and MPC: ~2-4 s per episode). Episodes/s counts the
 sweep alone; starting the pool or Ray (and the first job's imports) is the start-up column. Every engine's

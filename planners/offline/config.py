@@ -96,8 +96,8 @@ class PlannerConfig:
     refine_nodes: int | None = 20
     """Branch-and-bound nodes of stage 2 (0 skips it; None: no limit)."""
     refine_time_s: float = DEFAULT_SAFETY_NET_S
-    """Time limit of stage 2 (s): only a safety net, ``refine_nodes`` cuts it (0 skips it). It was 60 s until
-    0.4: four_robots' 20 nodes took 60.3 s with the machine at load 16, so the net cut them."""
+    """Time limit of stage 2 (s): only a safety net, ``refine_nodes`` cuts it (0 skips it). It was 60 s before
+    0.3.0, which a busy machine reached (``docs/planner_design.md#the-budget``)."""
     smooth: bool = False
     """Stage 3 as the convex QP on squared accelerations (Eq. 28) instead of the LP: off by default, HiGHS's
     QP takes 1-30 s on these models, 10x the MILP."""
