@@ -10,9 +10,9 @@ Prints a markdown table.
 
 ``--gain`` measures instead what the node cut buys: per scenario stage 1 once (the default budget), then stage 2
 from its incumbent (the warm start) cut at 1, 5, 20 (the default) and 100 nodes, and once at 20 nodes without the
-warm start. Per row: stage 2's time and nodes, its objective (impacts plus the scaled acceleration term), the
-gain over the warm start's own objective (what skipping stage 2 would keep), the impacts and the fingerprint
-of the plan after the polish. Usage:
+warm start (``refine_warm_start=False``). Per row: stage 2's time and nodes, its objective (impacts plus the
+scaled acceleration term), the gain over the warm start's own objective (what skipping stage 2 would keep), the
+impacts and the fingerprint of the plan after the polish. Usage:
 
     python -m benchmarks.planner_stage2 [--scenarios a,b,c] [--cuts nodes,time5,time60]
     python -m benchmarks.planner_stage2 --gain [--scenarios a,b,c] [--gain-cuts 1,5,20,100]
@@ -64,11 +64,9 @@ GAIN_CUTS = (1, 5, 20, 100)
 
 def gain_rows(scenario_name: str, cuts: tuple[int, ...] = GAIN_CUTS) -> list[str]:
     """Stage 1 once, then stage 2 cut at each of ``cuts`` nodes from its incumbent, and once cold at 20."""
-    from planners.offline.milp.model import LinExpr
     from planners.offline.solvers import solve
-    from planners.offline.solvers.base import SolverOptions
     from planners.offline.spatially_robust import build_model, extract_plan, staged_model
-    from planners.offline.stages import _stage2_objective, copy_model, polish, refine
+    from planners.offline.stages import _stage2_objective, polish, refine
 
     scenario = load_scenario(scenario_name)
     config = PlannerConfig()
@@ -97,14 +95,10 @@ def gain_rows(scenario_name: str, cuts: tuple[int, ...] = GAIN_CUTS) -> list[str
         label = f"{nodes} nodes, warm" + (" (default)" if nodes == PlannerConfig().refine_nodes else "")
         rows.append(row(label, x, stats["refine_s"], stats["refine_nodes_explored"], stats["refine_status"]))
         print(rows[-1], flush=True)
-    # the same 20-node cut without the warm start (as refine builds it, less the MIP start)
-    m = copy_model(staged.model, "refine")
-    m.add(staged.primary >= staged.primary.value(x0) - 1e-7, group="keep")
-    m.set_objective(objective + LinExpr(), maximize=False)
-    cold = solve(m, config.solver, SolverOptions(time_limit_s=config.refine_time_s, node_limit=20, mip_gap=1e-3))
-    x = cold.x if cold.x is not None and not m.check(cold.x, 1e-5) else x0
-    rows.append(row("20 nodes, cold" + ("" if cold.x is not None else " (found none: the incumbent)"), x,
-                    cold.solve_time_s, cold.nodes, cold.status.value))
+    # the same 20-node cut without the warm start, the better of its incumbent and stage 1's kept
+    x, stats = refine(staged, x0, dataclasses.replace(config, refine_warm_start=False))
+    rows.append(row("20 nodes, cold (refine_warm_start=False)", x, stats["refine_s"], stats["refine_nodes_explored"],
+                    stats["refine_status"]))
     print(rows[-1], flush=True)
     return rows
 
