@@ -21,7 +21,7 @@ from impact_env.errors import ImpactEnvError  # noqa: E402
 from impact_env.transport.generate import FAMILY_LIMITS, generate_task  # noqa: E402
 from impact_env.transport.task_observation import TaskObservation  # noqa: E402
 
-DATA = Path(__file__).parent / "data" / "generated"
+DATA = Path(__file__).parents[1] / "data" / "generated"
 
 
 def test_the_split_is_a_function_of_name_and_seed_only():

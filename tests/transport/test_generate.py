@@ -1,7 +1,7 @@
 """The task generator (impact_env/transport/generate.py) and the scenario writer (scenario_toml.py).
 
 The fast suite draws and checks tasks without planning; the planner's filter is tested in
-tests/test_task_filter.py.
+tests/planners/test_task_filter.py.
 """
 
 from __future__ import annotations
