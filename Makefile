@@ -57,9 +57,9 @@ test: $(VENV)/.dev-installed
 test-slow: $(VENV)/.dev-installed
 	$(BIN)/python -m pytest -q -n 2 --dist loadgroup -m slow --timeout 3600
 
-# The fuzzers of tests/fuzz/ drawing fresh inputs for FUZZ_SECONDS per fuzzer (7 fuzzers on 2 processes:
-# 170 s each is about 10 minutes), then a table of the inputs tried.
-FUZZ_SECONDS ?= 170
+# The fuzzers of tests/fuzz/ drawing fresh inputs for FUZZ_SECONDS per fuzzer (17 fuzzers on 2 processes:
+# 60 s each is about 10 minutes), then a table of the inputs tried.
+FUZZ_SECONDS ?= 60
 fuzz: $(VENV)/.dev-installed
 	mkdir -p $(OUT)
 	rm -f $(OUT)/fuzz_report.jsonl

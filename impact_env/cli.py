@@ -32,6 +32,7 @@ from impact_env.cli_options import (
     add_transport_options,
     check_outputs,
     legacy_file_out,
+    output_path,
     run_outputs,
 )
 from impact_env.errors import ImpactEnvError
@@ -103,10 +104,13 @@ def _cmd_generate(args: argparse.Namespace) -> int:
         raise ImpactEnvError(f"--count must be >= 1, got {args.count}")
     if args.seed < 0:
         raise ImpactEnvError(f"--seed must be >= 0, got {args.seed}")
+    from impact_env.results_store import check_output_file, check_output_folder
+
     if args.count == 1 and args.out.endswith(".toml"):
-        paths = [write_task(args.family, args.seed, args.out)]
+        paths = [write_task(args.family, args.seed, check_output_file(args.out, "--out"))]
     else:  # a folder of <family>_<seed>.toml
-        paths = [write_task(args.family, seed, f"{args.out}/{task_name(args.family, seed)}.toml")
+        folder = check_output_folder(args.out, "--out")
+        paths = [write_task(args.family, seed, folder / f"{task_name(args.family, seed)}.toml")
                  for seed in range(args.seed, args.seed + args.count)]
     for path in paths if len(paths) <= 3 else paths[:1]:
         print(f"wrote {path}")
@@ -139,8 +143,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--family", required=True, help=f"one of {', '.join(FAMILIES)}")
     p.add_argument("--seed", type=int, default=0, help="the task's seed (the first one with --count)")
     p.add_argument("--count", type=int, default=1, help="tasks to write, seeds SEED, SEED + 1, ... (default 1)")
-    p.add_argument("--out", default="task.toml",
-                   help="a .toml file, or a folder of <family>_<seed>.toml files (always a folder with --count > 1)")
+    p.add_argument("--out", default=".", metavar="DIR", type=output_path,
+                   help="output folder: one <family>_<seed>.toml per task (default: the current folder); a path "
+                        "ending in .toml, with one task, is the file itself")
     p.set_defaults(func=_cmd_generate)
 
     p = sub.add_parser("show", help="draw a scenario or station (world, obstacles, regions, bodies, start and end)")

@@ -96,8 +96,13 @@ class PlannerConfig:
     refine_nodes: int | None = 20
     """Branch-and-bound nodes of stage 2 (0 skips it; None: no limit)."""
     refine_time_s: float = DEFAULT_SAFETY_NET_S
-    """Time limit of stage 2 (s): only a safety net, ``refine_nodes`` cuts it (0 skips it). It was 60 s until
-    0.4: four_robots' 20 nodes took 60.3 s with the machine at load 16, so the net cut them."""
+    """Time limit of stage 2 (s): only a safety net, ``refine_nodes`` cuts it (0 skips it). It was 60 s before
+    0.3.0, which a busy machine reached (``docs/planner_design.md#the-budget``)."""
+    refine_warm_start: bool = True
+    """Stage 2 starts from stage 1's incumbent (a MIP start); False: it starts cold, and the better of its
+    incumbent and stage 1's is kept. Cold found the better stage-2 plan at the same 20-node cut on the three
+    scenarios measured (four_robots: 4 impacts instead of 5; ``docs/planner_design.md#stage-2-what-the-node-cut-buys``);
+    the default stays warm until the committed plans are re-planned and their cells re-flown."""
     smooth: bool = False
     """Stage 3 as the convex QP on squared accelerations (Eq. 28) instead of the LP: off by default, HiGHS's
     QP takes 1-30 s on these models, 10x the MILP."""
@@ -158,8 +163,8 @@ class PlannerConfig:
         check_integer(self, "refine_nodes", PlannerError, low=0, none="no limit")
         check_number(self, "refine_time_s", PlannerError, low=0)
         check_number(self, "min_robustness_m", PlannerError, low=0, high=1)
-        for name in ("smooth", "obstacle_clearance", "robot_object_separation", "diagnose_infeasibility",
-                     "bound_propagation"):
+        for name in ("refine_warm_start", "smooth", "obstacle_clearance", "robot_object_separation",
+                     "diagnose_infeasibility", "bound_propagation"):
             check_flag(self, name, PlannerError)
         check_choice(self, "solver", PlannerError, SOLVERS)
         check_instance(self, "warm_start", PlannerError, Plan, what="a Plan", none="a cold start")

@@ -7,18 +7,18 @@ import json
 
 from baselines import hyperparams
 from baselines.train import env_id_for
-from impact_env import TETHER_GYM_IDS
+from impact_env import TETHER_GYM_IDS, TETHER_GYM_IDS_V0
 from impact_env.cli import main
 from tests.optional import requires
 
-pytestmark = requires("stable_baselines3")
+pytestmark = requires("stable_baselines3")  # looked up, not imported: the tests import it when they run
 
 
 def test_every_tether_env_id_has_ppo_hyperparameters():
-    for env_id in TETHER_GYM_IDS:
+    for env_id in [*TETHER_GYM_IDS, *TETHER_GYM_IDS_V0]:
         entry = hyperparams.load("ppo", env_id)
         assert entry["n_timesteps"] > 0 and isinstance(entry["policy_kwargs"], dict)
-    assert env_id_for("dead_end") == "impact_env/TetherDeadEnd-v0"
+    assert env_id_for("dead_end") == "impact_env/TetherDeadEnd-v1"  # the current version's id
 
 
 def test_ppo_on_a_station_then_expert_versus_ppo_in_one_bench(tmp_path, capsys):

@@ -144,6 +144,15 @@ def test_status_and_publish(tmp_path, trained):
     assert sorted(p.name for p in (out / "curves").iterdir()) == [f"{trained.name}.jsonl", f"{partial.name}.jsonl"]
 
 
+def test_status_markdown_says_what_ran_and_what_remains(tmp_path, trained):
+    runs_dir = tmp_path / "runs"
+    shutil.copytree(trained, runs_dir / trained.name)
+    runs = queue(["sb3"], [0, 1], 64, [SCENARIO])
+    text = rl_at_scale.status_markdown(runs, runs_dir, "python -m benchmarks.rl_at_scale --frames 64")
+    assert "1 of the 2 runs of `python -m benchmarks.rl_at_scale --frames 64` finished" in text
+    assert "What remains:** sb3_ppo__throw_and_catch_exp__s1." in text
+
+
 def test_run_one_skips_a_finished_run_and_extends_a_smaller_budget(tmp_path, trained):
     runs_dir = tmp_path / "runs"
     shutil.copytree(trained, runs_dir / trained.name)
@@ -192,7 +201,7 @@ def test_report_interquartile_means_and_files(tmp_path):
     cells = [synthetic_cell("sb3_ppo", task, seed, s, s - 0.5) for task, values in successes.items()
              for seed, s in enumerate(values)]
     cells.append(synthetic_cell("mappo", "a", 0, 0.5, 0.0))  # one seed of one task only
-    numbers = aggregate(cells, reps=200)
+    numbers = aggregate(cells, reps=50)
     rows = {(r["algorithm"], r["task"]): r for r in numbers["rows"]}
     a = rows[("sb3_ppo", "a")]
     assert a["success_iqm"] == pytest.approx(0.3)  # the middle half of 0, 0.2, 0.4, 1
@@ -215,7 +224,7 @@ def test_report_interquartile_means_and_files(tmp_path):
     (tmp_path / "curves").mkdir()
     (tmp_path / "curves" / "sb3_ppo__a__s0.jsonl").write_text(
         "".join(json.dumps({"frames": f, "wall_s": f / 10, "success_rate": f / 1000}) + "\n" for f in (500, 1000)))
-    write_report(tmp_path, reps=200)
+    write_report(tmp_path, reps=50)
     for name in ("summary.md", "summary.json", "curves_steps.png", "curves_wall.png", "profile.png"):
         assert (tmp_path / name).stat().st_size > 0, name
     assert json.loads((tmp_path / "summary.json").read_text())["overall"][0]["algorithm"] == "sb3_ppo"

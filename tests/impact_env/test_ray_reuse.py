@@ -62,7 +62,7 @@ def test_another_cpu_count_restarts_it_and_keep_ray_false_stops_it():
 
 
 def test_a_ray_started_elsewhere_is_used_and_left_running():
-    ray().init(num_cpus=1, include_dashboard=False, logging_level="WARNING")
+    ray().init(address="local", num_cpus=1, include_dashboard=False, logging_level="WARNING")
     session = _session()
     with open_engine(EngineConfig("ray", workers=2)) as engine:  # not ours: used as it is, whatever its size
         assert list(engine.map(sweep_jobs.fail_on, [0])) == [0]

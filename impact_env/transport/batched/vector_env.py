@@ -22,8 +22,10 @@ an episode is both terminated and truncated.
 an env's frame only when it is read, so ``gymnasium.wrappers.vector.RecordVideo(envs, folder,
 record_first_only=True)`` draws one env per step of a batch of thousands (without ``record_first_only`` it
 tiles every env: keep such batches small).
-torch is imported here only: ``import impact_env`` stays free of it, and the id's registration names this
-module as a string.
+torch is imported here only: ``import impact_env`` stays free of it, and the ids' registration names
+:func:`impact_env.transport.vector_entry.make_vector_env`, which imports this module when a vector env is made.
+``gymnasium.make_vec(id, num_envs=N)`` without a mode picks it too (Gymnasium prefers an id's vector entry
+point); ``vectorization_mode="sync"`` makes N pymunk envs.
 """
 
 from __future__ import annotations
@@ -187,6 +189,3 @@ class TransportVectorEnv(VectorEnv):
             world._renderers.clear()
 
 
-def make_vector_env(scenario: Scenario | str | None = None, num_envs: int = 1, **kwargs: Any) -> TransportVectorEnv:
-    """The vector entry point of every impact-transport id (``gymnasium.make_vec(..., "vector_entry_point")``)."""
-    return TransportVectorEnv(scenario, num_envs, **kwargs)

@@ -52,3 +52,20 @@ def test_masked_tether_actions_are_action_errors():
     env.reset(seed=0)
     with pytest.raises(ActionError):
         env.step(np.ma.masked_all(env.action_space.shape, dtype=np.int64))
+
+
+def test_the_compiled_loop_does_not_read_under_the_mask(env):
+    """The compiled substep loop reads an array's buffer, mask or not: masked actions take the checked path,
+    also as rows of a list and as PettingZoo actions."""
+    from impact_env.transport import native
+
+    if not native.available():
+        pytest.skip("the compiled substep loop is not built")
+    with pytest.raises(ActionError, match="masked array with 1 masked entries"):
+        env.step([np.ma.array(np.zeros(3), mask=[0, 1, 0]), np.zeros(3)])
+    par = impact_env.parallel_env(scenario="corridor")
+    par.reset(seed=0)
+    with pytest.raises(ActionError, match=r"actions\['R2'\] is a masked array"):
+        par.step({"R1": np.zeros(3), "R2": np.ma.masked_all((3,))})
+    obs, *_ = env.step([np.ma.array(np.ones(3) * 0.5), np.zeros(3)])  # nothing masked: its numbers
+    assert np.all(np.isfinite(obs))

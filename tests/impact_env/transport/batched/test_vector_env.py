@@ -8,6 +8,7 @@ page, tested against the batched world driven by hand, and Gymnasium's own vecto
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import gymnasium as gym
@@ -53,6 +54,21 @@ def test_make_vec_returns_the_batched_world_for_every_transport_id(env_id):
     np.testing.assert_allclose(infos["time_s"], 0.1, rtol=1e-6)
     single.close()
     envs.close()
+
+
+def test_make_vec_picks_the_batched_world_and_sync_still_makes_pymunk_envs():
+    assert isinstance(gym.make_vec(ID, num_envs=2), TransportVectorEnv)  # Gymnasium prefers the vector entry point
+    sync = gym.make_vec(ID, num_envs=2, vectorization_mode="sync")
+    assert isinstance(sync, gym.vector.SyncVectorEnv) and not isinstance(sync, TransportVectorEnv)
+    sync.close()
+
+
+def test_without_torch_the_vector_entry_point_names_both_ways_out(monkeypatch):
+    from impact_env.transport.vector_entry import make_vector_env
+
+    monkeypatch.setitem(sys.modules, "torch", None)  # find_spec reports it missing
+    with pytest.raises(EnvConfigError, match=r"impact_env\[rl\].*vectorization_mode='sync'"):
+        make_vector_env("corridor", 2)
 
 
 def test_transport_v0_needs_a_scenario():
