@@ -120,15 +120,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                           "impact_env/generated_<family>/expert-v0 and .../heldout-v0.")
     p.add_argument("--family", required=True, help="the task family")
     p.add_argument("--tasks", required=True, metavar="TASKS_DIR", help="the folder impact-env filter --out wrote")
-    p.add_argument("--episodes-per-task", type=int, default=1, help="expert episodes per task (env seeds 0, 1, ...)")
+    p.add_argument("--episodes-per-task", type=int, default=1,
+                   help="expert episodes per task (env seeds --seed, --seed + 1, ...)")
     p.add_argument("--heldout", type=float, default=0.2, help="share of tasks held out (default 0.2)")
     p.add_argument("--split-seed", type=int, default=0, help="seed of the held-out split (default 0)")
     p.add_argument("--max-tasks", type=int, default=None, help="use at most this many kept tasks (seed order)")
-    p.add_argument("--out", default=None, metavar="DIR", help="where the datasets go (default: Minari's own folder)")
-    p.add_argument("--thrust-noise", type=float, default=0.0, metavar="STD",
-                   help="multiplicative thrust noise of the episodes (0.05 = 5%%)")
-    p.add_argument("--initial-position-noise-m", type=float, default=0.0, metavar="R",
-                   help="objects start uniformly within this radius (m) of their position")
+    add_out(p, "where the datasets go (default: Minari's own folder)")
+    add_seed(p, "env seed of each task's first episode (episode k uses seed + k)")
+    add_transport_options(p, REWARD_MODES)
+    add_quiet(p, "no line per episode")
     p.set_defaults(func=_dataset)
 
     p = subparsers.add_parser("curves", help="plot the evaluation curves of training runs")
@@ -186,10 +186,12 @@ def _curves(args: argparse.Namespace) -> int:
 def _dataset(args: argparse.Namespace) -> int:
     from baselines.task_dataset import DatasetConfig, build_dataset
 
-    options = {k: v for k, v in (("thrust_noise", args.thrust_noise),
-                                 ("initial_position_noise_m", args.initial_position_noise_m)) if v}
+    if args.out is not None:
+        check_outputs(folders={"--out": args.out})  # before any episode
+    options = {k: v for k, v in transport_options(args).items() if v not in (None, 0.0, "dense")}
     config = DatasetConfig(episodes_per_task=args.episodes_per_task, heldout_share=args.heldout,
-                           split_seed=args.split_seed, max_tasks=args.max_tasks, env_options=options or None)
+                           split_seed=args.split_seed, max_tasks=args.max_tasks, env_options=options or None,
+                           seed=args.seed, quiet=args.quiet)
     train, heldout = build_dataset(args.family, args.tasks, config, out=args.out)
     for dataset in (train, heldout):
         if dataset is not None:

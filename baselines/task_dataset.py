@@ -42,7 +42,11 @@ class DatasetConfig:
     """How the expert's episodes of a family's kept tasks become its datasets."""
 
     episodes_per_task: int = 1
-    """Expert episodes per task (env seeds 0, 1, ...)."""
+    """Expert episodes per task (env seeds ``seed``, ``seed + 1``, ...)."""
+    seed: int = 0
+    """The env seed of each task's first episode."""
+    quiet: bool = False
+    """No line per episode."""
     heldout_share: float = 0.2
     """The share of tasks held out (in [0, 1))."""
     split_seed: int = 0
@@ -58,6 +62,7 @@ class DatasetConfig:
         if self.heldout_share == 1:
             raise ImpactEnvError("DatasetConfig.heldout_share must be < 1 (some tasks must be left to train on), got 1")
         check_integer(self, "split_seed", ImpactEnvError, low=0)
+        check_integer(self, "seed", ImpactEnvError, low=0)
         check_integer(self, "max_tasks", ImpactEnvError, low=1, none="all")
 
 
@@ -99,7 +104,7 @@ def _episodes(family: str, tasks: list, config: DatasetConfig, first_id: int = 0
         pad = TaskObservation(scenario, FAMILY_LIMITS[family])
         expert = Expert(scenario, plan=plan)
         robots, objects = {r.name for r in scenario.robots}, {o.name for o in scenario.objects}
-        for seed in range(config.episodes_per_task):
+        for seed in range(config.seed, config.seed + config.episodes_per_task):
             obs, info = env.reset(seed=seed)
             expert.reset()
             observations, actions, rewards, terminations, truncations = [pad(obs)], [], [], [], []
@@ -123,8 +128,9 @@ def _episodes(family: str, tasks: list, config: DatasetConfig, first_id: int = 0
                                          infos={key: np.asarray(values) for key, values in infos.items()}))
             summaries.append({"task": scenario.name, "seed": seed, "success": bool(info["is_success"]),
                               "robustness_m": float(info["robustness"]), "steps": len(actions)})
-            print(f"  {scenario.name} seed {seed}: robustness {info['robustness']:+.3f} "
-                  f"({'success' if info['is_success'] else 'failure'})", flush=True)
+            if not config.quiet:
+                print(f"  {scenario.name} seed {seed}: robustness {info['robustness']:+.3f} "
+                      f"({'success' if info['is_success'] else 'failure'})", flush=True)
         env.close()
     return buffers, summaries
 

@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from impact_env.cli_options import add_quiet, check_outputs, output_path
 from impact_env.config_checks import check_integer, check_number
 from impact_env.errors import ImpactEnvError
 from impact_env.results_store import CellStore, atomic_path, write_atomic
@@ -198,7 +199,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                           "OUT/verdicts.jsonl (a rerun skips the tasks already there).")
     p.add_argument("--family", required=True, help=f"one of {', '.join(FAMILIES)}")
     p.add_argument("--seeds", default="0:10", help="A:B (seeds A..B-1), N, or a comma-separated list (default 0:10)")
-    p.add_argument("--out", required=True, help="the folder of kept tasks, their plans and verdicts.jsonl")
+    p.add_argument("--out", required=True, metavar="DIR", type=output_path,
+                   help="output folder: the kept tasks, their plans and verdicts.jsonl")
     defaults = FilterConfig()
     p.add_argument("--node-limit", type=int, default=defaults.node_limit,
                    help=f"branch-and-bound nodes per task (default {defaults.node_limit})")
@@ -206,15 +208,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"safety-net wall-clock limit per task, s (default {defaults.time_limit_s:g})")
     p.add_argument("--min-robustness", type=float, default=defaults.min_robustness_m,
                    help=f"keep a task only if its plan's rho exceeds this, m (default {defaults.min_robustness_m:g})")
+    add_quiet(p, "no line per task; only the count kept")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
     seeds = parse_seeds(args.seeds)
     check_family(args.family, seeds[0])
+    check_outputs(folders={"--out": args.out})  # before any plan
     config = FilterConfig(node_limit=args.node_limit, time_limit_s=args.time_limit,
                           min_robustness_m=args.min_robustness)
-    verdicts = filter_tasks(args.family, seeds, args.out, config)
+    verdicts = filter_tasks(args.family, seeds, args.out, config, progress=not args.quiet)
     kept = sum(v.kept for v in verdicts)
     reasons: dict[str, int] = {}
     for v in verdicts:

@@ -423,11 +423,10 @@ def generate_task(family: str, seed: int) -> Scenario:
 
 
 def write_task(family: str, seed: int, path: str | Path) -> Path:
-    """Write task ``seed`` of ``family`` to ``path`` (a ``.toml`` file; its folder is created)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(generate_toml(family, seed), encoding="utf-8")
-    return path
+    """Write task ``seed`` of ``family`` to ``path`` (a ``.toml`` file; its folder is created), atomically."""
+    from impact_env.results_store import write_atomic
+
+    return write_atomic(path, generate_toml(family, seed))  # its folder created, never half a file
 
 
 def check_task(scenario: Scenario) -> None:
