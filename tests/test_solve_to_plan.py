@@ -51,11 +51,12 @@ def test_the_default_budget_is_work_and_a_node_cut_returns_the_same_plan_every_t
     """Stage 1's default budget is a node count (a time limit only as a safety net); a stage 1 cut by its node
     limit is not an error: its best plan comes back, unproven, with how stage 1 ended, and the same work gives
     the same plan on every call."""
-    from planners.offline.config import DEFAULT_NODE_BUDGET, DEFAULT_SAFETY_NET_S, PlannerConfig
+    from planners.offline.config import DEFAULT_NODE_BUDGET, DEFAULT_SAFETY_NET_S, DEFAULT_THREADS, PlannerConfig
     from planners.offline.solvers.base import SolverOptions
 
     budget = PlannerConfig().solver_options
-    assert (budget.node_limit, budget.time_limit_s) == (DEFAULT_NODE_BUDGET, DEFAULT_SAFETY_NET_S)
+    assert (budget.node_limit, budget.time_limit_s, budget.threads) == (DEFAULT_NODE_BUDGET, DEFAULT_SAFETY_NET_S,
+                                                                        DEFAULT_THREADS)
     scenario = load_scenario(CUT_SCENARIO)
     config = PlannerConfig(solver_options=SolverOptions(node_limit=1, time_limit_s=600.0), refine_nodes=0)
     plans = [plan_spatially_robust(scenario, config) for _ in range(2)]
