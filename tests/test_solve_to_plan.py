@@ -81,3 +81,21 @@ def test_a_cold_stage_2_keeps_the_better_plan_and_finds_the_known_optimum():
         assert plan.stats["refine_objective"] == pytest.approx(2.0308, abs=1e-4) and len(plan.impacts) == 2
     with pytest.raises(Exception, match="refine_warm_start"):
         PlannerConfig(refine_warm_start="no")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["relay", "four_robots", "timed_visits"])
+def test_the_heaviest_scenarios_are_proven_within_the_default_budget_with_their_committed_plans(name):
+    """The default budget is work (nodes, on a pinned thread count), so it proves the three heaviest shipped
+    models on any machine however busy, and the plan is the committed one bit for bit (the plan the robustness
+    benchmark flies); rho is its known optimum."""
+    from pathlib import Path
+
+    from planners.plan import Plan
+
+    committed = Plan.load(Path(__file__).resolve().parents[1] / "results" / "robustness" / "plans" / f"{name}.json")
+    plan = plan_spatially_robust(load_scenario(name))
+    assert plan.stats["stage1_status"] == "optimal" and plan.mip_gap < 1e-4
+    assert plan.stats["refine_status"] in ("node_limit", "optimal")  # not cut by its safety net
+    assert plan.robustness == pytest.approx(committed.robustness, abs=1e-6)
+    assert plan.fingerprint() == committed.fingerprint()
