@@ -3,13 +3,16 @@
     impact-env plan SCENARIO [--planner sr|ir] [--solver highs|scip|gurobi] [--node-limit N] [--time-limit S]
                     [--mip-gap G]
                     [--threads N] [--intervals N] [--degree D] [--copy-intervals W] [--smooth]
-                    [--out plan.json] [--plot plan.png] [--quiet]
-    impact-env plan corridor,relay,two_objects [--planner sr|ir] --out plans/ [--plot figures/] [--engine ray]
+                    [--json plan.json] [--plot plan.png] [--out DIR] [--quiet]
+    impact-env plan corridor,relay,two_objects [--planner sr|ir] --out plans/ [--engine ray]
 
-A comma-separated list of scenarios is planned side by side on the sweep engine (planners/offline/batch.py):
-``--out`` and ``--plot`` are then folders (one ``<scenario>.json`` / ``.png`` each).
+``--out DIR`` writes ``<scenario>.json`` and ``<scenario>.png`` into DIR; ``--json`` and ``--plot`` are the
+single files (for one scenario). A comma-separated list of scenarios is planned side by side on the sweep
+engine (planners/offline/batch.py), one ``<scenario>.json`` and ``.png`` each in ``--out``. Every output path is
+checked before the solve.
 
-Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``); prints the model size,
+Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``), with ``impact-env filter``
+(:mod:`planners.task_filter`); prints the model size,
 progress at most once a second, then the robustness, solve time, gap and one line per planned impact. Exit
 codes: 0 plan found (optimal within the gap); 3 node budget or time limit reached with a plan (still written,
 with a warning giving its gap); 2 any error that ``impact_env.cli.main`` reports in one line (bad options,
@@ -28,6 +31,17 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from impact_env.cli_options import (
+    add_files,
+    add_out,
+    add_quiet,
+    add_seed,
+    check_outputs,
+    deprecated,
+    in_folder,
+    legacy_file_out,
+)
+from impact_env.figures import png_path
 from impact_env.transport.scenario import MAX_PLANNER_INTERVALS, MAX_ROBOT_DEGREE, MIN_ROBOT_DEGREE
 from planners.errors import PlannerError, PlanTimeoutError
 from planners.offline.solvers import SOLVERS as SOLVER_NAMES
@@ -79,11 +93,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="branch-and-bound nodes for the second stage (fewest impacts, least acceleration, rho "
                         "kept); a node count, not a time, so the plan is the same on a busy machine; 0 skips it "
                         "(default 20)")
-    p.add_argument("--seed", type=int, default=0, help="solver random seed (solve times vary with it)")
-    p.add_argument("--out", help="write the plan as JSON (planners.plan.Plan.save); a folder for a list of scenarios")
-    p.add_argument("--plot", help="write a PNG of the plan: xy view, positions and velocities over time (a folder "
-                                  "for a list of scenarios)")
-    p.add_argument("--quiet", action="store_true", help="no header and no progress lines; only the result")
+    add_seed(p, "solver random seed (solve times vary with it)")
+    add_out(p, "<scenario>.json (the plan) and <scenario>.png (its figure), for one scenario or a list")
+    add_files(p, json="the plan as JSON (planners.plan.Plan.save)",
+              plot="a PNG of the plan: xy view, positions and velocities over time")
+    add_quiet(p, "no header and no progress lines; only the result")
     from planners.tether.cli import add_arguments as add_tether_arguments
 
     add_tether_arguments(p)  # a tether station (impact-env plan L) is planned by planners/tether/cli.py
@@ -91,6 +105,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     add_engine_arguments(p)  # a list of scenarios (impact-env plan a,b,c) is planned side by side
     p.set_defaults(func=_cmd_plan)
+    from planners.task_filter import register as register_filter
+
+    register_filter(subparsers)  # impact-env filter: generated tasks kept if the MILP plans them
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
@@ -102,13 +119,21 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
     if "," in args.scenario:
         return _plan_list(args)
+    legacy_file_out(args, "--json", (".json",))
+    name = Path(args.scenario).stem if args.scenario.endswith(".toml") else args.scenario
+    args.json = in_folder(args, "--json", f"{name}.json")
+    args.plot = in_folder(args, "--plot", f"{name}.png")
     if is_station_file(args.scenario):
         from planners.tether.cli import plan_station
 
+        check_outputs({"--json": args.json, "--plot": args.plot, "--drh": args.drh}, {"--out": args.out})
+        args.plot = args.plot and str(png_path(args.plot))
         return plan_station(args)
 
     _check_options(args)
     scenario = load_scenario(args.scenario)
+    check_outputs({"--json": args.json, "--plot": args.plot}, {"--out": args.out})
+    args.plot = args.plot and str(png_path(args.plot))
     say = (lambda text: None) if args.quiet else (lambda text: print(text, flush=True))
     budget = _budget(args, progress=None if args.quiet else progress_printer())
     common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth, solver=args.solver,
@@ -151,14 +176,13 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         code = EXIT_TIME_LIMIT
 
     print(format_summary(plan, wall_s=time.perf_counter() - start))
-    if args.out:
-        print(f"wrote {plan.save(args.out)}")
+    if args.json:
+        print(f"wrote {plan.save(args.json)}")
     if args.plot:
         from planners.plan.plotting import plot_plan
 
-        png = Path(args.plot) if Path(args.plot).suffix else Path(args.plot).with_suffix(".png")
-        plot_plan(scenario, plan, png)
-        print(f"wrote {png}")
+        plot_plan(scenario, plan, args.plot)
+        print(f"wrote {args.plot}")
     return code
 
 
@@ -175,7 +199,14 @@ def _plan_list(args: argparse.Namespace) -> int:
     if stations:
         raise PlannerError(f"plan tether stations one at a time ({', '.join(stations)}); lists are for impact "
                            "scenarios")
+    if args.json is not None:
+        raise PlannerError("a list of scenarios writes one plan per scenario: give --out DIR, not --json")
+    figures = args.out
+    if args.plot is not None:  # 0.2: --plot DIR for a list
+        deprecated(f"--plot {args.plot} (a folder) for a list", "--out DIR, which holds the figures too")
+        figures = args.plot
     _check_options(args)
+    check_outputs(folders={"--out": args.out, "--plot": figures})
     budget = _budget(args)
     common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth, solver=args.solver,
                   solver_options=budget, refine_nodes=args.refine_nodes)
@@ -200,13 +231,12 @@ def _plan_list(args: argparse.Namespace) -> int:
         print(format_summary(o.plan) + f"\nplan fingerprint {o.plan.fingerprint()}")
         if args.out:
             print(f"wrote {o.plan.save(Path(args.out) / f'{o.scenario}.json')}")
-        if args.plot:
+        if figures:
             from impact_env.transport.scenario import load_scenario
             from planners.plan.plotting import plot_plan
 
-            Path(args.plot).mkdir(parents=True, exist_ok=True)
-            plot_plan(load_scenario(o.scenario), o.plan, Path(args.plot) / f"{o.scenario}.png")
-            print(f"wrote {Path(args.plot) / f'{o.scenario}.png'}")
+            plot_plan(load_scenario(o.scenario), o.plan, Path(figures) / f"{o.scenario}.png")
+            print(f"wrote {Path(figures) / f'{o.scenario}.png'}")
     return code
 
 

@@ -61,9 +61,11 @@ class ReplanInputError(PlannerError, ValueError):
 class PlanCheckError(PlannerError, ValueError):
     """A plan violates continuity, bounds, thrust limits or the impact law; lists every violation."""
 
-    def __init__(self, violations: list[str]) -> None:
-        super().__init__("plan check failed:\n  " + "\n  ".join(violations))
+    def __init__(self, violations: list[str], source: str | None = None) -> None:
+        where = f" for {source}" if source else ""
+        super().__init__(f"plan check failed{where}:\n  " + "\n  ".join(violations))
         self.violations = violations
+        self.source = source
 
 
 # ------------------------------------------------------------------------------------ tether planners

@@ -130,6 +130,13 @@ class PlannerConfig:
     """On an infeasible task, name the conflicting constraint groups (re-solving once per group)."""
     bound_propagation: bool = True
     """Give every robustness variable its exact upper bound (off only to measure what it buys)."""
+    min_robustness_m: float = 1e-4
+    """The robustness every conjunct of the task must reach (m). STL satisfaction is strict (rho > 0): a task
+    that can only reach rho = 0, such as ``F[0,100] in(O1, goal) & G[0,100] !in(O1, goal)``, is satisfied by no
+    trajectory, yet a MILP held at r >= 0 finds "plans" at -1e-7 within its tolerances and cannot close its
+    gap. With this margin such a task is infeasible, which the solver proves in seconds and the diagnosis
+    explains. 0.1 mm lies far below any scenario's geometry and far above the solvers' tolerances (1e-7 .. 1e-6);
+    0 is the constraint of 0.2 (the online replanner keeps it, :mod:`planners.online.mission`)."""
     handover: HandoverConfig | None = field(default_factory=HandoverConfig)
     """Refuse or repair a plan in which a robot has too little time to get round an object between two of its
     impacts (:class:`HandoverConfig`); None: not checked."""
@@ -159,6 +166,7 @@ class PlannerConfig:
         check_number(self, "impact_weight", PlannerError, low=0)
         check_integer(self, "refine_nodes", PlannerError, low=0, none="no limit")
         check_number(self, "refine_time_s", PlannerError, low=0)
+        check_number(self, "min_robustness_m", PlannerError, low=0, high=1)
         for name in ("refine_warm_start", "smooth", "obstacle_clearance", "robot_object_separation",
                      "diagnose_infeasibility", "bound_propagation"):
             check_flag(self, name, PlannerError)

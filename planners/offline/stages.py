@@ -101,7 +101,7 @@ def solve_stages(staged: StagedModel, config: PlannerConfig, scenario_name: str,
             # 2 s cap, which groups were named depended on how busy the machine was
             raise explain_infeasible(staged.model, config.solver,
                                      SolverOptions(time_limit_s=DIAGNOSE_SAFETY_S, node_limit=DIAGNOSE_NODES))
-        raise InfeasiblePlanError(f"no plan satisfies the task of {scenario_name!r}")
+        raise InfeasiblePlanError(f"infeasible: no plan satisfies the task of {scenario_name!r}")
     if result.status in (Status.ERROR, Status.UNBOUNDED):
         raise PlannerError(f"solver {config.solver} failed on {scenario_name!r}: {result.status.value} "
                            f"{result.message}")
