@@ -197,12 +197,12 @@ def check_outputs(files: dict[str, str | None] = (), folders: dict[str, str | No
             from impact_env.errors import OutputPathError
 
             raise OutputPathError(f"--video {path} must end in .mp4 (an H.264 video)")
+        check_output_file(path, option)
         if option == "--plot" and Path(path).suffix and Path(path).suffix.lower() not in figure_suffixes():
             from impact_env.errors import OutputPathError
 
             raise OutputPathError(f"--plot {path}: {Path(path).suffix} is not an image format matplotlib writes "
                                   f"({', '.join(figure_suffixes())}); .png, or no suffix, gives a PNG")
-        check_output_file(path, option)
         if option == "--plot" and not Path(path).suffix:  # the figure goes to PATH.png: check that too, but only
             check_output_file(Path(path).with_suffix(".png"), option)  # once PATH itself is not /dev/full
 

@@ -24,7 +24,7 @@ from typing import Any, cast
 import numpy as np
 
 from impact_env.env_shell import check_can_step, clip_to_space, time_left
-from impact_env.errors import ActionError, EnvConfigError, ImpactEnvError
+from impact_env.errors import ActionError, EnvConfigError
 from impact_env.stl import parse
 from impact_env.tether.faults import FaultConfig, FaultSchedule
 from impact_env.tether.physics import FIDELITIES, TetherWorld
@@ -189,6 +189,24 @@ class TetherCore:
         return self.step_count * self.dt_s
 
     # ------------------------------------------------------------------------------------------ episode
+    def _start_in_overlap(self, rng: np.random.Generator, start: tuple[float, float]) -> tuple[float, float]:
+        """A start uniform in the noise disc and the cargo's free space, by rejection in the bounds of their
+        overlap: what the disc sampling above gives, for a disc so large that it rarely lands in the station.
+        The overlap holds the start, so this finds a point; the start itself is the last resort."""
+        import shapely
+
+        r = self.initial_position_noise_m
+        overlap = self.station.free_space().intersection(shapely.Point(start).buffer(r))
+        x0, y0, x1, y1 = overlap.bounds if not overlap.is_empty else (start[0], start[1], start[0], start[1])
+        for _ in range(400):
+            points = np.column_stack([rng.uniform(x0, x1, 256), rng.uniform(y0, y1, 256)])
+            ok = (np.hypot(points[:, 0] - start[0], points[:, 1] - start[1]) <= r) \
+                & self.station.cargo_inside_many(points)
+            if ok.any():
+                x, y = points[int(np.argmax(ok))]
+                return (float(x), float(y))
+        return start
+
     def reset(self, rng: np.random.Generator) -> None:
         """Start a new episode: a fresh pymunk world, an empty trace, the faults drawn; randomness only from
         ``rng`` (the start position first, then the faults)."""
@@ -202,8 +220,8 @@ class TetherCore:
                 if st.cargo_inside(candidate):
                     start = candidate
                     break
-            else:  # pragma: no cover - the start itself is inside, so a sample lands inside almost surely
-                raise ImpactEnvError("could not place the cargo inside the station near its start")
+            else:  # a disc much larger than the station: sample where the disc and the station overlap
+                start = self._start_in_overlap(rng, start)
         self.schedule = FaultSchedule.draw(self.faults, self.n_robots, rng)
         speeds = None
         if self.schedule.winch_factors != (1.0,) * self.n_robots:

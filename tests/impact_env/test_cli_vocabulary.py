@@ -22,8 +22,8 @@ from impact_env.cli import build_parser, main
 from impact_env.errors import OutputPathError
 from tests.helpers import one_line_error
 
-LONG_COMMANDS = ("run", "plan", "train", "bench", "record", "bc")
-EPISODE_COMMANDS = ("run", "bench", "record", "train")
+LONG_COMMANDS = ("run", "plan", "train", "bench", "record", "bc", "dataset", "filter")
+EPISODE_COMMANDS = ("run", "bench", "record", "train", "dataset")
 NOISE = ("--thrust-noise", "--initial-position-noise-m", "--impact-velocity-noise-mps", "--restitution",
          "--fuel-penalty", "--reward-mode")
 STATION = ("--fidelity", "--energy-penalty", "--pull-speed-mps", "--max-active")
@@ -52,7 +52,8 @@ def test_out_is_a_folder_everywhere_and_files_have_their_own_options():
         for flag, metavar in (("--json", "PATH"), ("--plot", "PNG"), ("--video", "MP4")):
             if flag in options:
                 assert options[flag].metavar == metavar, (command, flag)
-    assert seen >= {"show", "run", "plan", "train", "bench", "record", "bc", "curves"}
+    assert seen >= {"show", "run", "plan", "train", "bench", "record", "bc", "curves", "generate", "dataset",
+                    "filter"}
 
 
 @pytest.mark.parametrize("command", LONG_COMMANDS)
@@ -192,6 +193,7 @@ def no_episode(monkeypatch):
     ["plan", "L", "--json", "{bad}"],
     ["show", "corridor", "--plot", "{bad}"],
     ["curves", "runs/none", "--table", "{bad}"],
+    ["generate", "--family", "gaps", "--toml", "{bad}"],
 ], ids=lambda v: " ".join(v) if isinstance(v, list) else None)
 def test_an_unwritable_file_is_refused_before_any_work(argv, bad, message, tmp_path, capsys, no_episode):
     path = _bad(bad, tmp_path)
@@ -208,6 +210,9 @@ def test_an_unwritable_file_is_refused_before_any_work(argv, bad, message, tmp_p
     ["plan", "corridor,throw_and_catch_exp", "--out", "{bad}"],
     ["bench", "throw_and_catch_exp", "--controllers", "zero", "--out", "{bad}"],
     ["record", "throw_and_catch_exp", "--out", "{bad}"],
+    ["generate", "--family", "gaps", "--count", "2", "--out", "{bad}"],
+    ["filter", "--family", "gaps", "--seeds", "0:2", "--out", "{bad}"],
+    ["dataset", "--family", "gaps", "--tasks", "tasks", "--out", "{bad}"],
 ])
 @pytest.mark.parametrize("bad, message", [("/dev/full", "is a character device, not a folder"),
                                           ("{tmp}/a_file", "is a file, not a folder"),
@@ -330,3 +335,23 @@ def test_run_quiet_prints_no_episode_lines(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "episode" not in out.replace("episode.png", "") and "wrote" in out
     assert json.loads((tmp_path / "summary.json").read_text())["scenario"] == "throw_and_catch_exp"
+
+
+def test_generate_speaks_the_vocabulary(tmp_path, capsys):
+    """``--toml PATH`` one task, ``--out DIR`` a folder of them; the first spelling ``--out task.toml`` still
+    works, with the deprecation message."""
+    assert main(["generate", "--family", "gaps", "--seed", "3", "--toml", str(tmp_path / "one.toml")]) == 0
+    assert main(["generate", "--family", "gaps", "--seed", "3", "--out", str(tmp_path / "many")]) == 0
+    assert (tmp_path / "many" / "gaps_3.toml").read_text() == (tmp_path / "one.toml").read_text()
+    assert main(["generate", "--family", "gaps", "--seed", "3", "--out", str(tmp_path / "old.toml")]) == 0
+    assert "--out " in capsys.readouterr().err and (tmp_path / "old.toml").is_file()
+    assert main(["generate", "--family", "gaps", "--count", "2", "--toml", str(tmp_path / "x.toml")]) == 2
+    assert "--toml is one file; --count 2 writes a folder: give --out DIR" in capsys.readouterr().err
+    assert main(["generate", "--family", "gaps", "--count", "2"]) == 2
+
+
+def test_dataset_and_filter_take_the_shared_options():
+    args = build_parser().parse_args(["dataset", "--family", "gaps", "--tasks", "t", "--seed", "4", "--quiet",
+                                      "--impact-velocity-noise-mps", "0.01", "--restitution", "0.7"])
+    assert (args.seed, args.quiet, args.impact_velocity_noise_mps, args.restitution) == (4, True, 0.01, 0.7)
+    assert build_parser().parse_args(["filter", "--family", "gaps", "--out", "o", "--quiet"]).quiet is True

@@ -105,7 +105,7 @@ def test_time_limit_with_a_plan_keeps_it_and_exits_3(planned, tmp_path, monkeypa
 
 def test_a_node_budget_reached_keeps_the_plan_warns_and_exits_3(tmp_path, capsys):
     out = tmp_path / "cut.json"
-    assert main(["plan", "two_objects", "--node-limit", "1", "--refine-nodes", "0", "--quiet", "--out",
+    assert main(["plan", "two_objects", "--node-limit", "1", "--refine-nodes", "0", "--quiet", "--json",
                  str(out)]) == 3
     err = capsys.readouterr().err
     assert "warning: node budget of 1 nodes reached with gap" in err and "keeping the best plan found" in err

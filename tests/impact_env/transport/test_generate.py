@@ -141,12 +141,12 @@ def test_check_task_names_the_broken_rule():
 
 
 def test_cli_generate_writes_the_file_and_a_folder(tmp_path, capsys):
-    assert main(["generate", "--family", "timed_visits", "--seed", "4", "--out", str(tmp_path / "t.toml")]) == 0
+    assert main(["generate", "--family", "timed_visits", "--seed", "4", "--toml", str(tmp_path / "t.toml")]) == 0
     assert (tmp_path / "t.toml").read_text() == generate_toml("timed_visits", 4)
     assert load_scenario(tmp_path / "t.toml").bodies == generate_task("timed_visits", 4).bodies
     assert main(["generate", "--family", "gaps", "--seed", "2", "--count", "4", "--out", str(tmp_path / "g")]) == 0
     assert sorted(p.name for p in (tmp_path / "g").iterdir()) == [f"gaps_{s}.toml" for s in range(2, 6)]
-    assert main(["generate", "--family", "nope", "--out", str(tmp_path / "x.toml")]) == 2
+    assert main(["generate", "--family", "nope", "--toml", str(tmp_path / "x.toml")]) == 2
     assert "unknown task family 'nope'" in capsys.readouterr().err
     assert main(["generate", "--family", "gaps", "--count", "0"]) == 2
 
