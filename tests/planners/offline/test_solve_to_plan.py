@@ -89,11 +89,10 @@ def test_the_heaviest_scenarios_are_proven_within_the_default_budget_with_their_
     """The default budget is work (nodes, on a pinned thread count), so it proves the three heaviest shipped
     models on any machine however busy, and the plan is the committed one bit for bit (the plan the robustness
     benchmark flies); rho is its known optimum."""
-    from pathlib import Path
-
     from planners.plan import Plan
+    from tests.paths import ROOT
 
-    committed = Plan.load(Path(__file__).resolve().parents[1] / "results" / "robustness" / "plans" / f"{name}.json")
+    committed = Plan.load(ROOT / "results" / "robustness" / "plans" / f"{name}.json")
     plan = plan_spatially_robust(load_scenario(name))
     assert plan.stats["stage1_status"] == "optimal" and plan.mip_gap < 1e-4
     assert plan.stats["refine_status"] in ("node_limit", "optimal")  # not cut by its safety net
