@@ -18,6 +18,7 @@ Prints a markdown table and appends one JSON line per measurement to ``results/b
 
     python -m benchmarks.batched [--scenario corridor] [--num-envs 1 16 256 1024 4096 16384] [--threads 2]
         [--seconds 5] [--dtype float32] [--eager] [--vmas-python PATH] [--ref 0378a64 | --ref ""]
+    python -m benchmarks.batched --table-only     # the tables of the last run in the results file
 
 Each row runs for ``--seconds`` of its process's CPU time (all threads) and records two rates: env-steps per
 second of the wall clock (``env_steps_per_s``, the measure on an idle machine) and per second of CPU time
@@ -157,7 +158,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--ref", default="0378a64",
                         help="commit whose pymunk Gym env is measured in the same run ('' to skip)")
     parser.add_argument("--no-write", action="store_true", help="print only, do not append to the results")
+    parser.add_argument("--table-only", action="store_true",
+                        help="print the tables of the last run in the results file, measure nothing")
     args = parser.parse_args(argv)
+    if args.table_only:
+        lines = [json.loads(line) for line in RESULTS.read_text(encoding="utf-8").splitlines() if line.strip()]
+        last = max(line["run"] for line in lines)
+        print(f"run {last}: {next(line['command'] for line in lines if line['run'] == last)}")
+        print_table([line for line in lines if line["run"] == last])
+        return
 
     import torch
 

@@ -14,11 +14,15 @@ from impact_env.errors import EnvConfigError
 
 
 def make_vector_env(scenario: Any = None, num_envs: int = 1, **kwargs: Any) -> Any:
-    """``TransportVectorEnv(scenario, num_envs, **kwargs)``; EnvConfigError when torch is not installed."""
+    """``TransportVectorEnv(scenario, num_envs, **kwargs)``, truncating at the task's horizon unless
+    ``max_episode_steps`` is given; EnvConfigError when torch is not installed."""
     if importlib.util.find_spec("torch") is None:
         raise EnvConfigError("the transport ids' vector env is the batched torch world, and torch is not "
                              "installed: pip install 'impact_env[rl]', or make N pymunk envs with "
                              "gymnasium.make_vec(id, num_envs=N, vectorization_mode='sync')")
     from impact_env.transport.batched.vector_env import TransportVectorEnv
 
-    return TransportVectorEnv(scenario, num_envs, **kwargs)
+    envs = TransportVectorEnv(scenario, num_envs, **kwargs)
+    if "max_episode_steps" not in kwargs:  # impact_env/Transport-v0: the horizon of the scenario given, as its
+        envs.max_episode_steps = envs.horizon_steps  # single env's make_with_horizon sets it
+    return envs

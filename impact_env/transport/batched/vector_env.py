@@ -130,6 +130,12 @@ class TransportVectorEnv(VectorEnv):
             out[f"_{key}"] = mask.copy()
         return out
 
+    def _state_info(self) -> dict[str, torch.Tensor]:
+        """The info of envs that did not move (just reset): their current values, no impacts."""
+        w = self.world
+        return {"robustness": w.robustness, "is_success": w.robustness > 0.0, "fuel_Ns": w.fuel_Ns,
+                "time_s": w.step_count.to(w.dtype) * w.dt_s, "impacts": torch.zeros_like(w.step_count)}
+
     def reset(self, *, seed: int | Sequence[int] | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every env (``seed``: env i gets seed + i, or one seed per env); ``options`` must be None or
@@ -147,16 +153,21 @@ class TransportVectorEnv(VectorEnv):
         done = np.ones(self.num_envs, dtype=bool) if mask is None else mask
         self._autoreset[done] = False
         self._elapsed[done] = 0
-        w = self.world
-        info = {"robustness": w.robustness, "is_success": w.robustness > 0.0, "fuel_Ns": w.fuel_Ns,
-                "time_s": w.step_count.to(w.dtype) * w.dt_s, "impacts": torch.zeros_like(w.step_count)}
-        return obs.cpu().numpy(), self._infos(info, done)
+        return obs.cpu().numpy(), self._infos(self._state_info(), done)
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """One step of every env; the envs whose episode ended at the previous step are reset instead."""
         self._moves += 1
         resetting = self._autoreset.copy()
         a = torch.as_tensor(np.asarray(actions), device=self.world.device)
+        if resetting.all():  # every episode ended together (the usual case: one horizon): nothing moves
+            self.world._check_actions(a)
+            self._elapsed[:] = 0
+            obs = self.world.reset()
+            zeros = np.zeros(self.num_envs)
+            self._autoreset[:] = False
+            return obs.cpu().numpy(), zeros, zeros.astype(bool), zeros.astype(bool), self._infos(
+                self._state_info(), np.ones(self.num_envs, bool))
         if resetting.any():
             m = torch.as_tensor(resetting, device=self.world.device)
             self.world.reset(mask=m)
