@@ -9,7 +9,8 @@ expert in the Gymnasium env under:
 - the simulator's restitution off by -0.2, -0.1, +0.1, +0.2 (no noise: each is one deterministic episode).
 
 Expert stacks: ``all`` (the default :class:`~planners.expert.ExpertConfig`: identification, mission
-replanning, safe segments; a mission re-plan replaces the rest of an IR plan by an SR plan), ``paper``
+replanning, safe segments; a mission re-plan of an IR plan is an IR plan where the planner finds delta > 0,
+``MissionConfig.impact_robust_replans``), ``paper``
 (local replanning at planned impacts only, so what each plan brings is what flies) and, on request,
 ``all+sig`` (``all`` with identification's significance test, k = 3, which keeps the file's restitution
 unless the impacts contradict it). An IR plan is flown with its copies as contingency plans
@@ -20,10 +21,14 @@ speed (mean and max, m/s), the share of episodes whose object ends inside the fi
 final state (the scenario's ``[final_box]``, default 0.5 m / 0.05 m/s: the residual the IR plan tolerates),
 and mission re-plans per episode. Every cell is a line of ``--out``/cells.jsonl, written atomically when the
 cell is done (a rerun resumes; :mod:`impact_env.results_store`), and the table of every cell goes to
-``--out``/table.md; episodes run in ``--workers`` spawned processes. From the repository root:
+``--out``/table.md; episodes run in ``--workers`` spawned processes. A cell records the fingerprint of its
+stack's config (``config``, as in :mod:`benchmarks.robustness`; a cell without one was flown before 0.4), and
+``--stale STACKS`` flies those cells again whose config is not the stack's current one; ``--factors`` and
+``--planners`` fly a part of the grid. From the repository root:
 
     python -m benchmarks.impact_robust --estimate
     python -m benchmarks.impact_robust [--scenarios a,b] [--stacks all,paper,all+sig] [--seeds 50] [--workers 2]
+    python -m benchmarks.impact_robust --factors 1 --planners ir --stale all,paper   # the guarantee, re-flown
     python -m benchmarks.impact_robust --table-only
 """
 
@@ -59,13 +64,26 @@ def expert_config(stack: str):
             "all+sig": ExpertConfig(identification=IdentificationConfig(significance=3))}[stack]
 
 
+def config_fingerprint(stack: str) -> str:
+    """12 hex digits naming the stack's ``ExpertConfig`` as it is now (:func:`benchmarks.robustness.config_fingerprint`
+    of the same config): a cell records the one it was flown with."""
+    import dataclasses
+    import hashlib
+
+    text = json.dumps(dataclasses.asdict(expert_config(stack)), sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
 def plan_path(out: Path, name: str, planner: str) -> Path:
     """Where a scenario's SR or IR plan is cached (a plan file: ``Plan.load`` reads it)."""
     return out / "plans" / planner / f"{name}.json"
 
 
-def conditions(delta: float, seeds: int) -> list[tuple[str, float, int]]:
-    """(axis, level, episodes): noise levels in m/s, restitution offsets."""
+def conditions(delta: float, seeds: int, factors=None) -> list[tuple[str, float, int]]:
+    """(axis, level, episodes): noise levels in m/s, restitution offsets; with ``factors`` (multiples of
+    delta) only those noise cells."""
+    if factors is not None:
+        return [("noise", k * delta, seeds) for k in factors]
     out = [("nominal", 0.0, 1)]
     out += [("noise", k * delta, seeds) for k in NOISE_FACTORS]
     out += [("e", de, 1) for de in E_OFFSETS]
@@ -152,26 +170,36 @@ def cell_store(out: Path) -> CellStore:
     return CellStore(path, key=key_of)
 
 
-def run(scenarios, stacks, seeds: int, out: Path, workers: int) -> None:
+def run(scenarios, stacks, seeds: int, out: Path, workers: int, factors=None, planners=PLANNERS,
+        stale: tuple[str, ...] = ()) -> None:
+    """Fly the cells not done (``factors``: only those noise cells; ``planners``: only those plans). A cell with
+    fewer episodes than asked gets the missing seeds flown and added (an episode depends on its seed only). For
+    the stacks in ``stale``, a cell flown with another config than the stack's current one (or none recorded)
+    is flown again whole."""
     out.mkdir(parents=True, exist_ok=True)
     store = cell_store(out)
+    fingerprints = {stack: config_fingerprint(stack) for stack in stacks}
     ctx = multiprocessing.get_context("spawn")  # the parent has run HiGHS threads: never fork after that
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         for name in scenarios:
             plans = plans_for(name, out)
             delta = plans["ir"]["delta_mps"]
-            for axis, level, n in conditions(delta, seeds):
+            for axis, level, n in conditions(delta, seeds, factors):
                 for stack in stacks:
-                    for planner in PLANNERS:
+                    for planner in planners:
                         done = store.get(cell_key(name, planner, stack, axis, level))
+                        if done is not None and stack in stale and done.get("config") != fingerprints[stack]:
+                            done = None
                         if done is not None and done["episodes_requested"] >= n:
                             continue
+                        kept = [] if done is None else done["episodes"][:n]  # a cell asked for more seeds
                         start = time.perf_counter()
-                        jobs = [(name, planner, stack, plans[planner], axis, level, s) for s in range(n)]
-                        episodes = list(pool.map(_episode, jobs))
+                        jobs = [(name, planner, stack, plans[planner], axis, level, s) for s in range(len(kept), n)]
+                        episodes = kept + list(pool.map(_episode, jobs))
+                        wall = time.perf_counter() - start + (0.0 if done is None else done["wall_s"])
                         cell = {"scenario": name, "planner": planner, "stack": stack, "axis": axis, "level": level,
-                                "delta": delta, "episodes_requested": n, "episodes": episodes,
-                                "wall_s": time.perf_counter() - start}
+                                "delta": delta, "episodes_requested": n, "episodes": episodes, "wall_s": wall,
+                                "config": fingerprints[stack]}
                         store.put(cell)
                         print(row(cell), flush=True)
                         write_table(out, store.cells())
@@ -189,7 +217,8 @@ def row(cell: dict) -> str:
     eps = cell["episodes"]
     rho = [e["robustness"] for e in eps]
     speed = [e["final_speed"] for e in eps]
-    return (f"| {cell['scenario']} | {label(cell)} | {cell['stack']} | {cell['planner']} | {len(eps)} | "
+    stack = cell["stack"] if cell.get("config") == config_fingerprint(cell["stack"]) else f"{cell['stack']} *"
+    return (f"| {cell['scenario']} | {label(cell)} | {stack} | {cell['planner']} | {len(eps)} | "
             f"{100 * np.mean([e['success'] for e in eps]):.0f}% | {np.mean(rho):+.3f} ({min(rho):+.3f}) | "
             f"{np.mean(speed):.3f} ({max(speed):.3f}) | {100 * np.mean([e['in_final_box'] for e in eps]):.0f}% | "
             f"{np.mean([e['mission_replans'] for e in eps]):.2f} |")
@@ -213,7 +242,10 @@ def table(cells: list[dict], scenarios) -> str:
     lines = ["| scenario | simulator | stack | plan | episodes | success | robustness mean (min) | "
              "final speed m/s mean (max) | in final box | mission replans / ep |",
              "|---|---|---|---|---:|---:|---:|---:|---:|---:|"]
-    return "\n".join(lines + [row(c) for c in cells])
+    rows = [row(c) for c in cells]
+    note = (["", "\\* flown with an earlier config of the stack, or before cells recorded theirs (`--stale STACK` "
+             "flies it again)"] if any(" * |" in r for r in rows) else [])
+    return "\n".join(lines + rows + note)
 
 
 def write_table(out: Path, cells: list[dict]) -> Path:
@@ -244,13 +276,27 @@ def main() -> None:
     parser.add_argument("--out", default=str(RESULTS),
                         help="the cells (cells.jsonl), their table (table.md) and the cached plans (plans/) "
                              "(default: %(default)s)")
+    parser.add_argument("--factors", default=None, metavar="K1,K2",
+                        help="fly only the noise cells at these multiples of delta (e.g. 1)")
+    parser.add_argument("--planners", default=",".join(PLANNERS), help=f"of {', '.join(PLANNERS)}")
+    parser.add_argument("--stale", default="", metavar="STACKS",
+                        help="comma-separated stacks whose cells flown with another config than the stack's "
+                             "current one (or before cells recorded it) are flown again")
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true",
                         help="print the table of the cells done (and rewrite table.md); fly nothing")
     args = parser.parse_args()
     scenarios, stacks = args.scenarios.split(","), args.stacks.split(",")
-    if any(s not in STACKS for s in stacks):
-        parser.error(f"--stacks takes {', '.join(STACKS)}, got {args.stacks!r}")
+    stale = tuple(s for s in args.stale.split(",") if s)
+    if any(s not in STACKS for s in stacks + list(stale)):
+        parser.error(f"--stacks and --stale take {', '.join(STACKS)}, got {args.stacks!r} and {args.stale!r}")
+    planners = tuple(args.planners.split(","))
+    if any(p not in PLANNERS for p in planners):
+        parser.error(f"--planners takes {', '.join(PLANNERS)}, got {args.planners!r}")
+    try:
+        factors = None if args.factors is None else tuple(float(k) for k in args.factors.split(","))
+    except ValueError:
+        parser.error(f"--factors takes comma-separated numbers (multiples of delta), got {args.factors!r}")
     out = Path(args.out)
     if args.estimate:
         seconds = estimate(scenarios, stacks, args.seeds)
@@ -258,7 +304,7 @@ def main() -> None:
               f"{args.workers} workers on an idle machine")
         return
     if not args.table_only:
-        run(scenarios, stacks, args.seeds, out, args.workers)
+        run(scenarios, stacks, args.seeds, out, args.workers, factors, planners, stale)
     cells = cell_store(out).cells()
     if cells:
         write_table(out, cells)

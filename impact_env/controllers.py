@@ -80,7 +80,12 @@ def make_controller(spec: str, scenario: Any, **options: Any) -> Controller:
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         if ep.name == spec:
             return ep.load()(scenario, **{k: v for k, v in options.items() if v is not None})
+    from pathlib import Path
+
     from impact_env.catalogue import suggestion
 
+    if (Path(spec) / "model.zip").is_file():
+        raise ControllerError(f"{spec!r} is a run folder, not a controller: give its model, --controller "
+                              f"{Path(spec) / 'model.zip'}")
     raise ControllerError(f"unknown controller {spec!r}{suggestion(spec, available_controllers())}; available: "
                           f"{', '.join(available_controllers())}, or a model path ending in .zip")

@@ -162,6 +162,53 @@ def test_cells_flown_with_another_config_are_marked():
     assert robustness.flown_with(cells[0]) == robustness.config_fingerprint("paper")
 
 
+class FakePool(FakeEngine):
+    """The impact-robust benchmark's process pool, flying nothing (each job answered with a made-up episode)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__()
+        FakePool.last = self
+
+    def map(self, fn, jobs):
+        jobs = list(jobs)
+        self.jobs += jobs
+        return [{"seed": j[-1], "success": True, "robustness": 0.2, "impacts": 2, "final_speed": 0.01,
+                 "in_final_box": True, "mission_replans": 0, "wall_s": 0.0} for j in jobs]
+
+
+def test_the_impact_robust_benchmark_flies_a_part_of_the_grid_and_again_the_cells_of_another_config(tmp_path,
+                                                                                                   monkeypatch):
+    out = tmp_path / "ir"
+    for planner, source in (("sr", DATA / "plans" / "bench"), ("ir", DATA / "plans" / "ir")):
+        (out / "plans" / planner).mkdir(parents=True)
+        shutil.copy(source / "throw_and_catch_exp.json", out / "plans" / planner)  # no planning
+    monkeypatch.setattr(impact_robust, "ProcessPoolExecutor", FakePool)
+    grid = dict(scenarios=["throw_and_catch_exp"], stacks=["all", "paper"], seeds=3, out=out, workers=1)
+    impact_robust.run(factors=(1.0,), planners=("ir",), **grid)  # the guarantee's cells only
+    delta = json.loads((out / "plans" / "ir" / "throw_and_catch_exp.json").read_text())["delta_mps"]
+    assert [(j[1], j[2], j[4], j[5], j[6]) for j in FakePool.last.jobs] == [
+        ("ir", stack, "noise", delta, seed) for stack in ("all", "paper") for seed in range(3)]
+    store = impact_robust.cell_store(out)
+    assert len(store) == 2 and all(c["config"] == impact_robust.config_fingerprint(c["stack"]) for c in store.cells())
+    impact_robust.run(factors=(1.0,), planners=("ir",), stale=("all", "paper"), **grid)
+    assert FakePool.last.jobs == []  # flown with today's configs: not stale
+    cell = store.get(impact_robust.cell_key("throw_and_catch_exp", "ir", "all", "noise", delta))
+    store.put({key: value for key, value in cell.items() if key != "config"})  # as cells before 0.4
+    assert "| throw_and_catch_exp | impact noise 1 delta (0.05 m/s) | all * | ir | 3 |" in impact_robust.table(
+        store.cells(), ["throw_and_catch_exp"])
+    impact_robust.run(factors=(1.0,), planners=("ir",), **grid)
+    assert FakePool.last.jobs == []  # not asked to fly it again
+    impact_robust.run(factors=(1.0,), planners=("ir",), stale=("all",), **grid)
+    assert [(j[2], j[6]) for j in FakePool.last.jobs] == [("all", 0), ("all", 1), ("all", 2)]
+    assert "*" not in impact_robust.table(impact_robust.cell_store(out).cells(), ["throw_and_catch_exp"])
+    impact_robust.run(**{**grid, "seeds": 5, "stacks": ["paper"]}, factors=(1.0,), planners=("ir",))
+    assert [j[6] for j in FakePool.last.jobs] == [3, 4]  # more seeds asked: only the missing ones flown
+    cell = impact_robust.cell_store(out).get(impact_robust.cell_key("throw_and_catch_exp", "ir", "paper", "noise",
+                                                                   delta))
+    assert cell["episodes_requested"] == 5 and [e["seed"] for e in cell["episodes"]] == list(range(5))
+    assert [c[:3] for c in impact_robust.conditions(0.01, 50)[:2]] == [("nominal", 0.0, 1), ("noise", 0.01, 50)]
+
+
 def test_benchmarks_run_as_modules(tmp_path):
     out = tmp_path / "cells"
     convert_cells.convert("robustness", old_folder(tmp_path, "robustness"), out)
@@ -221,3 +268,36 @@ def test_no_sys_path_edits_in_benchmarks_and_tests():
                     hits.append(f"{path.relative_to(ROOT)}:{node.lineno}")
     assert hits == []
 
+
+
+def _planner_cache(path: Path, rows: dict[bool, str]) -> None:
+    keys = {baseline: json.dumps(["corridor", "sr", "highs", baseline, 1, 5.0]) for baseline in rows}
+    path.write_text("".join(json.dumps({"key": keys[b], "row": r}) + "\n" for b, r in rows.items()))
+
+
+def test_planner_benchmark_resumes_from_its_cells(tmp_path, capsys):
+    """``--cache`` is a CellStore: the rows done are printed from it, not solved again (issue 24: the cache was
+    appended in place, and a kill mid-write left a line that blocked the next run)."""
+    from benchmarks import planner
+
+    cache = tmp_path / "planner.jsonl"
+    _planner_cache(cache, {False: "| corridor | highs | cached row |", True: "| corridor | highs | cached baseline |"})
+    before = cache.read_bytes()
+    planner.main(["--planners", "sr", "--scenarios", "corridor", "--solvers", "highs", "--repeats", "1",
+                  "--time-limit", "5", "--cache", str(cache)])
+    out = capsys.readouterr().out
+    assert "| corridor | highs | cached row |" in out and "| corridor | highs | cached baseline |" in out
+    assert cache.read_bytes() == before  # nothing solved, nothing rewritten
+
+
+def test_planner_benchmark_names_a_cut_line(tmp_path):
+    from benchmarks import planner
+    from impact_env.errors import ResultsFileError
+
+    cache = tmp_path / "planner.jsonl"
+    _planner_cache(cache, {False: "| corridor | highs | cached row |"})
+    with cache.open("a") as f:
+        f.write('{"key": "[\\"corridor\\", \\"sr\\"')  # what a kill during an in-place append left
+    with pytest.raises(ResultsFileError, match="line 2 .*not a complete JSON object.*sed -i '2d'"):
+        planner.main(["--planners", "sr", "--scenarios", "corridor", "--solvers", "highs", "--repeats", "1",
+                      "--time-limit", "5", "--cache", str(cache)])

@@ -60,7 +60,7 @@ def test_run_zero_controller_on_a_user_file(tmp_path):
     (["run", "corridor", "--restitution", "3"], "restitution must be in [0, 1]"),
     # each world family refuses the other's options
     (["run", "L", "--restitution", "0.5"], "--restitution applies to impact scenarios, not to station 'L'"),
-    (["run", "corridor", "--fidelity", "reel"], "--energy-penalty, --pull-speed-mps and --max-active apply to tether"),
+    (["run", "corridor", "--fidelity", "reel"], "--fidelity applies to tether stations, not to impact scenarios"),
     (["run", "L", "--reward-mode", "conjuncts"], "--reward-mode conjuncts applies to impact scenarios"),
 ])
 def test_errors_are_one_line_messages(argv, message, capsys):

@@ -20,6 +20,7 @@ from impact_env.cli import main
     ("--degree", "1", "--degree must be in 2..8"),
     ("--intervals", "100000", "--intervals must be in 2..1000"),
     ("--seed", "-1", "--seed must be in 0.."),
+    ("--node-limit", "0", "--node-limit must be >= 1, got 0"),
 ])
 def test_plan_rejects_meaningless_options(capsys, option, value, message):
     assert main(["plan", "throw_and_catch_exp", option, value]) == 2

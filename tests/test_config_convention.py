@@ -146,13 +146,15 @@ def test_the_solver_budget_is_declared_once_and_the_old_keywords_still_reach_it(
     for cls in (PlannerConfig, IRPlannerConfig, MissionConfig):
         assert not budget & {f.name for f in dataclasses.fields(cls)}, cls.__name__
     config = _warns(lambda: PlannerConfig(time_limit_s=5.0, threads=2, seed=3))
-    assert config.solver_options == SolverOptions(time_limit_s=5.0, threads=2, seed=3)
+    assert config.solver_options == SolverOptions(time_limit_s=5.0, threads=2, seed=3, node_limit=20_000)
     assert _warns(lambda: IRPlannerConfig(time_limit_s=None)).solver_options.time_limit_s is None
     assert _warns(lambda: MissionConfig(threads=2)).solver_options == SolverOptions(node_limit=200, time_limit_s=60.0,
                                                                                     threads=2)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert PlannerConfig().solver_options == SolverOptions(time_limit_s=60.0)
+        # work by default, a time limit only as a safety net; the impact-robust planner keeps its 60 s
+        assert PlannerConfig().solver_options == SolverOptions(time_limit_s=600.0, node_limit=20_000)
+        assert IRPlannerConfig().solver_options == SolverOptions(time_limit_s=60.0)
         replaced = dataclasses.replace(config, intervals=4)
     assert replaced.solver_options == config.solver_options and replaced.intervals == 4
 

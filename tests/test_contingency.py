@@ -143,3 +143,38 @@ def test_the_copies_keep_the_guarantee_where_the_nominal_plan_does_not():
         results[name] = run_episode(env, expert, seed=10)
     assert results["copies"].success and results["copies"].robustness == pytest.approx(0.168, abs=0.01)
     assert not results["nominal"].success and results["nominal"].robustness == pytest.approx(-0.266, abs=0.01)
+
+
+@pytest.mark.slow
+def test_no_wall_keep_off_toward_a_copys_contact_beyond_the_wall(monkeypatch):
+    """long_throw_trim's IR plan flown by the full expert with a post-impact error of delta, seed 17: the throw
+    sends O1 low, and the copy blend for R3's trimming impact puts R3's contact 0.07 m closer to the wall at
+    y = -1.5 m than a 0.2 m disc fits (the planner's copies are points). Held off the wall by the safe segments'
+    keep-off, R3 hits early from another side and the task fails (-0.18 m); approaching without it (the expert
+    drops the wall keep-off toward such a contact, ``Expert._contact_beyond``), it trims and delivers (+0.34 m)."""
+    import json
+    from pathlib import Path
+
+    from planners.expert import Expert as ExpertClass
+    from planners.plan import Plan
+
+    scenario = load_scenario("long_throw_trim")
+    path = Path(__file__).parent / "data" / "plans" / "ir" / "long_throw_trim.json"
+    plan = Plan.from_dict(json.loads(path.read_text()))
+    beyond = []
+    original = ExpertClass._contact_beyond
+
+    def recorded(self, wall, name, ref):
+        answer = original(self, wall, name, ref)
+        beyond.append((name, answer))
+        return answer
+
+    monkeypatch.setattr(ExpertClass, "_contact_beyond", recorded)
+    env = TransportEnv(scenario, impact_velocity_noise_mps=plan.delta_mps)
+    result = run_episode(env, Expert(scenario, plan=plan), seed=17)
+    assert result.success and result.robustness == pytest.approx(0.341, abs=0.01)
+    assert ("R3", True) in beyond and all(name == "R3" for name, answer in beyond if answer)
+    monkeypatch.setattr(ExpertClass, "_contact_beyond", lambda self, wall, name, ref: False)
+    env = TransportEnv(scenario, impact_velocity_noise_mps=plan.delta_mps)
+    held_off = run_episode(env, Expert(scenario, plan=plan), seed=17)
+    assert not held_off.success and held_off.robustness == pytest.approx(-0.183, abs=0.01)

@@ -4,7 +4,8 @@
   (the README's quick start is also on the site) runs once, under the first place it appears.
 - A block that cannot run in a test is not a ```python block: commands are ```bash blocks. A python block that
   must not run here, or only in the slow suite, says so on the line above its fence, with its reason:
-  ``<!-- test: skip, why -->`` or ``<!-- test: slow, why -->``. No page needs either today.
+  ``<!-- test: skip, why -->`` or ``<!-- test: slow, why -->`` (docs/batched.md skips its compiled example
+  and runs its BenchMARL one in the slow suite).
 - Every ``impact-env ...`` line of a ```bash block parses with :func:`impact_env.cli.build_parser` (parsed, not
   run).
 - What the text names exists: the scripts run as ``python path.py`` or ``python -m module``, the repository
@@ -228,3 +229,28 @@ def test_readme_links_and_images_exist():
     assert local
     missing = [t for t in local if not (ROOT / t.split("#")[0]).exists()]
     assert not missing, missing
+
+
+def _walk():
+    spec = importlib.util.spec_from_file_location("impact_env_new_user_walk", ROOT / "scripts" / "new_user_walk.py")
+    walk = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = walk  # its dataclass looks its module up
+    spec.loader.exec_module(walk)
+    return walk
+
+
+def test_the_new_user_walk_runs_the_blocks_the_suite_runs():
+    """``make wheel-check`` runs scripts/new_user_walk.py on copies of these pages in the wheel's venv: the same
+    blocks, under the same names, with the same marks, as test_python_block_runs above."""
+    walk = _walk()
+    ours = [(p.values[0].where, p.values[0].code, p.values[0].mark) for p in _python_blocks()]
+    theirs = [(b.where, b.code, b.mark) for b in walk.python_blocks(SOURCES, ROOT)]
+    assert theirs == ours and len(ours) >= 10
+
+
+def test_the_new_user_walk_refuses_a_checkout_and_records_a_video(tmp_path, capsys):
+    walk = _walk()
+    assert walk.main([str(ROOT / "README.md")]) == 1  # impact_env comes from this checkout, not a wheel
+    assert "not from an installed wheel" in capsys.readouterr().err
+    video = walk.record_video(tmp_path, steps=12)
+    assert video.suffix == ".mp4" and video.read_bytes()[4:8] == b"ftyp"

@@ -39,14 +39,16 @@ def test_environment_page_is_written_from_the_environment(page):
                     "## Version history"):
         assert section in text, section
     assert "``" not in text and ":class:" not in text
-    table = text[text.index("| | |"):text.index("| Spaces shown for")]
-    rows = table.splitlines()
-    assert all(row.startswith("|") and row.endswith("|") and row.count("|") == 3 for row in rows), table
+    card = text[text.index('<table class="env-card"><tbody>'):text.index("</tbody></table>")]
+    assert "<thead>" not in card and "<th>" not in card  # no empty header row
+    assert card.index("env-card") < text.index("env-gif")  # the card before the GIF
+    assert card.count("<tr><td>") >= 7 and f'<code class="env-id">{page.env_id}</code>' in card
 
 
 def test_cli_page_has_every_subcommand():
     text = hooks.cli_help()
-    for name in ("scenarios", "show", "run", "train", "bench", "record", "bc", "curves", "plan"):
+    for name in ("scenarios", "generate", "show", "run", "train", "bench", "record", "bc", "dataset", "curves", "plan",
+                 "filter"):
         assert f"## {name}\n" in text and f"usage: impact-env {name}" in text
     page = (ROOT / "docs" / "cli.md").read_text()
     assert page.count("<!-- cli-help -->") == 1

@@ -44,7 +44,8 @@ def test_no_silent_default_scenario():
     from impact_env.errors import EnvConfigError
 
     for make in (lambda: gym.make("impact_env/Transport-v0"), lambda: gym.make("impact_env/Tether-v0"),
-                 lambda: impact_env.parallel_env(), lambda: impact_env.tether_v0.parallel_env()):
+                 lambda: impact_env.transport_v0.TransportParallelEnv(),
+                 lambda: impact_env.tether_v0.TetherParallelEnv()):  # the modules' entry points have defaults
         with pytest.raises(EnvConfigError, match="is required"):
             make()
 

@@ -102,6 +102,16 @@ def test_time_limit_with_a_plan_keeps_it_and_exits_3(planned, tmp_path, monkeypa
     assert json.loads(again.read_text())["robustness"] == best.robustness
 
 
+def test_a_node_budget_reached_keeps_the_plan_warns_and_exits_3(tmp_path, capsys):
+    out = tmp_path / "cut.json"
+    assert main(["plan", "two_objects", "--node-limit", "1", "--refine-nodes", "0", "--quiet", "--out",
+                 str(out)]) == 3
+    err = capsys.readouterr().err
+    assert "warning: node budget of 1 nodes reached with gap" in err and "keeping the best plan found" in err
+    plan = Plan.load(out)
+    assert plan.stats["stage1_status"] == "node_limit" and plan.mip_gap > 1e-4
+
+
 def test_progress_lines_are_throttled_to_one_per_period(capsys):
     now = [0.0]
     report = progress_printer(period_s=1.0, clock=lambda: now[0])

@@ -15,6 +15,7 @@ from planners.offline.impact_robust import plan_impact_robust
 from planners.offline.solvers.base import Status
 from planners.offline.spatially_robust import plan_spatially_robust
 
+CUT_SCENARIO = "two_objects"  # stage 1 finds a plan at the root node but does not prove it (proven: rho 0.5 m)
 PLANNERS = {
     "sr": (plan_spatially_robust, lambda plan: f"best robustness {plan.robustness:.4f} m"),
     "ir": (plan_impact_robust, lambda plan: f"best delta {plan.delta_mps:.5f} m/s"),
@@ -44,3 +45,37 @@ def test_a_time_limit_after_a_plan_raises_with_the_plan_the_stages_found(monkeyp
     assert str(info.value) == f"time limit of 60.0 s reached with gap 0.25; {best(plan)}"
     assert plan.stats["refine_status"] == plain.stats["refine_status"] != "skipped"
     assert "polish_s" in plan.stats
+
+
+def test_the_default_budget_is_work_and_a_node_cut_returns_the_same_plan_every_time():
+    """Stage 1's default budget is a node count (a time limit only as a safety net); a stage 1 cut by its node
+    limit is not an error: its best plan comes back, unproven, with how stage 1 ended, and the same work gives
+    the same plan on every call."""
+    from planners.offline.config import DEFAULT_NODE_BUDGET, DEFAULT_SAFETY_NET_S, PlannerConfig
+    from planners.offline.solvers.base import SolverOptions
+
+    budget = PlannerConfig().solver_options
+    assert (budget.node_limit, budget.time_limit_s) == (DEFAULT_NODE_BUDGET, DEFAULT_SAFETY_NET_S)
+    scenario = load_scenario(CUT_SCENARIO)
+    config = PlannerConfig(solver_options=SolverOptions(node_limit=1, time_limit_s=600.0), refine_nodes=0)
+    plans = [plan_spatially_robust(scenario, config) for _ in range(2)]
+    for plan in plans:
+        assert plan.stats["stage1_status"] == "node_limit" and plan.stats["stage1_nodes"] >= 1
+        assert plan.mip_gap > 1e-4 and plan.stats["refine_status"] == "skipped"  # stage 2 only after a proof
+    assert plans[0].fingerprint() == plans[1].fingerprint()
+    assert 0.0 <= plans[0].robustness < 0.5 - 1e-3  # short of the optimum the full budget proves
+
+
+def test_a_cold_stage_2_keeps_the_better_plan_and_finds_the_known_optimum():
+    """throw_and_catch_exp's stage 2 is proven within its 20 nodes, warm or cold: the same optimum (2 impacts and
+    the scaled acceleration term, 2.0308), and the cold one is never worse than stage 1's incumbent."""
+    from planners.offline.config import PlannerConfig
+
+    scenario = load_scenario("throw_and_catch_exp")
+    warm = plan_spatially_robust(scenario)
+    cold = plan_spatially_robust(scenario, PlannerConfig(refine_warm_start=False))
+    for plan in (warm, cold):
+        assert plan.stats["refine_status"] == "optimal" and plan.robustness == pytest.approx(0.4, abs=1e-6)
+        assert plan.stats["refine_objective"] == pytest.approx(2.0308, abs=1e-4) and len(plan.impacts) == 2
+    with pytest.raises(Exception, match="refine_warm_start"):
+        PlannerConfig(refine_warm_start="no")

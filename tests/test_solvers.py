@@ -266,6 +266,16 @@ def test_node_limit_returns_incumbent_and_is_repeatable(solver: str) -> None:
         assert r.mip_gap is not None and r.mip_gap > 0.0
     # the same work, the same incumbent: what makes the planner's stage 2 independent of machine load
     assert np.array_equal(runs[0].x, runs[1].x)
+    if solver == "highs":  # HiGHS says how many nodes it explored: at least the limit (it may finish a few more)
+        assert runs[0].nodes == runs[1].nodes and runs[0].nodes >= 30
+
+
+def test_highs_reports_its_nodes_for_a_mip_and_none_for_an_lp() -> None:
+    pytest.importorskip("highspy")
+    m, w, v, cap = knapsack()
+    r = solve(m, "highs", SolverOptions(mip_gap=0.0))
+    assert r.status is Status.OPTIMAL and r.nodes is not None and r.nodes >= 1
+    assert solve(small_lp(), "highs").nodes is None
 
 
 # ------------------------------------------------------------------------------- warm start, progress

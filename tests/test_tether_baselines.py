@@ -11,15 +11,15 @@ pytest.importorskip("stable_baselines3")
 
 from baselines import hyperparams  # noqa: E402
 from baselines.train import env_id_for  # noqa: E402
-from impact_env import TETHER_GYM_IDS  # noqa: E402
+from impact_env import TETHER_GYM_IDS, TETHER_GYM_IDS_V0  # noqa: E402
 from impact_env.cli import main  # noqa: E402
 
 
 def test_every_tether_env_id_has_ppo_hyperparameters():
-    for env_id in TETHER_GYM_IDS:
+    for env_id in [*TETHER_GYM_IDS, *TETHER_GYM_IDS_V0]:
         entry = hyperparams.load("ppo", env_id)
         assert entry["n_timesteps"] > 0 and isinstance(entry["policy_kwargs"], dict)
-    assert env_id_for("dead_end") == "impact_env/TetherDeadEnd-v0"
+    assert env_id_for("dead_end") == "impact_env/TetherDeadEnd-v1"  # the current version's id
 
 
 def test_ppo_on_a_station_then_expert_versus_ppo_in_one_bench(tmp_path, capsys):

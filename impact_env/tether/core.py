@@ -261,6 +261,11 @@ class TetherCore:
     def decode(self, action: Any) -> list[int]:
         """The per-robot commands of an action: ``n_robots`` integers in ``0 .. n_commands - 1``."""
         n, top = self.n_robots, self.n_commands - 1
+        if isinstance(action, np.ndarray) and type(action) is not np.ndarray:  # masked arrays, np.matrix
+            if np.ma.is_masked(action):  # a masked entry is no command (tolist() would make it None)
+                raise ActionError(f"action is a masked array with {int(np.ma.count_masked(action))} masked entries; "
+                                  f"pass {n} integer commands ({self._commands_text()}), e.g. action.filled(0)")
+            action = np.asarray(np.ma.getdata(action))
         if isinstance(action, np.ndarray) and action.dtype.kind in "iu" and action.shape == (n,):
             if n and (action.min() < 0 or action.max() > top):
                 bad = int(np.flatnonzero((action < 0) | (action > top))[0])

@@ -111,7 +111,7 @@ def build_ir_model(scenario: Scenario, config: IRPlannerConfig) -> IRModel:
                          bound_propagation=config.bound_propagation, reuse_clearance=True)
     if config.obstacle_clearance:
         add_obstacle_clearance(encoder, scenario, n)
-    task = encode_task(model, encoder, scenario)
+    task = encode_task(model, encoder, scenario, min_robustness_m=config.min_robustness_m)
 
     copies = [c for r in robots for c in r.copies]
     cost = acceleration_l1(model, copies)

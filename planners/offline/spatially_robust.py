@@ -2,11 +2,12 @@
 
     plan = plan_spatially_robust(load_scenario("corridor"))
 
-Maximises the STL spatial robustness rho of the scenario's task subject to satisfying it (rho >= 0), the
-point-mass impact law in real velocities, conditional smoothness, velocity bounds, thrust limits, robot
-separation and obstacle clearance. The model is solved by an open-source solver (HiGHS by default); a
-second stage keeps rho and trims impacts and acceleration, and a third fixes the binaries and polishes
-(``planners/offline/stages.py``, shared with the impact-robust planner). See ``planners/offline/milp/`` for
+Maximises the STL spatial robustness rho of the scenario's task subject to satisfying it (each conjunct's
+robustness at least ``PlannerConfig.min_robustness_m``, 0.1 mm), the point-mass impact law in real velocities,
+conditional smoothness, velocity bounds, thrust limits, robot separation and obstacle clearance. The model is
+solved by an open-source solver (HiGHS by default); a second stage keeps rho and trims impacts and
+acceleration, and a third fixes the binaries and polishes (``planners/offline/stages.py``, shared with the
+impact-robust planner). See ``planners/offline/milp/`` for
 each constraint family.
 """
 
@@ -78,7 +79,8 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
         add_obstacle_clearance(encoder, scenario, n)
     # rho <= every conjunct's robustness: its upper bound is the smallest of theirs
     task = _encode_task(model, encoder, scenario, rho=lambda encoded: model.add_var(
-        -encoder.bound, max(-encoder.bound, min(encoder.upper_bound(r) for r in encoded)), name="rho"))
+        -encoder.bound, max(-encoder.bound, min(encoder.upper_bound(r) for r in encoded)), name="rho"),
+        min_robustness_m=config.min_robustness_m)
     rho = task.rho
 
     cost = acceleration_l1(model, robots)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import re
 import sys
 from importlib import resources
 from pathlib import Path
@@ -235,3 +236,38 @@ env_options = st.fixed_dictionaries({}, optional={
     "initial_position_noise_m": st.one_of(option_numbers, st.sampled_from([0.05, 0.5, 1.5, 3.0, 20.0])),
     "render_width_px": st.one_of(st.integers(-10, 10_000), st.sampled_from([True, 600.0, "600"])),
 })
+
+
+# ----------------------------------------------------------------------- STL: white space and number extremes
+
+# white space the tokenizer must skip in linear time (20,000 trailing spaces once took 87 s), and the kinds it
+# must refuse (no-break and em spaces are not STL white space)
+WHITESPACE = [" ", "\t", "\n", "\r", "\f", "\v", "\r\n", "  ", "\u00a0", "\u2003", "\u3000", "\ufeff"]
+# numbers as the STL text writes them: beyond a float, below the smallest, not finite, long, signed, odd forms
+EXTREME_BOUNDS = ["0", "-0", "+5", "1e308", "1.7976931348623157e308", "1e309", "1e-400", "5e-324", "2.5e-324",
+                  "1e-9", "inf", "nan", "NaN", "-1", "0x10", "1_000", "1e", "1e+", ".", "00", "007", "1.", ".5e1",
+                  "9" * 400, "0." + "0" * 400 + "1", "1" + "0" * 5000, "1e99999999999999999999"]
+
+
+@st.composite
+def stl_extreme_texts(draw) -> str:
+    """A grammar formula with runs of white space (up to 20,000 characters) between and around its tokens, and
+    with its bounds replaced by extreme numbers."""
+    text = draw(formulas)
+    if draw(st.booleans()):  # extreme bounds
+        bounds = list(re.finditer(r"\[([^,\]]*),([^\]]*)\]", text))
+        for m in reversed(bounds[:4]):
+            lo = draw(st.one_of(st.sampled_from(EXTREME_BOUNDS), st.just(m.group(1))))
+            hi = draw(st.one_of(st.sampled_from(EXTREME_BOUNDS), st.just(m.group(2))))
+            text = text[:m.start()] + f"[{lo},{hi}]" + text[m.end():]
+    run = st.tuples(st.sampled_from(WHITESPACE), st.sampled_from([1, 2, 10, 1000, 20_000])).map(lambda t: t[0] * t[1])
+    tokens = text.split(" ")
+    for _ in range(draw(st.integers(0, 3))):  # runs between tokens
+        k = draw(st.integers(0, len(tokens)))
+        tokens.insert(k, draw(run))
+    text = " ".join(tokens)
+    if draw(st.booleans()):
+        text = draw(run) + text
+    if draw(st.booleans()):
+        text = text + draw(run)
+    return text

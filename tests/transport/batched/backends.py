@@ -54,3 +54,15 @@ class BatchedBackend:
 
 def make_backend(name: str, scenario: Scenario) -> PymunkBackend | BatchedBackend:
     return PymunkBackend(scenario) if name == "pymunk" else BatchedBackend(scenario)
+
+
+def shipped_scenarios(fast: tuple[str, ...]) -> list:
+    """Every shipped scenario as a parameter; those outside ``fast`` run in the slow suite only (the default
+    suite keeps a representative few, so that its share of the batched tests stays small)."""
+    import pytest
+
+    from impact_env.transport.scenario import scenario_names
+
+    unknown = set(fast) - set(scenario_names())
+    assert not unknown, f"not shipped: {sorted(unknown)}"
+    return [name if name in fast else pytest.param(name, marks=pytest.mark.slow) for name in scenario_names()]

@@ -2,55 +2,28 @@
 world and of the pymunk env have the same distribution (two-sample Kolmogorov-Smirnov test, alpha = 0.01).
 
 The two draw their noise from different generators (Philox against numpy), so only distributions can
-agree. 30 episodes per scenario in the default suite, 200 in the slow suite; the p-values are printed."""
+agree. The functions are :mod:`benchmarks.batched_parity`'s (1,000 episodes per scenario there): 30 episodes
+of two short scenarios in the default suite, 200 of every shipped scenario in the slow suite; the p-values are
+printed."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
-import torch
-from scipy import stats
 
-from impact_env.envs import TransportEnv
-from impact_env.transport.batched import BatchedTransportWorld
+from benchmarks.batched_parity import ALPHA, compare
 from impact_env.transport.scenario import scenario_names
 
-ALPHA = 0.01
-NOISE = {"thrust_noise": 0.05, "initial_position_noise_m": 0.05}
-
-
-def pymunk_finals(name: str, episodes: int) -> np.ndarray:
-    env = TransportEnv(name, **NOISE)
-    rng = np.random.default_rng(123)
-    out = []
-    for seed in range(episodes):
-        env.reset(seed=seed)
-        for _ in range(env.unwrapped.horizon_steps):
-            _, _, terminated, _, info = env.step(rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32))
-        assert terminated
-        out.append(info["robustness"])
-    return np.array(out)
-
-
-def batched_finals(name: str, episodes: int) -> np.ndarray:
-    world = BatchedTransportWorld(name, episodes, dtype=torch.float64, **NOISE)
-    world.reset(seeds=10_000)
-    gen = torch.Generator().manual_seed(456)
-    for _ in range(world.horizon_steps):
-        _, _, terminated, _, info = world.step(torch.rand(episodes, world.action_size, generator=gen) * 2 - 1)
-    assert terminated.all()
-    return info["robustness"].numpy()
+FAST = ("throw_and_catch_exp", "two_objects")  # the shortest horizons, one with two objects
 
 
 def check(name: str, episodes: int) -> None:
-    ref, got = pymunk_finals(name, episodes), batched_finals(name, episodes)
-    result = stats.ks_2samp(ref, got)
-    print(f"{name}: KS p = {result.pvalue:.3f} ({episodes} episodes each; mean final robustness "
-          f"pymunk {ref.mean():.3f} m, batched {got.mean():.3f} m)")
-    assert result.pvalue > ALPHA
+    cell = compare(name, episodes)
+    print(f"{name}: KS p = {cell['ks_pvalue']:.3f} ({episodes} episodes each; mean final robustness "
+          f"pymunk {cell['pymunk_mean_m']:.3f} m, batched {cell['batched_mean_m']:.3f} m)")
+    assert cell["ks_pvalue"] > ALPHA
 
 
-@pytest.mark.parametrize("name", scenario_names())
+@pytest.mark.parametrize("name", FAST)
 def test_final_robustness_distribution_matches_pymunk(name):
     check(name, 30)
 

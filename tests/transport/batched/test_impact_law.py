@@ -17,7 +17,8 @@ def closest_on_box(shape: BoxShape, p: np.ndarray) -> np.ndarray:
     return np.array([min(max(p[0], shape.x0), shape.x1), min(max(p[1], shape.y0), shape.y1)])
 
 
-@pytest.mark.parametrize("name", ["corridor", "two_objects", "obstacle_avoidance"])
+@pytest.mark.parametrize("name", [pytest.param("corridor", marks=pytest.mark.slow), "two_objects",
+                                  "obstacle_avoidance"])
 def test_every_isolated_impact_follows_the_law(name):
     sc = load_scenario(name)
     scene = build_scene(sc)

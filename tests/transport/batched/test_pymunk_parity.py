@@ -9,8 +9,9 @@ import torch
 from impact_env.envs import TransportEnv
 from impact_env.transport.batched import BatchedTransportWorld
 from impact_env.transport.core import TransportCore
-from impact_env.transport.scenario import scenario_from_dict, scenario_names
+from impact_env.transport.scenario import scenario_from_dict
 from tests.helpers import two_body_dict
+from tests.transport.batched.backends import shipped_scenarios
 
 
 def far_apart():
@@ -43,7 +44,8 @@ def test_free_flight_equals_pymunk_to_1e9_m_over_an_episode():
     assert core.step_count == 1000
 
 
-@pytest.mark.parametrize("name", scenario_names())
+# the default suite: walls, two objects and a pillar, four robots (the rest in the slow suite)
+@pytest.mark.parametrize("name", shipped_scenarios(("wall_start", "two_objects", "four_robots")))
 def test_episode_with_impacts_follows_the_pymunk_env(name):
     """Random full-thrust actions for a whole episode: observations, rewards, impacts and fuel as the Gym env's.
     Contacts are resolved alike to rounding, so the trajectories agree to far better than the tolerances."""
