@@ -174,3 +174,21 @@ def test_a_station_that_is_not_a_name_is_a_scenario_error():
         gym.make("impact_env/Tether-v1", station=123)
     with pytest.raises(ScenarioError, match="a station is a shipped name or a path"):
         gym.make("impact_env/Tether-v0", station=123)
+
+
+def test_a_start_radius_far_beyond_the_station_still_places_the_cargo():
+    """Found by ``make fuzz`` (tether_env_options): ``initial_position_noise_m=312`` on station L was accepted,
+    then every reset failed, since 1000 draws in a disc mostly outside the station all missed."""
+    env = TetherEnv("L", initial_position_noise_m=312)
+    starts = []
+    for seed in (0, 1, 0):
+        env.reset(seed=seed)
+        x, y = env.unwrapped.core._state[0][:2]
+        assert env.unwrapped.station.cargo_inside((x, y))
+        starts.append((x, y))
+    assert starts[0] == starts[2] != starts[1]  # seeded
+    small = TetherEnv("L", initial_position_noise_m=0.3)  # the first 1000 draws are the disc's, as before
+    small.reset(seed=0)
+    again = TetherEnv("L", initial_position_noise_m=0.3)
+    again.reset(seed=0)
+    assert small.unwrapped.core._state == again.unwrapped.core._state
