@@ -14,6 +14,7 @@ import pytest
 
 from impact_env.errors import OutputPathError
 from impact_env.results_store import atomic_path, check_output_file, check_output_folder, write_atomic
+from tests.paths import DATA
 
 
 @pytest.fixture
@@ -115,7 +116,7 @@ def test_plans_summaries_and_videos_are_written_atomically(tmp_path, monkeypatch
     from impact_env.rollout import write_video
     from planners.plan import Plan
 
-    plan = Plan.load(Path(__file__).parent / "data" / "plans" / "bench" / "corridor.json")
+    plan = Plan.load(DATA / "plans" / "bench" / "corridor.json")
     written = []
     real = os.replace
     monkeypatch.setattr(os, "replace", lambda a, b: (written.append((Path(a), Path(b))), real(a, b))[1])
