@@ -1,8 +1,9 @@
 # Two entry points from a fresh clone (only Python 3.11 needed):
 #   make demo   - create .venv, install the package, run the main demo (video + JSON + plots in out/)
-#   make test   - create .venv, install with the [rl,dev,scip,tether,ray] extras, run the default (fast) test suite
+#   make test   - create .venv, install with the [rl,marl,rl-analysis,dev,scip,tether,ray] extras, run the default (fast) test suite
 # Further targets: make test-slow (long checks), make fuzz (10 minutes of property-based fuzzing),
 #   make bench (benchmarks), make bench-ray (local processes vs Ray, RLlib vs SB3 sampling), make lint,
+#   make typecheck (mypy over impact_env, planners and baselines; its options in setup.cfg [mypy]),
 #   make wheel-check (sdist + wheel, smoke test of the wheel in a fresh venv), make docs (the documentation
 #   site, warnings as errors), make docs-check (its links and a headless-Chromium look at an environment page),
 #   make docs-media (re-make the GIFs and figures the site shows),
@@ -15,7 +16,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 OUT := out
 
-.PHONY: demo test test-slow fuzz bench bench-expert bench-ir bench-ray results lint clean wheel-check docs docs-check docs-media
+.PHONY: demo test test-slow fuzz bench bench-expert bench-ir bench-ray results lint typecheck clean wheel-check docs docs-check \
+	docs-media
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -35,15 +37,15 @@ $(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml setup.py impact_
 # test tools. torch is pinned again on the line that pulls RLlib.
 $(VENV)/.dev-installed: $(VENV)/.base-installed
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,dev,scip,tether,ray]'
+	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,marl,rl-analysis,dev,scip,tether,ray]'
 	touch $@
 
 # The main demo: plan the corridor (MILP, HiGHS), fly it with the expert (replanner + MPC) in the
 # simulator, write the plan, the video, the plots and the JSON summary.
 demo: $(VENV)/.base-installed
 	mkdir -p $(OUT)
-	$(BIN)/impact-env show corridor --out $(OUT)/corridor_setup.png
-	$(BIN)/impact-env plan corridor --out $(OUT)/corridor_plan.json --plot $(OUT)/corridor_plan.png
+	$(BIN)/impact-env show corridor --plot $(OUT)/corridor_setup.png
+	$(BIN)/impact-env plan corridor --json $(OUT)/corridor_plan.json --plot $(OUT)/corridor_plan.png
 	$(BIN)/impact-env run corridor --controller expert --plan $(OUT)/corridor_plan.json --seed 0 \
 		--video $(OUT)/corridor_expert.mp4 --json $(OUT)/corridor_expert.json --plot $(OUT)/corridor_expert.png
 	@echo "demo outputs in $(OUT)/"
@@ -55,9 +57,9 @@ test: $(VENV)/.dev-installed
 test-slow: $(VENV)/.dev-installed
 	$(BIN)/python -m pytest -q -n 2 --dist loadgroup -m slow --timeout 3600
 
-# The fuzzers of tests/fuzz/ drawing fresh inputs for FUZZ_SECONDS per fuzzer (7 fuzzers on 2 processes:
-# 170 s each is about 10 minutes), then a table of the inputs tried.
-FUZZ_SECONDS ?= 170
+# The fuzzers of tests/fuzz/ drawing fresh inputs for FUZZ_SECONDS per fuzzer (17 fuzzers on 2 processes:
+# 60 s each is about 10 minutes), then a table of the inputs tried.
+FUZZ_SECONDS ?= 60
 fuzz: $(VENV)/.dev-installed
 	mkdir -p $(OUT)
 	rm -f $(OUT)/fuzz_report.jsonl
@@ -90,7 +92,7 @@ results: $(VENV)/.dev-installed
 
 # the docs tools on top of the dev install (torch stays the pinned CPU build installed above)
 $(VENV)/.docs-installed: $(VENV)/.dev-installed
-	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,dev,scip,tether,ray,docs]'
+	$(BIN)/pip install --quiet torch==2.13.0 -e '.[rl,marl,rl-analysis,dev,scip,tether,ray,docs]'
 	touch $@
 
 wheel-check: $(VENV)/.dev-installed
@@ -103,13 +105,17 @@ docs: $(VENV)/.docs-installed
 	TUTORIAL_SIZE=$(TUTORIAL_SIZE) NO_MKDOCS_2_WARNING=1 SDL_VIDEODRIVER=dummy MPLBACKEND=Agg $(BIN)/mkdocs build --strict
 
 docs-check: docs
-	$(BIN)/python -m pytest -q -p no:cacheprovider tests/docs_site_check.py
+	$(BIN)/python -m pytest -q -p no:cacheprovider tests/docs/docs_site_check.py
 
 docs-media: $(VENV)/.base-installed
 	SDL_VIDEODRIVER=dummy MPLBACKEND=Agg $(BIN)/python scripts/make_docs_media.py
 
 lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check impact_env planners baselines tests benchmarks
+
+# the packages' annotations checked (setup.cfg [mypy]: the files, the options and why each exception)
+typecheck: $(VENV)/.dev-installed
+	$(BIN)/mypy
 
 clean:
 	rm -rf $(VENV) $(OUT) *.egg-info site build

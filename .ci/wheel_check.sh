@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Build the sdist and the wheel (python -m build: the wheel is built from the sdist, so both are checked),
-# install the wheel alone in a fresh venv and run the smoke test from a folder outside the source tree.
+# install the wheel alone in a fresh venv and run the smoke test from a folder outside the source tree; then
+# the new-user walk in that venv with the wheel's [rl] extra added: every python block of the README and the
+# docs pages (copies), and a video recorded with RecordVideo (scripts/new_user_walk.py).
 # Usage: .ci/wheel_check.sh [PYTHON]   (PYTHON builds; default .venv/bin/python, which has `build`)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -22,7 +24,8 @@ done
 if grep -E "(^|/)results/|(^|/)benchmarks/" "$WORK/wheel.txt" "$WORK/sdist.txt"; then
     echo "the sdist or the wheel ships results or benchmarks (above)"; exit 1
 fi
-for f in impact_env/transport/scenarios/corridor.toml impact_env/tether/stations/L.toml baselines/hyperparams/ppo.yml planners/expert/expert.py; do
+for f in impact_env/transport/scenarios/corridor.toml impact_env/tether/stations/L.toml baselines/hyperparams/ppo.yml \
+         planners/expert/expert.py impact_env/py.typed planners/py.typed baselines/py.typed; do
     grep -q "^$f\$" "$WORK/wheel.txt" || { echo "wheel lacks $f"; exit 1; }
 done
 # the compiled helpers (setup.py): built into the wheel, their C sources in the sdist
@@ -34,5 +37,16 @@ done
 "$WORK/venv/bin/pip" install --quiet --upgrade pip
 "$WORK/venv/bin/pip" install --quiet "$WHEEL"
 cp scripts/smoke_installed.py "$WORK/smoke.py"
+cp scripts/new_user_walk.py "$WORK/walk.py"
+mkdir -p "$WORK/pages/docs"
+cp README.md "$WORK/pages/"
+cp docs/*.md "$WORK/pages/docs/"
 cd "$WORK"  # outside the source tree: nothing can be imported from the checkout
 PATH="$WORK/venv/bin:$PATH" SDL_VIDEODRIVER=dummy MPLBACKEND=Agg "$WORK/venv/bin/python" smoke.py
+# [rl] as a new user adds it, torch pinned to the CPU build first (as the dev install does)
+"$WORK/venv/bin/pip" install --quiet torch==2.13.0
+"$WORK/venv/bin/pip" install --quiet torch==2.13.0 "$WHEEL[rl]"
+mkdir "$WORK/walk"
+cd "$WORK/walk"
+PATH="$WORK/venv/bin:$PATH" SDL_VIDEODRIVER=dummy MPLBACKEND=Agg "$WORK/venv/bin/python" ../walk.py \
+    ../pages/README.md ../pages/docs/*.md

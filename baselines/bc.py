@@ -26,8 +26,9 @@ import numpy as np
 from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
 from baselines.record import dataset_id, datasets_path, use_datasets_path
 from baselines.run_meta import scenario_fingerprint
-from impact_env.config_checks import check_integer, check_number, check_text, fail
+from impact_env.config_checks import check_flag, check_integer, check_number, check_text, fail
 from impact_env.errors import ImpactEnvError
+from impact_env.results_store import atomic_path, check_output_folder, write_atomic
 from impact_env.transport.scenario import load_scenario
 
 MIN_OBS_STD = 1e-2  # features constant in the demonstrations (e.g. a passive disc's heading) are not blown up
@@ -59,6 +60,8 @@ class BCConfig:
     """The parent of the default run folder."""
     net_arch: tuple[int, ...] = (128, 128)
     """Hidden layer sizes of the policy and value networks."""
+    quiet: bool = False
+    """No line per epoch (``--quiet``)."""
 
     def __post_init__(self) -> None:
         check_text(self, "scenario", ImpactEnvError)
@@ -71,6 +74,7 @@ class BCConfig:
         check_integer(self, "seed", ImpactEnvError, low=0)
         check_text(self, "out", ImpactEnvError, none="<runs_dir>/bc_<scenario>_s<seed>")
         check_text(self, "runs_dir", ImpactEnvError)
+        check_flag(self, "quiet", ImpactEnvError)
         arch = self.net_arch
         layers = isinstance(arch, (tuple, list)) and len(arch) > 0
         if not (layers and all(isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in arch)):
@@ -102,6 +106,8 @@ def behaviour_clone(config: BCConfig) -> Path:
     from impact_env.transport.gym_env import TransportEnv
 
     scenario = load_scenario(config.scenario)
+    run_dir = Path(config.out) if config.out else Path(config.runs_dir) / f"bc_{scenario.name}_s{config.seed}"
+    check_output_folder(run_dir, "--out")  # before any epoch
     episodes = load_demonstrations(scenario.name, config.dataset_dir)
     n_val = int(round(config.validation_share * len(episodes))) if len(episodes) > 1 else 0
     n_val = min(max(n_val, 1 if config.validation_share > 0 and len(episodes) > 1 else 0), len(episodes) - 1)
@@ -148,20 +154,21 @@ def behaviour_clone(config: BCConfig) -> Path:
             if row["val_mse"] < best[0]:
                 best = (row["val_mse"], copy.deepcopy(policy.state_dict()), epoch)
         history.append(row)
-        print(f"  epoch {epoch}/{config.epochs}: " + ", ".join(f"{k} {v:.3g}" for k, v in row.items() if k != "epoch"),
-              flush=True)
+        if not config.quiet:
+            print(f"  epoch {epoch}/{config.epochs}: " + ", ".join(f"{k} {v:.3g}" for k, v in row.items()
+                                                                  if k != "epoch"), flush=True)
     if best[1] is not None:  # keep the weights that imitated the held-out episodes best
         policy.load_state_dict(best[1])
-        print(f"  kept epoch {best[2]} (lowest validation error {best[0]:.3g})")
+        if not config.quiet:
+            print(f"  kept epoch {best[2]} (lowest validation error {best[0]:.3g})")
 
-    run_dir = Path(config.out) if config.out else Path(config.runs_dir) / f"bc_{scenario.name}_s{config.seed}"
-    run_dir.mkdir(parents=True, exist_ok=True)
     policy.set_training_mode(False)
-    model.save(run_dir / "model.zip")
+    with atomic_path(run_dir / "model.zip") as tmp:
+        model.save(tmp)
     save_normalization(venv, run_dir / NORMALIZATION_FILE)
     (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
-    (run_dir / "train.json").write_text(json.dumps({
-        "algo": "ppo", "method": "behaviour cloning", "scenario": scenario.name,
+    write_atomic(run_dir / "train.json", json.dumps({
+        "algo": "ppo", "method": "behaviour cloning", "normalized": True, "scenario": scenario.name,
         "scenario_fingerprint": scenario_fingerprint(scenario),
         "dataset": dataset_id(scenario.name), "episodes_train": len(train_eps), "episodes_validation": len(val_eps),
         "samples": len(obs), "epochs": config.epochs, "batch_size": config.batch_size,

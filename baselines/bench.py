@@ -88,11 +88,22 @@ def parse_controllers(text: str, scenarios: list[str] | None = None,
         if target.endswith(".zip"):
             spec = ControllerSpec(label or Path(target).parent.name, target, trust_pickle=trust_pickle)
             for name in (scenarios or [""]) if "{scenario}" in target else [""]:
-                if not Path(model_path(spec, name)).is_file():
-                    raise ImpactEnvError(f"controller {item!r}: model file {model_path(spec, name)!r} does not exist")
-                preflight(Path(model_path(spec, name)), trust_pickle)
+                try:
+                    preflight(Path(model_path(spec, name)), trust_pickle)
+                except ImpactEnvError as exc:
+                    raise type(exc)(f"controller {item!r}: {exc}") from None
             specs.append(spec)
         else:
+            from impact_env.catalogue import suggestion
+            from impact_env.controllers import available_controllers
+            from impact_env.errors import ControllerError
+
+            # only names the episodes can build: the rest need a path (sb3's .zip, rllib:RUN)
+            names = [n for n in available_controllers() if n not in ("sb3", "rllib")]
+            if target not in names:
+                raise ControllerError(f"controller {item!r}: unknown controller {target!r}"
+                                      f"{suggestion(target, names)}; available: {', '.join(names)}, "
+                                      "label:path/to/model.zip or label:rllib:RUN")
             specs.append(ControllerSpec(label or target, target))
     if not specs:
         raise ImpactEnvError("--controllers is empty")
@@ -117,12 +128,19 @@ def _controller(scenario_name: str, scenario: Any, spec: ControllerSpec, files: 
     return _CACHE[key]
 
 
-def _episode(job: tuple[str, ControllerSpec, int, Any, dict[str, Any]]) -> dict[str, Any]:
+def _impact_options(env_options: dict[str, Any]) -> dict[str, Any]:
+    """The impact env's keywords: the tether stations' own options left out (their defaults, checked before)."""
+    from impact_env.cli_options import STATION_DEFAULTS
+
+    return {k: v for k, v in env_options.items() if k not in STATION_DEFAULTS}
+
+
+def _episode(job: tuple[str, ControllerSpec, int, Any, dict[str, Any], bool]) -> dict[str, Any]:
     from baselines import tether
     from impact_env.rollout import robot_object_impacts, run_episode
     from impact_env.transport.gym_env import TransportEnv
 
-    scenario_name, spec, seed, files, env_options = job
+    scenario_name, spec, seed, files, env_options, first = job
     station = tether.is_station(scenario_name)
     if station:
         from impact_env.tether.station import load_station
@@ -131,14 +149,14 @@ def _episode(job: tuple[str, ControllerSpec, int, Any, dict[str, Any]]) -> dict[
         env_options = tether.env_options(env_options, scenario_name)
     else:
         scenario = load_scenario(scenario_name)
-        env_options = {k: v for k, v in env_options.items() if k != "fidelity"}  # a tether-only option
+        env_options = _impact_options(env_options)
     controller = _controller(scenario_name, scenario, spec, files)
     env = tether.make_env(scenario, **env_options) if station else TransportEnv(scenario, **env_options)
     res = run_episode(env, controller, seed=seed)
     hits = 0 if station else len(robot_object_impacts(scenario, res.impacts))
     return {"scenario": scenario_name, "controller": spec.label, "seed": seed, "success": res.success,
             "robustness": res.robustness, "fuel_Ns": res.fuel_Ns, "impacts": hits,
-            "controller_ms": float(np.mean(res.controller_ms)), "positions": res.positions if seed == 0 else None}
+            "controller_ms": float(np.mean(res.controller_ms)), "positions": res.positions if first else None}
 
 
 def plan_expert(name: str) -> dict[str, Any]:
@@ -158,14 +176,18 @@ def plan_expert(name: str) -> dict[str, Any]:
 
 def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes: int, out: Path,
               workers: int | None = None, env_options: dict[str, Any] | None = None,
-              engine: EngineConfig | None = None) -> list[dict[str, Any]]:
+              engine: EngineConfig | None = None, seed: int = 0, quiet: bool = False) -> list[dict[str, Any]]:
     """Run every (scenario, controller, seed) and write the outputs; returns the summary rows.
 
-    ``env_options`` (TransportEnv keywords such as ``thrust_noise``) apply to every episode; they are
-    checked once here, so a bad value is one clear error rather than one per worker. ``engine`` says where the
-    plans and episodes run (default: ``workers`` local processes).
+    ``env_options`` (TransportEnv keywords such as ``thrust_noise``, and TetherEnv's for stations) apply to
+    every episode; they are checked once here, so a bad value is one clear error rather than one per worker.
+    The episodes of every scenario and controller are seeded ``seed``, ``seed + 1``, ... ``seed + episodes -
+    1``. ``engine`` says where the plans and episodes run (default: ``workers`` local processes). ``out`` is
+    checked (and created) after the options and before any plan or episode; ``quiet`` drops the line per
+    episode.
     """
     from baselines import tether
+    from impact_env.results_store import check_output_folder
     from impact_env.transport.core import TransportCore
 
     env_options = dict(env_options or {})
@@ -173,8 +195,8 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
         if tether.is_station(name):
             tether.make_env(name, **tether.env_options(env_options, name)).close()
         else:
-            TransportCore(name, **{k: v for k, v in env_options.items() if k != "fidelity"})
-    out.mkdir(parents=True, exist_ok=True)
+            TransportCore(name, **_impact_options(env_options))
+    check_output_folder(out, "--out")
     engine = engine or EngineConfig("local", workers)
     n_jobs = len(scenarios) * len(controllers) * episodes
     with open_engine(engine, n_jobs=n_jobs) as pool:
@@ -194,14 +216,16 @@ def run_bench(scenarios: list[str], controllers: list[ControllerSpec], episodes:
                     from baselines.rllib_policy import resolve_policy_dir
 
                     shared[s, c.name] = pool.share(resolve_policy_dir(model_path(c, s)))
-        jobs = [(s, c, seed, shared.get((s, c.name)), env_options)
-                for s in scenarios for c in controllers for seed in range(episodes)]
+        jobs = [(s, c, k, shared.get((s, c.name)), env_options, k == seed)
+                for s in scenarios for c in controllers for k in range(seed, seed + episodes)]
         results = []
         for k, r in enumerate(pool.map(_episode, jobs), 1):
             results.append(r)
-            print(f"  [{k}/{len(jobs)}] {r['scenario']} {r['controller']} seed {r['seed']}: "
-                  f"rho {r['robustness']:+.3f} {'ok' if r['success'] else 'fail'}", flush=True)
-        print(f"  {pool.describe()}: {pool.placement_summary()}", flush=True)
+            if not quiet:
+                print(f"  [{k}/{len(jobs)}] {r['scenario']} {r['controller']} seed {r['seed']}: "
+                      f"rho {r['robustness']:+.3f} {'ok' if r['success'] else 'fail'}", flush=True)
+        if not quiet:
+            print(f"  {pool.describe()}: {pool.placement_summary()}", flush=True)
     # every output is written atomically (impact_env.results_store): a kill leaves the old file or the new one
     with atomic_path(out / "episodes.csv") as tmp, open(tmp, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=[k for k in results[0] if k != "positions"])
@@ -288,6 +312,7 @@ def _figure(results, summary, scenarios, controllers, path: Path) -> None:
                         and r["positions"] is not None)
             for b, name in enumerate(names[:traj.shape[1]]):
                 ax.plot(traj[:, b, 0], traj[:, b, 1], lw=1.2, color=colours[b], zorder=5, label=name)
-            ax.set_title(f"{c} (seed 0)", fontsize=9)
+            ax.set_title(f"{c} (seed {next(r['seed'] for r in results if r['positions'] is not None)})",
+                         fontsize=9)
         axes[i][-1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, title="paths")
     fig.savefig(path, dpi=100)

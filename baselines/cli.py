@@ -1,5 +1,5 @@
 """``impact-env train`` (baselines/train.py), ``bench`` (baselines/bench.py), ``record`` (baselines/record.py),
-``bc`` (baselines/bc.py), ``curves`` (baselines/curves.py)."""
+``dataset`` (baselines/task_dataset.py), ``bc`` (baselines/bc.py), ``curves`` (baselines/curves.py)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,19 @@ import numpy as np
 # Nothing from the [rl] extra is imported here: `impact-env` loads this module at start-up, also in a base
 # install (make demo), so stable-baselines3, yaml and minari are imported only by the command handlers.
 from baselines import ALGOS, rllib_cli
-from impact_env.cli_options import add_transport_options, transport_options
+from impact_env.cli_options import (
+    add_files,
+    add_out,
+    add_quiet,
+    add_seed,
+    add_tether_options,
+    add_transport_options,
+    check_outputs,
+    check_world_options,
+    legacy_file_out,
+    station_options,
+    transport_options,
+)
 from impact_env.sweep import add_engine_arguments, engine_config
 from impact_env.transport.core import REWARD_MODES
 
@@ -25,14 +37,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--timesteps", type=int, default=None,
                    help="environment steps to train (default: n_timesteps of the hyperparameter file; PPO rounds up "
                         "to whole rollouts)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the algorithm and the environments")
+    add_seed(p, "seed of the algorithm and the environments")
     p.add_argument("--n-envs", type=int, default=None,
                    help="parallel environments, in subprocesses when more than one (default: n_envs of the file)")
     p.add_argument("--max-minutes", type=float, default=None,
                    help="wall-clock budget: stop before --timesteps when it runs out (default: none)")
-    p.add_argument("--out", default=None, metavar="RUN_DIR",
-                   help="the run folder: model.zip, vecnormalize.json, train.json, eval/, tb/, checkpoints/ (default: "
-                        "<--runs-dir>/<algo>_<scenario>_s<seed>)")
+    add_out(p, "the run folder, with model.zip, vecnormalize.json, train.json, eval/, tb/, checkpoints/ (default: "
+               "<--runs-dir>/<algo>_<scenario>_s<seed>)")
     p.add_argument("--runs-dir", default="runs", help="parent of the default run folder")
     p.add_argument("--resume", action="store_true",
                    help="continue the run saved in the run folder (after Ctrl-C, --max-minutes or a shorter "
@@ -45,9 +56,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="environment steps between evaluations (default: a fifth of the run, at most 20,000; "
                         "there is always one at the end)")
     add_transport_options(p, REWARD_MODES)
-    p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
-                   help="tether stations only: the tether physics (see impact_env.tether.physics)")
-    p.add_argument("--no-progress", action="store_true", help="neither a progress bar nor progress lines")
+    add_tether_options(p)
+    add_quiet(p, "neither a progress bar nor progress lines", legacy_no_progress=True)
     p.add_argument("--verbose", type=int, default=0, help="stable-baselines3's verbosity (0, 1, 2)")
     rllib_cli.add_arguments(p)
     p.set_defaults(func=_run)
@@ -59,18 +69,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="comma-separated: expert, random, zero, label:path/to/model.zip (stable-baselines3), "
                         "label:rllib:RUN_OR_CHECKPOINT (RLlib) ({scenario} in a path becomes each scenario's name)")
     p.add_argument("--episodes", type=int, default=10, help="seeded episodes per scenario and controller")
-    p.add_argument("--out", default="bench", help="output folder (tables, CSV, figure)")
-    p.add_argument("--thrust-noise", type=float, default=0.0, metavar="STD",
-                   help="standard deviation of multiplicative thrust noise (0.05 = 5%%)")
-    p.add_argument("--initial-position-noise-m", type=float, default=0.0, metavar="R",
-                   help="objects start uniformly within this radius (m) of their position")
-    p.add_argument("--restitution", type=float, default=None, metavar="E",
-                   help="simulate with this restitution instead of the scenario's")
+    add_seed(p, "seed of every scenario's and controller's first episode (episode k uses seed + k)")
+    add_out(p, "summary.md, summary.csv, episodes.csv, bench.png and the expert's plans/", default="bench")
+    add_transport_options(p, REWARD_MODES)
+    add_tether_options(p)
     p.add_argument("--trust-pickle", action="store_true",
                    help="also load pickled files of model folders (old vecnormalize.pkl, unknown pickled model "
                         "entries); a pickle can run any code: only for files you made yourself")
-    p.add_argument("--fidelity", choices=("kinematic", "reel", "force"), default="kinematic",
-                   help="tether stations only: the tether physics (see impact_env.tether.physics)")
+    add_quiet(p, "no line per episode; only the table and the files written")
     add_engine_arguments(p)
     p.set_defaults(func=_bench)
 
@@ -84,15 +90,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("record", help="record expert episodes as a Minari dataset (with per-step infos)")
     p.add_argument("scenario", help="a shipped scenario name (impact-env scenarios) or a .toml file")
     p.add_argument("--episodes", type=int, default=20, help="episodes to record (seeds --seed, --seed + 1, ...)")
-    p.add_argument("--out", default=None, metavar="DIR",
-                   help="Minari datasets folder (default: Minari's own, $MINARI_DATASETS_PATH or ~/.minari/datasets, "
-                        "so minari.load_dataset finds it without settings)")
+    add_out(p, "the Minari datasets folder (default: Minari's own, $MINARI_DATASETS_PATH or ~/.minari/datasets, so "
+               "minari.load_dataset finds it without settings)")
     p.add_argument("--plan", default=None, metavar="JSON", help="a saved plan; planned with the MILP if omitted")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first episode")
-    p.add_argument("--thrust-noise", type=float, default=0.0, metavar="STD",
-                   help="standard deviation of multiplicative thrust noise")
-    p.add_argument("--initial-position-noise-m", type=float, default=0.0, metavar="R",
-                   help="objects start uniformly within this radius (m) of their position")
+    add_seed(p)
+    add_transport_options(p, REWARD_MODES)
+    add_quiet(p, "no line per episode")
     p.set_defaults(func=_record)
 
     p = subparsers.add_parser("bc", help="behaviour cloning from a recorded expert dataset (see `record`)")
@@ -102,19 +105,39 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--epochs", type=int, default=30, help="passes over the demonstrations")
     p.add_argument("--batch-size", type=int, default=256, help="minibatch size")
     p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate")
-    p.add_argument("--seed", type=int, default=0, help="seed of the policy and the minibatches")
-    p.add_argument("--out", default=None, metavar="RUN_DIR",
-                   help="the run folder: model.zip, vecnormalize.json, train.json (default: "
-                        "<--runs-dir>/bc_<scenario>_s<seed>)")
+    add_seed(p, "seed of the policy and the minibatches")
+    add_out(p, "the run folder, with model.zip, vecnormalize.json, train.json (default: "
+               "<--runs-dir>/bc_<scenario>_s<seed>)")
     p.add_argument("--runs-dir", default="runs", help="parent of the default run folder")
+    add_quiet(p, "no line per epoch")
     p.set_defaults(func=_bc)
+
+    p = subparsers.add_parser("dataset", help="expert episodes on a family's kept generated tasks as Minari datasets "
+                                              "(training and held-out)",
+                              description="Fly the plans of the kept tasks in TASKS_DIR (impact-env filter --out) "
+                                          "with the expert and store the episodes, padded to the family's "
+                                          "goal-conditioned layout, as two Minari datasets: "
+                                          "impact_env/generated_<family>/expert-v0 and .../heldout-v0.")
+    p.add_argument("--family", required=True, help="the task family")
+    p.add_argument("--tasks", required=True, metavar="TASKS_DIR", help="the folder impact-env filter --out wrote")
+    p.add_argument("--episodes-per-task", type=int, default=1,
+                   help="expert episodes per task (env seeds --seed, --seed + 1, ...)")
+    p.add_argument("--heldout", type=float, default=0.2, help="share of tasks held out (default 0.2)")
+    p.add_argument("--split-seed", type=int, default=0, help="seed of the held-out split (default 0)")
+    p.add_argument("--max-tasks", type=int, default=None, help="use at most this many kept tasks (seed order)")
+    add_out(p, "where the datasets go (default: Minari's own folder)")
+    add_seed(p, "env seed of each task's first episode (episode k uses seed + k)")
+    add_transport_options(p, REWARD_MODES)
+    add_quiet(p, "no line per episode")
+    p.set_defaults(func=_dataset)
 
     p = subparsers.add_parser("curves", help="plot the evaluation curves of training runs")
     p.add_argument("runs", nargs="+", help="run folders written by `impact-env train` (its --out)")
-    p.add_argument("--out", default="curves.png", help="output image")
+    add_out(p, "curves.png and, with --table, the table (default: the current folder)")
+    add_files(p, plot="the figure (default: curves.png in --out)")
     p.add_argument("--title", default="", help="figure title")
     p.add_argument("--labels", default=None, help="comma-separated legend labels, one per run")
-    p.add_argument("--table", default=None, help="also write a markdown table of the runs to this file")
+    p.add_argument("--table", default=None, metavar="MD", help="also write a markdown table of the runs to this file")
     p.set_defaults(func=_curves)
 
 
@@ -134,7 +157,13 @@ def _convert(args: argparse.Namespace) -> int:
 def _curves(args: argparse.Namespace) -> int:
     from baselines.curves import load_curve, plot_curves, training_table
     from impact_env.errors import ImpactEnvError
+    from impact_env.figures import png_path
+    from impact_env.results_store import write_atomic
 
+    legacy_file_out(args, "--plot", (".png",))
+    args.plot = str(args.plot or Path(args.out or ".") / "curves.png")
+    check_outputs({"--plot": args.plot, "--table": args.table}, {"--out": args.out})
+    args.plot = str(png_path(args.plot))
     curves = [load_curve(r) for r in args.runs]
     if args.labels is not None:
         labels = args.labels.split(",")
@@ -142,15 +171,31 @@ def _curves(args: argparse.Namespace) -> int:
             raise ImpactEnvError(f"--labels has {len(labels)} labels for {len(curves)} runs")
         for c, label in zip(curves, labels):
             c.label = label
-    plot_curves(curves, args.out, args.title)
+    plot_curves(curves, args.plot, args.title)
     for c in curves:
         best = int(np.argmax(c.robustness.mean(axis=1)))
         print(f"{c.label}: {len(c.timesteps)} evaluations up to {c.timesteps[-1]} steps; last robustness "
               f"{c.robustness[-1].mean():+.3f}, best {c.robustness[best].mean():+.3f} at {c.timesteps[best]} steps")
     if args.table:
-        Path(args.table).write_text(training_table(curves) + "\n")
+        write_atomic(args.table, training_table(curves) + "\n")
         print(f"wrote {args.table}")
-    print(f"wrote {args.out}")
+    print(f"wrote {args.plot}")
+    return 0
+
+
+def _dataset(args: argparse.Namespace) -> int:
+    from baselines.task_dataset import DatasetConfig, build_dataset
+
+    if args.out is not None:
+        check_outputs(folders={"--out": args.out})  # before any episode
+    options = {k: v for k, v in transport_options(args).items() if v not in (None, 0.0, "dense")}
+    config = DatasetConfig(episodes_per_task=args.episodes_per_task, heldout_share=args.heldout,
+                           split_seed=args.split_seed, max_tasks=args.max_tasks, env_options=options or None,
+                           seed=args.seed, quiet=args.quiet)
+    train, heldout = build_dataset(args.family, args.tasks, config, out=args.out)
+    for dataset in (train, heldout):
+        if dataset is not None:
+            print(f"wrote {dataset.spec.dataset_id}: {dataset.total_episodes} episodes, {dataset.total_steps} steps")
     return 0
 
 
@@ -159,7 +204,7 @@ def _bc(args: argparse.Namespace) -> int:
 
     run_dir = behaviour_clone(BCConfig(scenario=args.scenario, dataset_dir=args.dataset, epochs=args.epochs,
                                        batch_size=args.batch_size, learning_rate=args.lr, seed=args.seed,
-                                       out=args.out, runs_dir=args.runs_dir))
+                                       out=args.out, runs_dir=args.runs_dir, quiet=args.quiet))
     print(f"saved {run_dir / 'model.zip'}; fly it with: impact-env run {args.scenario} "
           f"--controller {run_dir / 'model.zip'}")
     return 0
@@ -168,8 +213,8 @@ def _bc(args: argparse.Namespace) -> int:
 def _record(args: argparse.Namespace) -> int:
     from baselines.record import datasets_path, mean_return, record
 
-    options = {"thrust_noise": args.thrust_noise, "initial_position_noise_m": args.initial_position_noise_m}
-    ds = record(args.scenario, args.episodes, args.out, args.plan, options, args.seed)
+    options = transport_options(args)
+    ds = record(args.scenario, args.episodes, args.out, args.plan, options, args.seed, quiet=args.quiet)
     print(f"wrote Minari dataset {ds.spec.dataset_id} in {datasets_path(args.out)}: {ds.total_episodes} episodes, "
           f"{ds.total_steps} steps, mean return {mean_return(ds):+.3f}; load it with "
           f"minari.load_dataset({ds.spec.dataset_id!r})"
@@ -185,31 +230,36 @@ def _bench(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise ImpactEnvError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.seed < 0:
+        raise ImpactEnvError(f"--seed must be >= 0, got {args.seed}")
     scenarios = args.scenarios.split(",")
-    options = {"thrust_noise": args.thrust_noise, "initial_position_noise_m": args.initial_position_noise_m}
-    if args.restitution is not None:
-        options["restitution"] = args.restitution
     from baselines.tether import is_station
 
-    if any(is_station(s) for s in scenarios):
-        options["fidelity"] = args.fidelity
-    summary = run_bench(scenarios, parse_controllers(args.controllers, scenarios, args.trust_pickle), args.episodes,
-                        Path(args.out), env_options=options, engine=engine_config(args))
+    stations = [is_station(s) for s in scenarios]
+    check_world_options(args, impact=not all(stations), station=any(stations),
+                        what="these scenarios" if not any(stations) else "these stations")
+    # every controller name is checked before any plan or episode (a typo after "expert" planned first in 0.2)
+    controllers = parse_controllers(args.controllers, scenarios, args.trust_pickle)
+    options = {**transport_options(args), **(station_options(args) if any(stations) else {})}
+    summary = run_bench(scenarios, controllers, args.episodes, Path(args.out), env_options=options,
+                        engine=engine_config(args), seed=args.seed, quiet=args.quiet)
     print(markdown_table(summary))
     print(f"wrote {args.out}/summary.md, summary.csv, episodes.csv, bench.png")
     return 0
 
 
 def _run(args: argparse.Namespace) -> int:
+    from baselines.tether import is_station
     from baselines.train import TrainConfig, train
 
-    options = transport_options(args)
-    if options["restitution"] is None:
-        del options["restitution"]
-    from baselines.tether import is_station
-
-    if is_station(args.scenario):
-        options["fidelity"] = args.fidelity
+    station = is_station(args.scenario)
+    check_world_options(args, impact=not station, station=station,
+                        what=f"station {args.scenario!r}" if station else "impact scenarios")
+    options = station_options(args) if station else transport_options(args)
+    # None: the file's own (no faults for --faults), as train.json records it
+    for key in ("restitution", "pull_speed_mps", "max_active", "faults"):
+        if options.get(key, 0) is None:
+            del options[key]
     if args.engine == "rllib":
         try:
             return rllib_cli.run(args, options)
@@ -218,7 +268,7 @@ def _run(args: argparse.Namespace) -> int:
     rllib_cli.check_sb3_options(args)
     config = TrainConfig(algo=args.algo, scenario=args.scenario, timesteps=args.timesteps, seed=args.seed,
                          n_envs=args.n_envs, out=args.out, runs_dir=args.runs_dir, env_options=options,
-                         eval_freq=args.eval_freq, multiagent=args.multiagent, progress_bar=not args.no_progress,
+                         eval_freq=args.eval_freq, multiagent=args.multiagent, progress_bar=not args.quiet,
                          hyperparams_file=args.hyperparams, verbose=args.verbose, max_minutes=args.max_minutes,
                          resume=args.resume)
     try:

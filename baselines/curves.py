@@ -80,7 +80,10 @@ def plot_curves(curves: list[Curve], path: str | Path, title: str = "") -> None:
     for ax in (ax_rho, ax_ok):  # 400000 -> 400k: full numbers overlap under a few ticks
         ax.xaxis.set_major_formatter(FuncFormatter(_steps_label))
     ax_rho.legend(fontsize=8)
-    fig.savefig(path, dpi=100)
+    from impact_env.results_store import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100)
 
 
 def _steps_label(x: float, _pos: int) -> str:

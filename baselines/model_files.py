@@ -16,10 +16,15 @@ convert-model DIR --trust-pickle`` rewrites such a folder once into the safe for
 
 from __future__ import annotations
 
+import errno
 import json
+import lzma
 import math
+import stat
 import sys
+import warnings
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,11 +32,18 @@ from typing import Any
 import numpy as np
 
 from impact_env.errors import ModelFileError, UntrustedFileError
+from impact_env.results_store import write_atomic
 
 NORMALIZATION_FILE = "vecnormalize.json"
 LEGACY_NORMALIZATION_FILE = "vecnormalize.pkl"
 FORMAT = "impact_env.vecnormalize/1"
 TRUST_FLAG = "--trust-pickle"
+# what a model zip may hold: SB3's zips are a few hundred kB (weights, optimiser state, a JSON of settings)
+MAX_MEMBER_BYTES = 512 * 2**20
+MAX_ZIP_BYTES = 1024 * 2**20
+MAX_DATA_BYTES = 16 * 2**20
+_COMPRESSIONS = {zipfile.ZIP_STORED: "stored", zipfile.ZIP_DEFLATED: "deflated", zipfile.ZIP_BZIP2: "bzip2",
+                 zipfile.ZIP_LZMA: "lzma"}
 # entries of a model zip's data JSON that SB3 pickles and that are rebuilt here; the rest are training state
 _SPACES = ("observation_space", "action_space")
 _SCHEDULES = {"lr_schedule": 0.0, "learning_rate": 0.0, "clip_range": 0.2, "clip_range_vf": None}
@@ -99,9 +111,7 @@ def save_normalization(vec_normalize: Any, path: Path | str) -> Path:
     data = {"format": FORMAT, "norm_obs": bool(vn.norm_obs), "norm_reward": bool(vn.norm_reward),
             "clip_obs": float(vn.clip_obs), "clip_reward": float(vn.clip_reward), "gamma": float(vn.gamma),
             "epsilon": float(vn.epsilon), "obs_rms": rms(vn.obs_rms), "ret_rms": rms(vn.ret_rms)}
-    path = Path(path)
-    path.write_text(json.dumps(data, indent=1))
-    return path
+    return write_atomic(path, json.dumps(data, indent=1))
 
 
 def _vector(value: Any, where: str, size: int | None) -> np.ndarray:
@@ -143,6 +153,54 @@ def read_normalization(path: Path, obs_size: int | None = None) -> Normalization
                          norm_obs)
 
 
+def load_vec_normalize(path: Path | str, venv: Any, training: bool = False) -> Any:
+    """A stable-baselines3 ``VecNormalize`` around ``venv`` with the statistics of a ``vecnormalize.json``: what
+    ``VecNormalize.load(path, venv)`` gives for SB3's pickle, from the plain JSON a run folder keeps.
+
+    ``path`` is a run folder (``impact-env train``'s ``--out``) or the JSON file itself. The wrapper is built with
+    the file's ``norm_obs``, ``norm_reward``, ``clip_obs``, ``clip_reward``, ``gamma`` and ``epsilon``, and its
+    ``obs_rms`` and ``ret_rms`` are the file's. ``training=False`` (the default, as for evaluation) freezes the
+    statistics; ``training=True`` keeps updating them, to continue training. Reward normalisation is switched off
+    when ``training`` is False, as SB3's evaluation recipe does::
+
+        venv = load_vec_normalize("runs/ppo_corridor_s0", DummyVecEnv([lambda: gym.make("impact_env/Corridor-v0")]))
+        model = PPO.load("runs/ppo_corridor_s0/model.zip", env=venv)
+    """
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    path = Path(path)
+    file = path / NORMALIZATION_FILE if path.is_dir() else path
+    if not file.is_file():
+        raise ModelFileError(f"{file} does not exist: a run folder keeps its observation statistics in "
+                             f"{NORMALIZATION_FILE} (a run trained with normalize: false has none)")
+    stats = read_normalization(file, int(np.prod(venv.observation_space.shape)))
+    data = json.loads(file.read_bytes())
+    where = str(file)
+    ret = data.get("ret_rms") or {"mean": 0.0, "var": 1.0, "count": 1e-4}
+    if not isinstance(ret, dict):
+        raise ModelFileError(f"{file}: ret_rms must be an object with mean, var and count")
+    ret_mean = _finite(ret.get("mean"), f"{where}: ret_rms.mean")
+    ret_var = _number(ret, "var", f"{where}: ret_rms")
+    ret_count = _number(ret, "count", f"{where}: ret_rms")
+    norm_reward = data.get("norm_reward", True)
+    if not isinstance(norm_reward, bool):
+        raise ModelFileError(f"{file}: norm_reward must be true or false, got {norm_reward!r}")
+    clip_reward = _number(data, "clip_reward", where, positive=True) if "clip_reward" in data else 10.0
+    gamma = _number(data, "gamma", where) if "gamma" in data else 0.99
+    vec = VecNormalize(venv, training=training, norm_obs=stats.norm_obs,
+                       norm_reward=norm_reward and training, clip_obs=stats.clip_obs,
+                       clip_reward=clip_reward, gamma=gamma, epsilon=stats.epsilon)
+    vec.obs_rms.mean, vec.obs_rms.var, vec.obs_rms.count = stats.mean.copy(), stats.var.copy(), stats.count
+    vec.ret_rms.mean, vec.ret_rms.var, vec.ret_rms.count = np.float64(ret_mean), np.float64(ret_var), ret_count
+    return vec
+
+
+def _finite(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ModelFileError(f"{where} must be a finite number, got {value!r}")
+    return float(value)
+
+
 def _unpickle_normalization(path: Path) -> Normalization:
     import pickle
 
@@ -157,12 +215,40 @@ def _unpickle_normalization(path: Path) -> Normalization:
                              f"{str(exc)[:200]}") from None
 
 
+def missing_normalization(folder: Path) -> None:
+    """What a model folder without observation statistics means, decided by its ``train.json``:
+
+    - ``"normalized": false``: the policy was trained on raw observations; nothing to say;
+    - any other ``train.json`` (``impact-env train`` and ``bc`` normalise unless the hyperparameters say
+      ``normalize: false``, and record which since 0.3.0): a :class:`ModelFileError`, since the policy would
+      fly on raw observations it never saw;
+    - no ``train.json`` (a model trained elsewhere): a warning on stderr and as a ``UserWarning``.
+    """
+    meta = read_train_json(folder)
+    if meta.get("normalized") is False:
+        return
+    if meta:
+        raise ModelFileError(
+            f"{folder} has no {NORMALIZATION_FILE}, but its train.json says the policy was trained on normalised "
+            f"observations{'' if 'normalized' in meta else ' (impact-env train and bc normalise them by default)'}; "
+            f"without the statistics it would fly on raw observations. Copy the run's {NORMALIZATION_FILE} beside "
+            "model.zip, or, if the policy really was trained on raw observations, add \"normalized\": false to "
+            f"{folder / 'train.json'}")
+    message = (f"{folder} has no {NORMALIZATION_FILE} and no train.json: the policy flies on RAW observations. If "
+               "it was trained with VecNormalize, save its statistics there (baselines.model_files."
+               "save_normalization); if not, add a train.json with \"normalized\": false to silence this")
+    print(f"impact-env: warning: {message}", file=sys.stderr, flush=True)
+    warnings.warn(message, UserWarning, stacklevel=3)
+
+
 def load_normalization(folder: Path, obs_size: int | None = None, trust_pickle: bool = False) -> Normalization | None:
-    """The folder's observation statistics: ``vecnormalize.json``, else (trusted only) ``vecnormalize.pkl``."""
+    """The folder's observation statistics: ``vecnormalize.json``, else (trusted only) ``vecnormalize.pkl``; None
+    for a policy trained on raw observations (see :func:`missing_normalization` for when that is allowed)."""
     safe, legacy = folder / NORMALIZATION_FILE, folder / LEGACY_NORMALIZATION_FILE
     if safe.is_file():
         return read_normalization(safe, obs_size)
     if not legacy.is_file():
+        missing_normalization(folder)
         return None
     if not trust_pickle:
         raise UntrustedFileError(
@@ -175,14 +261,66 @@ def load_normalization(folder: Path, obs_size: int | None = None, trust_pickle: 
 # ------------------------------------------------------------------------------------------------ model.zip
 
 
+def check_model_path(path: Path) -> None:
+    """``path`` is a regular file (or a link to one), else a :class:`ModelFileError` with the real reason: it does
+    not exist, is a folder, a FIFO, a device or a socket, is a loop of symbolic links, or cannot be read. A FIFO
+    is never opened (opening one for reading blocks until someone writes to it)."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        dangling = " (a symbolic link to a missing file)" if path.is_symlink() else ""
+        raise ModelFileError(f"model file {str(path)!r} does not exist{dangling}") from None
+    except OSError as exc:
+        reason = "is a loop of symbolic links" if exc.errno == errno.ELOOP else f"cannot be read: {exc.strerror}"
+        raise ModelFileError(f"model file {str(path)!r} {reason}") from None
+    if stat.S_ISREG(mode):
+        return
+    kind = ("a folder" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
+            "a socket" if stat.S_ISSOCK(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else
+            "not a regular file")
+    hint = " (give the model.zip inside it)" if stat.S_ISDIR(mode) and (path / "model.zip").is_file() else ""
+    raise ModelFileError(f"model file {str(path)!r} is {kind}, not a zip file{hint}")
+
+
+def check_zip_members(path: Path, archive: zipfile.ZipFile) -> None:
+    """Every member of a model zip can be read safely: not encrypted, compressed by a method Python reads, and
+    small enough to inflate (a member that inflates to :data:`MAX_MEMBER_BYTES` or the whole archive to
+    :data:`MAX_ZIP_BYTES` is refused before it is read: a zip bomb would otherwise be read into memory whole)."""
+    total = 0
+    for info in archive.infolist():
+        where = f"{path}: member {info.filename!r}"
+        if info.flag_bits & 0x1:
+            raise ModelFileError(f"{where} is encrypted; stable-baselines3 never encrypts a model, so the file was "
+                                 "altered or is not a model")
+        if info.compress_type not in _COMPRESSIONS:
+            raise ModelFileError(f"{where} is compressed with method {info.compress_type}, which is not one of the "
+                                 f"zip methods a model is saved with ({', '.join(_COMPRESSIONS.values())})")
+        if info.file_size > MAX_MEMBER_BYTES:
+            raise ModelFileError(f"{where} inflates to {info.file_size:,} bytes, more than the {MAX_MEMBER_BYTES:,} a "
+                                 "model member may have; not read")
+        total += info.file_size
+    if total > MAX_ZIP_BYTES:
+        raise ModelFileError(f"{path} inflates to {total:,} bytes in all, more than the {MAX_ZIP_BYTES:,} a model may "
+                             "have; not read")
+
+
 def read_zip_data(path: Path) -> dict[str, Any]:
-    """The ``data`` JSON of an SB3 model zip, decoded as JSON only (no entry is unpickled)."""
+    """The ``data`` JSON of an SB3 model zip, decoded as JSON only (no entry is unpickled); the path and every
+    member checked first (:func:`check_model_path`, :func:`check_zip_members`)."""
+    check_model_path(path)
     try:
         with zipfile.ZipFile(path) as archive:
-            raw = archive.read("data")
-    except (OSError, zipfile.BadZipFile, KeyError, ValueError) as exc:
+            check_zip_members(path, archive)
+            with archive.open("data") as member:
+                raw = member.read(MAX_DATA_BYTES + 1)
+    except ModelFileError:
+        raise
+    except (OSError, EOFError, zipfile.BadZipFile, KeyError, ValueError, RuntimeError, NotImplementedError,
+            zlib.error, lzma.LZMAError) as exc:
         raise ModelFileError(f"{path} is not a model saved by stable-baselines3 (a zip with a 'data' entry): "
-                             f"{str(exc)[:200]}") from None
+                             f"{type(exc).__name__}: {str(exc)[:200]}") from None
+    if len(raw) > MAX_DATA_BYTES:
+        raise ModelFileError(f"{path}: its 'data' entry is larger than {MAX_DATA_BYTES:,} bytes; not a model's")
     try:
         data = json.loads(raw)
     except (ValueError, RecursionError) as exc:
@@ -238,6 +376,8 @@ def preflight(path: Path, trust_pickle: bool = False) -> None:
         read_normalization(safe)
     elif legacy.is_file():
         load_normalization(path.parent)  # raises UntrustedFileError naming the flag
+    else:
+        missing_normalization(path.parent)
 
 
 def convert_folder(folder: Path) -> list[str]:

@@ -34,8 +34,7 @@ class SB3Controller:
 
         path = Path(model_path)
         self.model_path = path
-        if not path.is_file():
-            raise ControllerError(f"model file {str(path)!r} does not exist")
+        model_files.check_model_path(path)  # a folder, a FIFO or a link loop is named as such, not "missing"
         self.meta = model_files.read_train_json(path.parent)
         run_meta.check_scenario(self.meta, scenario, str(path), allow_other_scenario)
         self._warned = False

@@ -55,10 +55,14 @@ def step_infos(info: dict[str, Any], robots: set[str], objects: set[str]) -> dic
 
 
 def record(scenario: str, episodes: int, out: str | Path | None = None, plan_path: str | None = None,
-           env_options: dict[str, Any] | None = None, seed: int = 0) -> Any:
-    """Record ``episodes`` expert episodes (seeds ``seed``, ``seed + 1``, ...); returns the MinariDataset."""
+           env_options: dict[str, Any] | None = None, seed: int = 0, quiet: bool = False) -> Any:
+    """Record ``episodes`` expert episodes (seeds ``seed``, ``seed + 1``, ...), a line each unless ``quiet``;
+    returns the MinariDataset. The datasets folder is checked before the first episode."""
     import gymnasium as gym
 
+    from impact_env.results_store import check_output_folder
+
+    check_output_folder(datasets_path(out), "--out")
     use_datasets_path(out)
     import minari
     from minari.data_collector.episode_buffer import EpisodeBuffer
@@ -95,8 +99,9 @@ def record(scenario: str, episodes: int, out: str | Path | None = None, plan_pat
         buffers.append(EpisodeBuffer(id=k, seed=seed + k, observations=observations, actions=actions,
                                      rewards=rewards, terminations=terminations, truncations=truncations,
                                      infos={key: np.asarray(values) for key, values in infos.items()}))
-        print(f"  episode {k + 1}/{episodes}: robustness {info['robustness']:+.3f} "
-              f"({'success' if info['is_success'] else 'failure'})", flush=True)
+        if not quiet:
+            print(f"  episode {k + 1}/{episodes}: robustness {info['robustness']:+.3f} "
+                  f"({'success' if info['is_success'] else 'failure'})", flush=True)
     name = dataset_id(sc.name)
     if name in minari.list_local_datasets():
         minari.delete_dataset(name)

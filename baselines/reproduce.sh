@@ -20,7 +20,7 @@ else
     PPO_LONG=2000000; PPO_SHORT=1000000; SAC_STEPS=300000; LONG=58; SHORT=14; EPISODES=20; DEMOS=30
     EVAL_PPO=50000; EVAL_SAC=20000; PPO_REWARD=600000; RUNS=runs; RESULTS=results/baselines; DATASETS=datasets
 fi
-train() { "$BIN/impact-env" train --runs-dir "$RUNS" "$@" $NOISE --no-progress; }  # --out names the run folder
+train() { "$BIN/impact-env" train --runs-dir "$RUNS" "$@" $NOISE --quiet; }  # --out names the run folder
 side_by_side() {  # the two training commands given as strings, one per core; fails if either fails
     $1 & local a=$!
     $2 & local b=$!
@@ -59,7 +59,7 @@ publish() {  # the trained models (no checkpoints) and the learning curves
         done
     done
     for s in $SCENARIOS; do
-        "$BIN/impact-env" curves "$RUNS/ppo_${s}_s0" "$RUNS/sac_${s}_s0" --title "$s" --out "$RESULTS/curves_$s.png" \
+        "$BIN/impact-env" curves "$RUNS/ppo_${s}_s0" "$RUNS/sac_${s}_s0" --title "$s" --plot "$RESULTS/curves_$s.png" \
             --table "$RESULTS/training_$s.md"
     done
 }
@@ -70,7 +70,7 @@ reward() {  # the corridor reward investigation: PPO with the "conjuncts" reward
                  "train ppo corridor --reward-mode conjuncts --hyperparams $quiet --timesteps $PPO_REWARD --n-envs 2 --eval-freq $EVAL_PPO --out $RUNS/quiet/ppo_corridor_s0"
     "$BIN/impact-env" curves "$RUNS/ppo_corridor_s0" "$RUNS/conjuncts/ppo_corridor_s0" "$RUNS/quiet/ppo_corridor_s0" \
         "$RUNS/sac_corridor_s0" --labels "PPO dense,PPO conjuncts,PPO conjuncts + quiet exploration,SAC dense" \
-        --title "corridor: reward investigation" --out "$RESULTS/reward_investigation.png" --table "$RESULTS/reward_investigation.md"
+        --title "corridor: reward investigation" --plot "$RESULTS/reward_investigation.png" --table "$RESULTS/reward_investigation.md"
 }
 
 bench() {
@@ -83,7 +83,7 @@ bench() {
 rllib() {  # RLlib's multi-agent PPO (independent policies, 2 env runners) on throw_and_catch_exp, SB3's budget there
     local run="$RUNS/rllib_ppo_throw_and_catch_exp_independent_s0" m="$RESULTS/models"
     "$BIN/impact-env" train ppo throw_and_catch_exp --engine rllib --policies independent --env-runners 2 \
-        --runs-dir "$RUNS" --timesteps $PPO_SHORT --max-minutes $SHORT --eval-freq $EVAL_PPO $NOISE --no-progress
+        --runs-dir "$RUNS" --timesteps $PPO_SHORT --max-minutes $SHORT --eval-freq $EVAL_PPO $NOISE --quiet
 }
 
 rllib_publish() {  # its export (pickle-free), learning curve and bench beside SB3's PPO, the expert and the floor
@@ -96,7 +96,7 @@ rllib_publish() {  # its export (pickle-free), learning curve and bench beside S
         runs="$RUNS/ppo_throw_and_catch_exp_s0 $run"; labels="SB3 PPO (one central policy),$labels"
     fi
     "$BIN/impact-env" curves $runs --labels "$labels" --title "throw_and_catch_exp: SB3 and RLlib" \
-        --out "$RESULTS/curves_rllib_throw_and_catch_exp.png" --table "$RESULTS/training_rllib_throw_and_catch_exp.md"
+        --plot "$RESULTS/curves_rllib_throw_and_catch_exp.png" --table "$RESULTS/training_rllib_throw_and_catch_exp.md"
     [[ "${QUICK:-0}" == 1 ]] || cp "$RESULTS/curves_rllib_throw_and_catch_exp.png" docs/img/rllib_curves_throw_and_catch_exp.png
     "$BIN/impact-env" bench throw_and_catch_exp --episodes $EPISODES $NOISE --workers 2 \
         --controllers "expert,ppo:$m/ppo_{scenario}/model.zip,rllib:rllib:$m/rllib_ppo_{scenario},random,zero" \

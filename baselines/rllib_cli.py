@@ -60,6 +60,6 @@ def run(args: argparse.Namespace, env_options: dict[str, Any]) -> int:
         env_runners=args.env_runners, envs_per_runner=args.n_envs or 1, out=args.runs_dir, run_dir=args.out,
         env_options=options, eval_freq=args.eval_freq, hyperparams_file=args.hyperparams,
         max_minutes=args.max_minutes, address=args.address, ship_code=args.ship_code, resume=args.resume,
-        trust_pickle=args.trust_pickle, verbose=not args.no_progress)
+        trust_pickle=args.trust_pickle, verbose=not args.quiet)
     train_rllib(config)
     return 0

@@ -33,9 +33,12 @@ def _wrapper_class():
 
 
 def make_env(env_config: dict[str, Any]):
-    """The env of one RLlib env runner: the transport ParallelEnv with ``env_config`` as its keywords."""
+    """The env of one RLlib env runner: the transport ParallelEnv with ``env_config`` as its keywords. The
+    runner's process drops RLlib's notices from here on (:mod:`baselines.rllib_notices`)."""
+    from baselines.rllib_notices import quiet_notices
     from impact_env.transport.pettingzoo_env import parallel_env
 
+    quiet_notices()
     return _wrapper_class()(parallel_env(**dict(env_config)))
 
 

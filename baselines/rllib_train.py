@@ -267,6 +267,9 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
         import ray.rllib  # noqa: F401
     except ImportError:
         raise EngineError("--engine rllib needs RLlib: pip install 'impact_env[ray]'") from None
+    from baselines.rllib_notices import quiet_notices
+
+    quiet_notices()
     owns_ray = connect_ray(EngineConfig("ray", address=config.address, ship_code=config.ship_code),
                            num_cpus=max(2, config.env_runners))
     start = time.perf_counter()

@@ -43,6 +43,7 @@ from impact_env.config_checks import (
     check_text,
 )
 from impact_env.errors import ImpactEnvError
+from impact_env.results_store import atomic_path, check_output_folder, write_atomic
 from impact_env.transport.scenario import load_scenario
 
 
@@ -183,9 +184,9 @@ def train(config: TrainConfig) -> Path:
     previous = _previous_run(run_dir, config, scenario.name) if config.resume else None
     if not config.resume and (run_dir / "model.zip").is_file():
         print(f"note: {run_dir} holds a model already; it is overwritten (pass --resume to continue it)", flush=True)
-    run_dir.mkdir(parents=True, exist_ok=True)
     env_kwargs = {"station" if station else "scenario": config.scenario, **config.env_options}
     env_cls(**env_kwargs).close()  # a bad option is one clear error here, not one per worker process
+    check_output_folder(run_dir, "--out")  # before any step is trained
 
     if config.multiagent:
         if config.algo != "ppo":
@@ -318,17 +319,19 @@ def _save(model: Any, venv: Any, run_dir: Path, config: TrainConfig, scenario_na
 
     from baselines.run_meta import scenario_fingerprint
 
-    model.save(run_dir / "model.zip")
+    with atomic_path(run_dir / "model.zip") as tmp:  # a kill while saving keeps the last whole model
+        model.save(tmp)
     if isinstance(venv, VecNormalize):
         save_normalization(venv, run_dir / NORMALIZATION_FILE)
     else:
         (run_dir / NORMALIZATION_FILE).unlink(missing_ok=True)  # a previous run's statistics are not this model's
     (run_dir / LEGACY_NORMALIZATION_FILE).unlink(missing_ok=True)  # a stale pickle must not sit beside the model
-    (run_dir / "train.json").write_text(json.dumps({
+    write_atomic(run_dir / "train.json", json.dumps({
         "algo": config.algo, "scenario": scenario_name,
         "scenario_fingerprint": scenario_fingerprint(load_world(config.scenario)), "env_id": env_id,
         "timesteps": timesteps, "timesteps_trained": int(model.num_timesteps), "max_minutes": config.max_minutes,
         "n_envs": n_envs, "seed": config.seed, "multiagent": config.multiagent, "env_options": config.env_options,
+        "normalized": isinstance(venv, VecNormalize),
         "interrupted": interrupted, "wall_time_s": wall_time_s}, indent=2))
 
 

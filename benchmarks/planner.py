@@ -10,8 +10,9 @@ process CPU time, which a busy machine inflates less. Each HiGHS row is followed
 baseline row: for SR the same model without the robustness bound propagation (stage 1 only); for IR the
 same model with the box resets switched by big-M rows instead of their convex hull (stage 1 only).
 
-Rows are appended to ``--cache`` (JSON lines) as they finish, and a rerun with the same cache prints cached
-rows instead of solving again (delete the file to measure afresh). Prints markdown tables. Usage:
+Rows go to ``--cache`` (JSON lines, one cell per row, the file rewritten atomically as each finishes, so a kill
+leaves the rows done so far), and a rerun with the same cache prints cached rows instead of solving again
+(delete the file to measure afresh). Prints markdown tables. Usage:
 
     python -m benchmarks.planner [--planners sr,ir] [--scenarios a,b] [--solvers highs,scip] [--repeats 3]
                                  [--time-limit 60] [--cache planner_bench.jsonl]
@@ -27,9 +28,9 @@ import resource
 import statistics
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 from impact_env.errors import ImpactEnvError
+from impact_env.results_store import CellStore
 from impact_env.transport.scenario import load_scenario, scenario_names
 from planners.errors import PlanTimeoutError
 from planners.offline.impact_robust import IRPlannerConfig, build_ir_model, plan_impact_robust
@@ -124,7 +125,7 @@ TITLES = {"sr": "Spatially robust planner (maximise rho)",
           "ir": "Impact-robust planner (maximise delta)"}
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--planners", default="sr,ir", help="comma-separated: sr, ir (default both)")
     parser.add_argument("--scenarios", default=",".join(scenario_names()), help="comma-separated (default: all)")
@@ -132,7 +133,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="solves per scenario and solver (seeds 0..n-1)")
     parser.add_argument("--time-limit", type=float, default=60.0, help="solver time limit per solve (s)")
     parser.add_argument("--cache", default=None, help="JSON-lines file of finished rows, reused on a rerun")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error(f"--repeats must be >= 1, got {args.repeats}")
     planners = [p for p in args.planners.split(",") if p]
@@ -148,20 +149,18 @@ def main() -> None:
     if not solvers:
         raise SystemExit(f"none of the requested solvers is available (available: {', '.join(sorted(available))})")
 
+    # one cell per row in a CellStore (rewritten atomically), so a run killed mid-write resumes from its cells
+    store = CellStore(args.cache, key=lambda cell: cell["key"]) if args.cache else None
     cache: dict[str, str] = {}
-    cache_path = Path(args.cache) if args.cache else None
-    if cache_path is not None and cache_path.exists():
-        for line in cache_path.read_text().splitlines():
-            entry = json.loads(line)
-            cache[entry["key"]] = entry["row"]
 
     def cached_row(name: str, planner: str, solver: str, baseline: bool = False) -> str:
         key = json.dumps([name, planner, solver, baseline, args.repeats, args.time_limit])
+        if key not in cache and store is not None and key in store:
+            cache[key] = store.get(key)["row"]
         if key not in cache:
             cache[key] = row(name, planner, solver, args.repeats, args.time_limit, baseline)
-            if cache_path is not None:
-                with cache_path.open("a") as f:
-                    f.write(json.dumps({"key": key, "row": cache[key]}) + "\n")
+            if store is not None:
+                store.put({"key": key, "row": cache[key]})
         return cache[key]
 
     print(f"{args.repeats} solves per row (seeds 0..{args.repeats - 1}), time limit {args.time_limit:g} s; "

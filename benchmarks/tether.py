@@ -17,8 +17,8 @@ in this process, one at a time; the flown episodes (the last two tables) run on 
 (:mod:`impact_env.sweep`): local worker processes, or Ray tasks with ``--engine ray [--address ADDR]``, with the
 same results either way. Usage:
 
-    python -m benchmarks.tether [--stations L,T,...] [--repeats 3] [--z3-timeout 20] [--no-smt] [--episodes 50]
-                                [--engine ray] [--workers 2]
+    python -m benchmarks.tether [--stations L,T,my_station.toml,...] [--repeats 3] [--z3-timeout 20] [--no-smt]
+                                [--episodes 50] [--engine ray] [--workers 2]
 
 The last table is the expert's success rate over ``--episodes`` seeded episodes per station under ``reel`` with
 the winches 10 % slower and 10 % faster than planned and the cargo starting up to 0.3 m from its start point.
@@ -101,6 +101,11 @@ def perturbed(job: tuple[str, float, int]) -> dict:
             "held_s": res.final_info["time_at_rest_in_goal_s"], "speed": res.final_info["speed_mps"]}
 
 
+def _label(name: str) -> str:
+    """A station's name in the tables (a station file is named by its ``name`` field)."""
+    return load_station(name).name
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--stations", default=",".join(station_names()))
@@ -126,7 +131,7 @@ def main() -> None:
         refined = [refine_timing(st, plan, k) for k in (1, 2, 3)]
         timing = " / ".join(f"{r.total_s:.0f}" if r.status == "optimal" else "-" for r in refined)
         timing += " (" + " / ".join(f"{100 * r.bang_bang_fraction:.0f}" for r in refined) + ")"
-        print(f"| {name} | {regions} | {z_region} | {z_sight} | {cold:.3f} ({cold_cpu:.3f}) | {warm:.4f} | "
+        print(f"| {st.name} | {regions} | {z_region} | {z_sight} | {cold:.3f} ({cold_cpu:.3f}) | {warm:.4f} | "
               f"{plan.switches} | {plan.path_length_m:.1f} | {times} | {timing} |", flush=True)
     names = args.stations.split(",")
     with open_engine(engine_config(args)) as engine:
@@ -142,7 +147,7 @@ def main() -> None:
             for fid in fidelities:
                 r = next(results)
                 goal = "-" if r["goal_s"] is None else f"{r['goal_s']:.0f}"
-                print(f"| {name} | {fid} | {'yes' if r['success'] else 'NO'} | {r['rho']:+.2f} | {goal} | "
+                print(f"| {_label(name)} | {fid} | {'yes' if r['success'] else 'NO'} | {r['rho']:+.2f} | {goal} | "
                       f"{r['held_s']:.0f} | {r['speed']:.4f} | {r['work']:.1f} | {r['switches']} |", flush=True)
         if args.episodes > 0:
             print(f"\nThe expert under reel, {args.episodes} seeded episodes per cell, cargo start within 0.3 m of its "
@@ -162,7 +167,7 @@ def main() -> None:
                                  f"{np.mean([r['switches'] for r in runs]):.1f}, "
                                  f"{np.mean([r['rho'] for r in runs]):+.2f}, "
                                  f"{min(r['held_s'] for r in runs):.0f}, {max(r['speed'] for r in runs):.4f}")
-                print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+                print(f"| {_label(name)} | " + " | ".join(cells) + " |", flush=True)
         print(f"\nflown episodes: {engine.describe()}, {engine.placement_summary()}")
 
 

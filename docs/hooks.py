@@ -2,8 +2,9 @@
 
 - ``on_files`` adds one page per environment (``environments/<slug>.md``), written from the environment
   class's docstring (:mod:`impact_env.env_docstrings`) and from the environment itself (spaces, episode length,
-  agents), so a page cannot drift from the code: id, GIF, a summary table, the docstring's sections and the
-  arguments table (types and defaults from the constructor's signature).
+  agents), so a page cannot drift from the code: a card (id, make, spaces, episode) with the GIF beside it, the
+  docstring's sections and the arguments table (types and defaults from the constructor's signature); and the
+  index, a grid of thumbnails (a frame of each GIF) above the table of ids.
 - ``on_page_markdown`` replaces ``<!-- cli-help -->`` by every subcommand's ``--help``, ``<!-- changelog -->``
   by the CHANGELOG, and ``<!-- readme: ## Heading -->`` by that section of the README. The pages hold their
   own text (the README says what the package is and links to them), so no page uses the README marker now;
@@ -50,7 +51,7 @@ def pages() -> list[EnvPage]:
     for env_id, name in TETHER_GYM_IDS.items():
         out.append(EnvPage(f"tether_{name}", env_id.split("/")[1], env_id, "gymnasium", "TetherEnv",
                            f'gym.make("{env_id}")', name,
-                           f"a scripted anchor sequence on {name} (the tether planners are not in the package yet)",
+                           f"a scripted anchor sequence on {name} (a hand-written rule, not a planner)",
                            (("station", name),)))
     out.append(EnvPage("tether", "Tether-v1 (any station)", "impact_env/Tether-v1", "gymnasium", "TetherEnv",
                        'gym.make("impact_env/Tether-v1", station="my.toml")', "iss_chain",
@@ -82,10 +83,6 @@ def space_text(space) -> str:
     return repr(space).replace("\n", " ")
 
 
-def _cell(text: str) -> str:
-    return rst_to_markdown(text).replace("|", "\\|")
-
-
 def render_page(page: EnvPage) -> str:
     import gymnasium as gym
 
@@ -115,18 +112,23 @@ def render_page(page: EnvPage) -> str:
         agents = ", ".join(core.possible_agents)
     shown = ", ".join(f"{k}={v!r}" for k, v in kwargs.items())
     doc = sections(cls)
-    lines = [f"# {page.title}", "", '<figure class="env-gif" markdown>',
-             f'![{page.gif_caption}](../img/envs/{page.gif}.gif){{ width="360" }}',
-             f"<figcaption>{page.gif_caption}</figcaption>", "</figure>", "",
-             "| | |", "|---|---|", f"| Id | `{page.env_id}` |", f"| Make | `{page.make}` |"]
+    card = [("Id", _code(page.env_id, "env-id")), ("Make", _code(page.make))]
     if page.kind == "gymnasium":
-        lines.append(f'| Without importing first | `gym.make("impact_env:{page.env_id}")` |')
-    lines += [f"| {name} | `{_cell(value)}` |" for name, value in spaces]
-    lines.append(f"| Episode | {length} |")
+        card.append(("Without importing first", _code(f'gym.make("impact_env:{page.env_id}")')))
+    card += [(name, _code(rst_to_markdown(value))) for name, value in spaces]
+    card.append(("Episode", _html(length.replace("`", "``"))))
     if agents:
-        lines.append(f"| Agents | {agents} |")
-    lines += [f"| Class | `impact_env.envs.{page.cls}` |", f"| Spaces shown for | `{shown}` |", "",
-              rst_to_markdown(doc.get("Summary", "")), ""]
+        card.append(("Agents", _html(agents)))
+    card += [("Class", _code(f"impact_env.envs.{page.cls}")), ("Spaces shown for", _code(shown))]
+    # the card first and the GIF beside it, the GIF's height capped: the corridor's (a 4 m x 10 m world, 360 x
+    # 900 px) stood above the card and pushed it below the first screen
+    lines = [f"# {page.title}", "", '<div class="env-top" markdown>', "",
+             '<table class="env-card"><tbody>',
+             *(f"<tr><td>{name}</td><td>{value}</td></tr>" for name, value in card),
+             "</tbody></table>", "", '<figure class="env-gif" markdown>',
+             f'![{page.gif_caption}](../img/envs/{page.gif}.gif){{ width="360" }}',
+             f"<figcaption>{page.gif_caption}</figcaption>", "</figure>", "", "</div>", "",
+             rst_to_markdown(doc.get("Summary", "")), ""]
     for title in ("Description", "Agents", "Action space", "Observation space", "Rewards", "Starting state",
                   "Episode end", "Info", "Metadata"):
         if doc.get(title):
@@ -142,6 +144,12 @@ def render_page(page: EnvPage) -> str:
     return "\n".join(lines)
 
 
+def _code(text: str, css: str | None = None) -> str:
+    """``text`` as an HTML code element (the card is an HTML table: Markdown's needs a header row)."""
+    text = text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+    return f'<code class="{css}">{text}</code>' if css else f"<code>{text}</code>"
+
+
 def _html(text: str) -> str:
     text = text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
     text = re.sub(r":(?:class|func|meth|mod|attr|data|exc):`~?([\w.]+)`",
@@ -149,17 +157,48 @@ def _html(text: str) -> str:
     return re.sub(r"``(.+?)``", r"<code>\1</code>", text)
 
 
+THUMB_PX = 200  # the side of the square box every thumbnail of the environments index fits in
+
+
+def thumbnail(gif: Path) -> bytes:
+    """A PNG of one frame of ``gif`` (two thirds into the episode: bodies in flight), fitted into a
+    ``THUMB_PX`` square on white, so every card of the index grid has the same size."""
+    import io
+
+    from PIL import Image, ImageOps
+
+    with Image.open(gif) as image:
+        image.seek(max(0, int(getattr(image, "n_frames", 1) * 2 / 3) - 1))
+        frame = ImageOps.contain(image.convert("RGB"), (THUMB_PX, THUMB_PX))
+    square = Image.new("RGB", (THUMB_PX, THUMB_PX), "white")
+    square.paste(frame, ((THUMB_PX - frame.width) // 2, (THUMB_PX - frame.height) // 2))
+    out = io.BytesIO()
+    square.save(out, format="PNG", optimize=True)
+    return out.getvalue()
+
+
 def index_page() -> str:
-    rows = "\n".join(f"| [{p.title}]({p.slug}.md) | `{p.env_id}` | {p.kind} | `{p.make}` |" for p in pages())
+    rows = "\n".join(f'| [{p.title}]({p.slug}.md) | <code class="env-id">{p.env_id}</code> | {p.kind} | '
+                     f"`{p.make}` |" for p in pages())
+    cards = "\n".join(f'<a class="env-thumb" href="{p.slug}.html"><img src="thumbs/{p.slug}.png" alt="{p.title}" '
+                      f'width="{THUMB_PX}" height="{THUMB_PX}"><span>{p.title}</span></a>' for p in pages())
     return f"""# Environments
 
 Every environment follows Gymnasium's or PettingZoo's API unchanged. Importing `impact_env` registers them;
 `gym.make("impact_env:impact_env/Corridor-v0")` imports the package itself. Each page below is written from the
 environment's own docstring and constructor, so its arguments table is the code's.
 
+<div class="env-grid">
+{cards}
+</div>
+
+<div class="env-index" markdown>
+
 | environment | id | API | make |
 |---|---|---|---|
 {rows}
+
+</div>
 
 ## Conventions
 
@@ -170,8 +209,10 @@ environment's own docstring and constructor, so its arguments table is the code'
   horizon. The env sets `terminated=True` at the horizon (the task's end; the time left is in the observation,
   so do not bootstrap), and Gymnasium's `TimeLimit` also sets `truncated=True` on that same step: read
   `terminated` first (stable-baselines3 does). A smaller `max_episode_steps` truncates earlier.
-- **No silent defaults**: `Transport-v0`, `Tether-v1` and the PettingZoo entry points need `scenario=` or
-  `station=`.
+- **No silent defaults**: `Transport-v0`, `Tether-v1` and `Tether-v0` need `scenario=` or `station=`, and take
+  their `max_episode_steps` from that file. The PettingZoo modules' `parallel_env()`, `env()` and `raw_env()` make
+  the corridor and station L when called without one, as `pistonball_v6.env()` does, so PettingZoo's own test
+  suite (`api_test`, `parallel_api_test`, `max_cycles_test`) runs on `transport_v0` and `tether_v1` as they are.
 - **The episode's clock** is on the env: `env.unwrapped.dt_s`, `horizon_steps`, `horizon_s`.
 - **PettingZoo**: versioned modules `impact_env.transport_v0` and `impact_env.tether_v1` with `parallel_env`,
   `env` and `raw_env` (arguments spelled out), `metadata["name"]` per scenario (`transport_corridor_v0`).
@@ -195,20 +236,22 @@ def cli_help() -> str:
     os.environ["COLUMNS"] = "110"
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    parts = ["## impact-env --help", "", "```text", parser.format_help().rstrip(), "```", ""]
+    parts = ["### impact-env --help", "", "```text", parser.format_help().rstrip(), "```", ""]
     for name, command in sub.choices.items():
-        parts += [f"## {name}", "", "```text", command.format_help().rstrip(), "```", ""]
+        parts += [f"### {name}", "", "```text", command.format_help().rstrip(), "```", ""]
     return "\n".join(parts)
 
 
 def on_files(files, config):
     from mkdocs.structure.files import File
 
-    generated = {"environments/index.md": index_page()}
+    generated: dict[str, str | bytes] = {"environments/index.md": index_page()}
     for page in pages():
         generated[f"environments/{page.slug}.md"] = render_page(page)
-    for path, text in generated.items():
-        files.append(File.generated(config, path, content=text))
+        gif = ROOT / "docs" / "img" / "envs" / f"{page.gif}.gif"
+        generated[f"environments/thumbs/{page.slug}.png"] = thumbnail(gif)
+    for path, content in generated.items():
+        files.append(File.generated(config, path, content=content))
     return files
 
 

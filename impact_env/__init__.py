@@ -1,17 +1,21 @@
 """impact_env: collaborative transport of free-floating objects in microgravity by impacts.
 
-Importing the package registers the Gymnasium environments (``impact_env/Corridor-v0``,
-``impact_env/ObstacleAvoidance-v0``, ``impact_env/ThrowAndCatchExp-v0``, each with ``max_episode_steps`` equal
-to its task's horizon, and ``impact_env/Transport-v0``, which needs ``scenario=``). ``gym.make`` can import
-the package itself: ``gym.make("impact_env:impact_env/Corridor-v0")``. Where PettingZoo's registry exists it
-also registers ``impact_env/transport-v0``. PettingZoo's versioned module is :mod:`impact_env.transport_v0`
-(``parallel_env``, ``env``, ``raw_env``); ``impact_env.parallel_env``, ``impact_env.env`` and
-``impact_env.raw_env`` are the same functions.
+Importing the package registers the Gymnasium environments: one id per shipped scenario (``GYM_IDS``, e.g.
+``impact_env/Corridor-v0``), each with ``max_episode_steps`` equal to its task's horizon, and
+``impact_env/Transport-v0``, which needs ``scenario=`` and takes its ``max_episode_steps`` from that file.
+``gym.make`` can import the package itself: ``gym.make("impact_env:impact_env/Corridor-v0")``. Where
+PettingZoo's registry exists it also registers ``impact_env/transport-v0``. PettingZoo's versioned module is
+:mod:`impact_env.transport_v0` (``parallel_env``, ``env``, ``raw_env``); ``impact_env.parallel_env``,
+``impact_env.env`` and ``impact_env.raw_env`` are the same functions. Every transport id also has a vector entry
+point, the batched torch world (``gymnasium.make_vec(id, num_envs=N)``, which picks it, or
+``vectorization_mode="vector_entry_point"``; the ``[rl]`` extra: :mod:`impact_env.transport.batched.vector_env`);
+torch is imported only when one is made. ``vectorization_mode="sync"`` still makes N pymunk envs.
 
-Tether (anchor-pull) transport: ``impact_env/Tether-v1`` with ``station=`` (a shipped name or a path) and one id
-per shipped station (``TETHER_GYM_IDS``, e.g. ``impact_env/TetherL-v1``); PettingZoo ``impact_env/tether-v1`` and
-the module :mod:`impact_env.tether_v1`. The ``-v0`` tether ids (``TETHER_GYM_IDS_V0``, ``impact_env/Tether-v0``,
-``impact_env/tether-v0``, :mod:`impact_env.tether_v0`) stay registered for one release.
+Tether (anchor-pull) transport: ``impact_env/Tether-v1`` with ``station=`` (a shipped name or a path; its
+``max_episode_steps`` from that file) and one id per shipped station (``TETHER_GYM_IDS``, e.g.
+``impact_env/TetherL-v1``); PettingZoo ``impact_env/tether-v1`` and the module :mod:`impact_env.tether_v1`. The
+``-v0`` tether ids (``TETHER_GYM_IDS_V0``, ``impact_env/Tether-v0``, ``impact_env/tether-v0``,
+:mod:`impact_env.tether_v0`) stay registered for one release.
 """
 
 from __future__ import annotations
@@ -64,6 +68,16 @@ GYM_IDS = {
     "impact_env/Corridor-v0": "corridor",
     "impact_env/ObstacleAvoidance-v0": "obstacle_avoidance",
     "impact_env/ThrowAndCatchExp-v0": "throw_and_catch_exp",
+    "impact_env/Relay-v0": "relay",
+    "impact_env/TwoObjects-v0": "two_objects",
+    "impact_env/PingPongStop-v0": "ping_pong_stop",
+    "impact_env/LongThrowTrim-v0": "long_throw_trim",
+    "impact_env/NarrowGap-v0": "narrow_gap",
+    "impact_env/OneRobotTwoObjects-v0": "one_robot_two_objects",
+    "impact_env/TimedVisits-v0": "timed_visits",
+    "impact_env/WallStart-v0": "wall_start",
+    "impact_env/FourRobots-v0": "four_robots",
+    "impact_env/HeldDrift-v0": "held_drift",
 }
 
 TETHER_GYM_IDS = {
@@ -84,14 +98,30 @@ def _horizon_steps(task_source) -> int:
     return OnlineMonitor(task_source.formula, task_source.region_map(), task_source.control_period_s).horizon_steps
 
 
+TRANSPORT_ENTRY_POINT = "impact_env.transport.gym_env:TransportEnv"
+# the batched torch world behind gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point"); a
+# string, so that torch is imported only when a vector env is made
+TRANSPORT_VECTOR_ENTRY_POINT = "impact_env.transport.vector_entry:make_vector_env"
+
+
+def _add_vector_entry_points() -> None:
+    """Every registered id of the transport env (the shipped scenarios' ids, ``Transport-v0`` and any id registered
+    with ``scenario=``) gets the batched world as its vector entry point, unless it names one of its own."""
+    for spec in gymnasium.registry.values():
+        if spec.entry_point == TRANSPORT_ENTRY_POINT and spec.vector_entry_point is None:
+            spec.vector_entry_point = TRANSPORT_VECTOR_ENTRY_POINT
+
+
 def _register() -> None:
     for env_id, scenario in GYM_IDS.items():
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point="impact_env.transport.gym_env:TransportEnv",
-                               kwargs={"scenario": scenario},
+            gymnasium.register(id=env_id, entry_point=TRANSPORT_ENTRY_POINT, kwargs={"scenario": scenario},
+                               vector_entry_point=TRANSPORT_VECTOR_ENTRY_POINT,
                                max_episode_steps=_horizon_steps(load_scenario(scenario)))
     if "impact_env/Transport-v0" not in gymnasium.registry:
-        gymnasium.register(id="impact_env/Transport-v0", entry_point="impact_env.transport.gym_env:TransportEnv")
+        gymnasium.register(id="impact_env/Transport-v0", entry_point="impact_env.transport.gym_env:make_with_horizon",
+                           vector_entry_point=TRANSPORT_VECTOR_ENTRY_POINT)
+    _add_vector_entry_points()
     for ids, cls in ((TETHER_GYM_IDS, "TetherEnv"), (TETHER_GYM_IDS_V0, "TetherEnvV0")):
         for env_id, station in ids.items():
             if env_id not in gymnasium.registry:
@@ -99,9 +129,11 @@ def _register() -> None:
                 steps = _horizon_steps(st) if cls == "TetherEnv" else round(st.tf_s / st.control_period_s)
                 gymnasium.register(id=env_id, entry_point=f"impact_env.tether.gym_env:{cls}",
                                    kwargs={"station": station}, max_episode_steps=steps)
-    for env_id, cls in (("impact_env/Tether-v1", "TetherEnv"), ("impact_env/Tether-v0", "TetherEnvV0")):
+    # the file given to make sets max_episode_steps (gym_env.make_with_horizon)
+    for env_id, entry in (("impact_env/Tether-v1", "make_with_horizon"),
+                          ("impact_env/Tether-v0", "make_v0_with_horizon")):
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point=f"impact_env.tether.gym_env:{cls}")
+            gymnasium.register(id=env_id, entry_point=f"impact_env.tether.gym_env:{entry}")
     try:
         import pettingzoo
         from pettingzoo.env_registry.registration import parallel_registry

@@ -38,7 +38,7 @@ class ZeroController:
         self._shape = env.action_space.shape
 
     def act(self, observation: np.ndarray, info: dict[str, Any]) -> np.ndarray:
-        return np.zeros(self._shape, dtype=np.float32)
+        return np.zeros(self._shape, dtype=np.float32)  # type: ignore[arg-type]  # a Box: its shape is set
 
 
 class RandomController:
@@ -54,7 +54,7 @@ class RandomController:
         return self._space.sample()
 
 
-BUILTIN = {"zero": ZeroController, "random": RandomController}
+BUILTIN: dict[str, type[Controller]] = {"zero": ZeroController, "random": RandomController}
 
 
 def available_controllers() -> list[str]:
@@ -80,7 +80,12 @@ def make_controller(spec: str, scenario: Any, **options: Any) -> Controller:
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         if ep.name == spec:
             return ep.load()(scenario, **{k: v for k, v in options.items() if v is not None})
+    from pathlib import Path
+
     from impact_env.catalogue import suggestion
 
+    if (Path(spec) / "model.zip").is_file():
+        raise ControllerError(f"{spec!r} is a run folder, not a controller: give its model, --controller "
+                              f"{Path(spec) / 'model.zip'}")
     raise ControllerError(f"unknown controller {spec!r}{suggestion(spec, available_controllers())}; available: "
                           f"{', '.join(available_controllers())}, or a model path ending in .zip")

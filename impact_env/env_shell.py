@@ -78,7 +78,8 @@ def reject_unknown(unknown: dict[str, Any], cls: type) -> None:
     """An unknown keyword is a typed error naming the right one (``reward=`` -> ``reward_mode``), not a default."""
     if not unknown:
         return
-    names = [p.name for p in inspect.signature(cls.__init__).parameters.values()
+    # the class's own constructor, read (not called): mypy's warning is about calling it on an instance
+    names = [p.name for p in inspect.signature(cls.__init__).parameters.values()  # type: ignore[misc]
              if p.name != "self" and p.kind is not p.VAR_KEYWORD]
     parts = []
     for key in unknown:
@@ -105,6 +106,19 @@ def clip_to_space(obs: np.ndarray, core: Any) -> np.ndarray:
     """``obs`` (float32) clipped in place to the core's observation bounds, so it always lies in the space."""
     np.minimum(obs, core.obs_high, out=obs)
     return np.maximum(obs, core.obs_low, out=obs)
+
+
+def with_horizon(env: gym.Env) -> gym.Env:
+    """``env`` in Gymnasium's ``TimeLimit`` at its task's horizon (``env.horizon_steps``).
+
+    The entry point of the ids whose scenario or station is a ``gym.make`` argument (``impact_env/Transport-v0``,
+    ``impact_env/Tether-v0``): their registration cannot know the horizon, so the env built from the file sets
+    it, and ``env.spec.max_episode_steps`` is then the file's, as for the ids of shipped files. Gymnasium's
+    ``make`` allows this: it records its spec on the unwrapped env and reads ``max_episode_steps`` back through
+    this wrapper, and a ``max_episode_steps=`` given to ``make`` adds its own, outer ``TimeLimit``, which cuts
+    earlier when it is smaller.
+    """
+    return gym.wrappers.TimeLimit(env, env.horizon_steps)
 
 
 # ------------------------------------------------------------------------------------------------ shells

@@ -8,7 +8,7 @@ degenerate polygon. The planners add theirs in ``planners/errors.py`` (all subcl
 :class:`ImpactEnvError`, listed in ``planners.errors.PLANNER_ERRORS``).
 
 :data:`TYPED_ERRORS` lists this package's classes. The property-based tests (``tests/fuzz/``) accept
-exactly these and the planners' as the outcome of a bad input, and ``tests/test_errors_contract.py`` checks
+exactly these and the planners' as the outcome of a bad input, and ``tests/impact_env/test_errors_contract.py`` checks
 that every exception class the packages define is listed here or there.
 """
 
@@ -94,10 +94,23 @@ class ResultsFileError(ImpactEnvError, ValueError):
     a complete cell: names the file and line, and what to do (usually: delete the line, rerun its cell)."""
 
 
+class OutputPathError(ImpactEnvError, OSError):
+    """An output path cannot be written: a folder where a file is asked for (or a file where a folder is), a
+    device such as ``/dev/full``, a path under ``/proc``, a folder without write permission, a full disk. Names
+    the path (and the option that gave it) and the reason. The commands check their output paths before any
+    work starts (:func:`impact_env.results_store.check_output_file`), so a run is not lost at its end. An
+    ``OSError`` too, so code that caught the file system's errors still catches it."""
+
+
+class GeneratedTaskError(ScenarioError):
+    """A generated task (:mod:`impact_env.transport.generate`) breaks one of its rules (names the body or region
+    and the rule), its family or seed is not one the generator knows, or no draw met the placement rules."""
+
+
 TYPED_ERRORS: tuple[type[ImpactEnvError], ...] = (
     ImpactEnvError, ScenarioError, STLError, STLSyntaxError, STLBindingError, STLUnsupportedError, ActionError,
     EnvConfigError, ControllerError, TetherError, HyperparameterError, ModelFileError, UntrustedFileError, EngineError,
-    ResultsFileError,
+    ResultsFileError, OutputPathError, GeneratedTaskError,
 )
 
 

@@ -31,21 +31,26 @@ def new_figure(width_in: float, height_in: float) -> Figure:
 
 
 def png_path(path: str | Path) -> Path:
-    """``path`` with ``.png`` added when it has no suffix, its parent folders created."""
+    """``path`` with ``.png`` added when it has no suffix (the path :func:`save` writes; check it with
+    :func:`impact_env.results_store.check_output_file` before the work that makes the figure)."""
     path = Path(path)
     if not path.suffix:
         path = path.with_suffix(".png")
-    path.parent.mkdir(parents=True, exist_ok=True)
     return path
 
 
 def save(fig: Figure, path: str | Path, tight: bool = True) -> Path:
-    """Write ``fig`` as a PNG at ``DPI`` (cropped to its content with ``tight``) and free it; returns the path."""
+    """Write ``fig`` as a PNG at ``DPI`` (cropped to its content with ``tight``), atomically
+    (:func:`impact_env.results_store.atomic_path`: its folders created, a kill leaves no half image), and free
+    it; returns the path."""
+    from impact_env.results_store import atomic_path
+
     path = png_path(path)
-    if tight:
-        fig.savefig(path, dpi=DPI, bbox_inches="tight")
-    else:
-        fig.savefig(path, dpi=DPI)
+    with atomic_path(path) as tmp:
+        if tight:
+            fig.savefig(tmp, dpi=DPI, bbox_inches="tight")
+        else:
+            fig.savefig(tmp, dpi=DPI)
     fig.clear()  # an OO Figure is not registered with pyplot: clearing and dropping it frees it
     return path
 

@@ -14,30 +14,124 @@ per file at a time. The tables and CSV files the benchmarks print are written wi
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
+import stat
 import uuid
 from collections.abc import Callable, Hashable, Iterator
 from pathlib import Path
 from typing import Any
 
-from impact_env.errors import ResultsFileError
+from impact_env.errors import OutputPathError, ResultsFileError
 
-__all__ = ["CellStore", "atomic_path", "write_atomic"]
+__all__ = ["CellStore", "atomic_path", "check_output_file", "check_output_folder", "write_atomic"]
+
+
+def _named(path: Path, option: str | None) -> str:
+    return f"{option} {path}" if option else str(path)
+
+
+def _kind(mode: int) -> str:
+    return ("a folder" if stat.S_ISDIR(mode) else "a character device" if stat.S_ISCHR(mode) else
+            "a block device" if stat.S_ISBLK(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
+            "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+
+
+def _stat(path: Path, named: str) -> os.stat_result | None:
+    """``path``'s status through its links; None if nothing is there (or a link points nowhere)."""
+    try:
+        return path.stat()
+    except FileNotFoundError:
+        return None
+    except ValueError:  # a NUL byte: no file system takes it
+        raise OutputPathError(f"{named} contains a NUL byte, which no path can") from None
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise OutputPathError(f"{named} is a loop of symbolic links") from None
+        if exc.errno == errno.ENOTDIR:
+            raise OutputPathError(f"{named}: a part of the path is a file, not a folder") from None
+        raise OutputPathError(f"{named} cannot be checked: {exc.strerror or exc}") from None
+
+
+def _probe(folder: Path, named: str) -> None:
+    """Create and remove a file in ``folder``, as :func:`atomic_path` will: permissions alone do not tell (root
+    passes every permission check, yet cannot create a file in ``/proc``)."""
+    probe = folder / f".write-check-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    try:
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except OSError as exc:
+        raise OutputPathError(f"{named}: cannot create files in {folder}: {exc.strerror or exc}") from None
+    os.close(fd)
+    try:
+        os.unlink(probe)
+    except OSError:
+        pass
+
+
+def _make_folder(folder: Path, named: str) -> None:
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise OutputPathError(f"{named}: {folder} exists and is not a folder") from None
+    except OSError as exc:
+        if exc.errno == errno.ENOTDIR:
+            raise OutputPathError(f"{named}: a part of {folder} is a file, not a folder") from None
+        raise OutputPathError(f"{named}: cannot create the folder {folder}: {exc.strerror or exc}") from None
+
+
+def check_output_file(path: str | os.PathLike, option: str | None = None) -> Path:
+    """Check, before any work, that a result can be written to the file ``path`` (``option`` names the command
+    line option that gave it, for the message): nothing is there, or a regular file that will be replaced; its
+    folder exists or can be created (it is created now), and a file can be created in it. Anything else is an
+    :class:`~impact_env.errors.OutputPathError` naming the path and the reason: a folder, ``/dev/full`` (a
+    device: it would be replaced, or written into and fail), a FIFO, a symbolic-link loop, a folder under
+    ``/proc``. Returns the path."""
+    path = Path(path)
+    named = _named(path, option)
+    if not path.name or path.name in (".", ".."):
+        raise OutputPathError(f"{named} names a folder, not a file")
+    status = _stat(path, named)
+    if status is not None and not stat.S_ISREG(status.st_mode):
+        hint = " (a file path is expected here; --out takes a folder)" if stat.S_ISDIR(status.st_mode) else ""
+        raise OutputPathError(f"{named} is {_kind(status.st_mode)}, not a file{hint}")
+    _make_folder(path.parent, named)
+    _probe(path.parent, named)
+    return path
+
+
+def check_output_folder(path: str | os.PathLike, option: str | None = None) -> Path:
+    """Check, before any work, that results can be written into the folder ``path``: it is a folder or can be
+    created (it is created now), and a file can be created in it; else an
+    :class:`~impact_env.errors.OutputPathError` naming it and the reason. Returns the path."""
+    path = Path(path)
+    named = _named(path, option)
+    status = _stat(path, named)
+    if status is not None and not stat.S_ISDIR(status.st_mode):
+        raise OutputPathError(f"{named} is {_kind(status.st_mode) if not stat.S_ISREG(status.st_mode) else 'a file'}"
+                              ", not a folder")
+    _make_folder(path, named)
+    _probe(path, named)
+    return path
 
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """A temporary path beside ``path`` (same folder, same suffix) for the block to write; when the block ends
     without an error the file is flushed to disk and renamed over ``path`` (``os.replace``: atomic on one file
-    system), otherwise removed. The folder is created if missing. For writers that want a path, not a string
+    system), otherwise removed. The folder is created if missing. A path that is something else than a regular
+file (a folder, a device) is refused, and any failure of the file system is an
+:class:`~impact_env.errors.OutputPathError` naming the path. For writers that want a path, not a string
     (``Plan.save``, ``csv``, ``Figure.savefig``, which reads the format from the suffix)::
 
         with atomic_path(out / "bench.png") as tmp:
             fig.savefig(tmp)
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    status = _stat(path, str(path))
+    if status is not None and not stat.S_ISREG(status.st_mode):  # never rename over /dev/full or a folder
+        raise OutputPathError(f"{path} is {_kind(status.st_mode)}, not a file: not replaced")
+    _make_folder(path.parent, str(path))
     tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}{path.suffix}")
     try:
         yield tmp
@@ -47,6 +141,11 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         finally:
             os.close(fd)
         os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if isinstance(exc, OutputPathError):
+            raise
+        raise OutputPathError(f"cannot write {path}: {exc.strerror or exc}") from exc
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

@@ -61,9 +61,9 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
     start = time.perf_counter()
     obs, info = env.reset(seed=seed)
     controller.reset(env, seed)
-    core = env.unwrapped.core
+    core = env.unwrapped.core  # type: ignore[attr-defined]  # a TransportEnv or a TetherEnv: both have one
     positions = [[s[:2] for s in core._state]]
-    frames = [env.render()] if record_frames else None
+    frames: list[Any] | None = [env.render()] if record_frames else None
     ms: list[float] = []
     total = 0.0
     impacts: list[dict[str, Any]] = []
@@ -73,10 +73,10 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
         action = controller.act(obs, info)
         ms.append(1e3 * (time.perf_counter() - t0))
         obs, reward, terminated, truncated, info = env.step(action)
-        total += reward
+        total += reward  # type: ignore[operator]  # gymnasium says SupportsFloat; both envs return a float
         impacts.extend(info.get("impacts", ()))  # the tether environments have no impacts
         positions.append([s[:2] for s in core._state])
-        if record_frames:
+        if frames is not None:  # record_frames
             frames.append(env.render())
         done = terminated or truncated
     steps = len(positions) - 1
@@ -112,17 +112,21 @@ def statistics(results: list[EpisodeResult]) -> dict[str, float]:
 
 
 def write_video(frames: list[np.ndarray], path: str, fps: int) -> None:
-    """Write RGB frames (H, W, 3) uint8 to an mp4 (H.264 through the ffmpeg that imageio-ffmpeg ships)."""
+    """Write RGB frames (H, W, 3) uint8 to an mp4 (H.264 through the ffmpeg that imageio-ffmpeg ships),
+    atomically (:func:`impact_env.results_store.atomic_path`)."""
     import imageio_ffmpeg
 
     if not frames:
         raise ValueError("no frames to write")
+    from impact_env.results_store import atomic_path
+
     h, w = frames[0].shape[:2]
     pad = ((0, h % 2), (0, w % 2), (0, 0))  # H.264 in yuv420p needs even sizes
     h, w = h + h % 2, w + w % 2
-    writer = imageio_ffmpeg.write_frames(str(path), (w, h), fps=fps, macro_block_size=1, quality=7,
-                                         ffmpeg_log_level="error")
-    writer.send(None)
-    for frame in frames:
-        writer.send(np.ascontiguousarray(np.pad(frame, pad, mode="edge") if any(p[1] for p in pad) else frame))
-    writer.close()
+    with atomic_path(path) as tmp:  # the temporary file keeps the suffix, from which ffmpeg picks the container
+        writer = imageio_ffmpeg.write_frames(str(tmp), (w, h), fps=fps, macro_block_size=1, quality=7,
+                                             ffmpeg_log_level="error")
+        writer.send(None)
+        for frame in frames:
+            writer.send(np.ascontiguousarray(np.pad(frame, pad, mode="edge") if any(p[1] for p in pad) else frame))
+        writer.close()

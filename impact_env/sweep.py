@@ -47,12 +47,18 @@ class EngineConfig:
     """A running Ray cluster (``auto``, ``HOST:PORT``); None: ``$RAY_ADDRESS``, else a private instance."""
     ship_code: bool = False
     """Ship this checkout's packages to the Ray workers in Ray's runtime environment."""
+    keep_ray: bool = True
+    """A private local Ray instance stays up when the engine closes, for the next ``--engine ray`` engine of
+    this process (with the same CPU count) to reuse: its start-up and its workers' imports are paid once per
+    process. :func:`shutdown_ray` stops it early; Ray stops it when the process exits. False: stop it at
+    close. A cluster connection is always closed."""
 
     def __post_init__(self) -> None:
         check_choice(self, "name", EngineError, ENGINES)
         check_integer(self, "workers", EngineError, low=1, none="the CPU count")
         check_text(self, "address", EngineError, none="$RAY_ADDRESS, else a private instance")
         check_flag(self, "ship_code", EngineError)
+        check_flag(self, "keep_ray", EngineError)
         if self.name == "local" and (self.address or self.ship_code):
             option = "--address" if self.address else "--ship-code"
             raise EngineError(f"{option} applies to --engine ray, not to local processes")
@@ -167,7 +173,6 @@ class Engine:
     placements: list[Placement] = field(default_factory=list)
     _pool: ProcessPoolExecutor | None = None
     _owns_ray: bool = False  # this engine called ray.init, so it calls ray.shutdown
-    _remotes: dict = field(default_factory=dict)  # job function -> its Ray remote function
 
     def map(self, fn: Callable[[Any], Any], jobs: Iterable[Any]) -> Iterator[Any]:
         """``fn(job)`` for every job, yielded in the jobs' order as soon as each (and all before it) is done.
@@ -202,16 +207,17 @@ class Engine:
         import ray
         from ray.exceptions import RayError, RayTaskError
 
-        if fn not in self._remotes:
+        remotes = _remotes_of(ray)
+        if fn not in remotes:
             def run(job):
                 return _located(fn, job)
 
-            # one remote function per job function: Ray sends it to each worker once and keeps it there, so
-            # module-level caches of a script's function (sent by value) live as long as the worker, across
-            # map calls, as in a local pool
+            # one remote function per job function and Ray session: Ray sends it to each worker once and keeps
+            # it there, so module-level caches of a script's function (sent by value) live as long as the
+            # worker, across map calls and engines, as in a local pool
             run.__name__ = run.__qualname__ = getattr(fn, "__name__", "job")
-            self._remotes[fn] = ray.remote(num_cpus=1, scheduling_strategy="SPREAD", max_retries=0)(run)
-        refs = [self._remotes[fn].remote(job) for job in jobs]
+            remotes[fn] = ray.remote(num_cpus=1, scheduling_strategy="SPREAD", max_retries=0)(run)
+        refs = [remotes[fn].remote(job) for job in jobs]
         for k, ref in enumerate(refs):
             try:
                 result, where = ray.get(ref)
@@ -256,7 +262,9 @@ class Engine:
         nodes = sum(1 for n in ray.nodes() if n.get("Alive"))
         where = self.config.resolved_address()
         where = (f"the cluster at {where!r}" if where and self._owns_ray else
-                 "a private local instance" if self._owns_ray else "the Ray instance this process had started")
+                 "a private local instance" if self._owns_ray else
+                 "the private local instance this process keeps" if _kept_ray else
+                 "the Ray instance this process had started")
         return (f"Ray: {ray.cluster_resources().get('CPU', 0):g} CPUs on {nodes} node{'s' if nodes != 1 else ''} "
                 f"({where})")
 
@@ -301,7 +309,8 @@ def open_engine(config: EngineConfig | None = None, n_jobs: int | None = None) -
       share the sweep even while the head node has free CPUs). ``address`` (or the ``RAY_ADDRESS`` environment
       variable) names a running cluster: ``auto`` for the one started on this machine with ``ray start --head``,
       ``HOST:6379`` for a head elsewhere. Without an address a private local Ray instance with ``workers`` CPUs
-      is started and shut down again when the ``with`` block ends.
+      is started, and kept when the ``with`` block ends for the next Ray engine of the process to reuse
+      (``EngineConfig.keep_ray``; :func:`shutdown_ray` stops it, and so does the end of the process).
 
     Workers must import this package. On a cluster either install it on every node (``pip install
     impact_env[ray]`` into the same Python version as the driver's), or pass ``ship_code=True``
@@ -336,30 +345,83 @@ def runtime_env(ship_code: bool) -> dict[str, Any] | None:
     return {"py_modules": modules, "excludes": ["__pycache__", "*.pyc", "results/"]}
 
 
+# The private local Ray instance this process keeps for reuse (EngineConfig.keep_ray): {"num_cpus": n, "session":
+# the Ray session it belongs to}; empty when there is none.
+_kept_ray: dict[str, Any] = {}
+# Ray remote functions of the current Ray session: {"session": ..., "remotes": {job function: remote function}}
+_session_remotes: dict[str, Any] = {}
+
+
+def _session(ray: Any) -> tuple[str, str]:
+    """This driver's Ray session: a new local instance has a new node id (job ids restart with each one)."""
+    context = ray.get_runtime_context()
+    return context.get_node_id(), context.get_job_id()
+
+
+def _remotes_of(ray: Any) -> dict:
+    """The remote functions made in this Ray session (a new session, after a shutdown, starts with none)."""
+    session = _session(ray)
+    if _session_remotes.get("session") != session:
+        _session_remotes.clear()
+        _session_remotes.update(session=session, remotes={})
+    return _session_remotes["remotes"]
+
+
+def shutdown_ray() -> bool:
+    """Stop the private local Ray instance this process keeps (:attr:`EngineConfig.keep_ray`), if any: its
+    raylet, object store and idle workers hold memory until then. Returns whether there was one. A Ray that
+    someone else initialised is left alone."""
+    if not _kept_ray:
+        return False
+    import ray
+
+    if ray.is_initialized() and _session(ray) == _kept_ray["session"]:
+        ray.shutdown()
+    _kept_ray.clear()
+    return True
+
+
+def _private_cpus(config: EngineConfig, num_cpus: int | None) -> int:
+    return num_cpus or config.workers or min(2, os.cpu_count() or 1)
+
+
 def connect_ray(config: EngineConfig, num_cpus: int | None = None) -> bool:
     """Initialise Ray for ``config`` (connect to its cluster, or start a private local instance with ``num_cpus``
-    or ``config.workers`` CPUs); returns True if it called ``ray.init`` (the caller then calls ``ray.shutdown``).
-    An already initialised Ray (a notebook, a test fixture) is used as it is, and False returned."""
+    or ``config.workers`` CPUs); returns True if it called ``ray.init`` and the caller is to call
+    ``ray.shutdown``. An already initialised Ray (a notebook, a test fixture) is used as it is, and False
+    returned. A private instance with ``config.keep_ray`` is kept for the rest of the process instead (False is
+    returned): the next call reuses it if it has the CPU count asked for, else restarts it with that count."""
     try:
         import ray
     except ImportError:
         raise EngineError("--engine ray needs Ray: pip install 'impact_env[ray]'") from None
+    address = config.resolved_address()
+    if _kept_ray and not (ray.is_initialized() and _session(ray) == _kept_ray["session"]):
+        _kept_ray.clear()  # someone called ray.shutdown
+    if _kept_ray:
+        if address is None and not config.ship_code and _private_cpus(config, num_cpus) == _kept_ray["num_cpus"]:
+            return False
+        shutdown_ray()  # another count, a cluster or shipped code: this instance does not serve
     if ray.is_initialized():
         if config.ship_code:  # Ray uploads local folders only for a job's own runtime environment (ray.init)
             raise EngineError("--ship-code needs to start the Ray connection itself, but Ray is already initialised "
                               "in this process: call ray.init(runtime_env=impact_env.sweep.runtime_env(True)) "
                               "yourself, or leave Ray uninitialised")
         return False
-    address = config.resolved_address()
     options: dict[str, Any] = {"runtime_env": runtime_env(config.ship_code), "logging_level": "WARNING",
                                "configure_logging": True}
     if address is None:
-        options.update(num_cpus=num_cpus or config.workers or min(2, os.cpu_count() or 1), include_dashboard=False)
+        options.update(num_cpus=_private_cpus(config, num_cpus), include_dashboard=False)
     try:
-        ray.init(address=address, **options)
+        # "local", not None: with None, Ray joins a `ray start` cluster it finds recorded on this machine
+        # (/tmp/ray/ray_current_cluster), which is someone else's on a shared machine
+        ray.init(address=address or "local", **options)
     except (ConnectionError, RuntimeError, ValueError) as exc:
         where = f"the Ray cluster at {address!r}" if address else "a local Ray instance"
         hint = (" (start one with `ray start --head`, or leave out --address and RAY_ADDRESS for a private local "
                 "instance)" if address else "")
         raise EngineError(f"could not connect to {where}: {str(exc).splitlines()[0][:300]}{hint}") from None
+    if address is None and config.keep_ray and not config.ship_code:
+        _kept_ray.update(num_cpus=options["num_cpus"], session=_session(ray))
+        return False
     return True

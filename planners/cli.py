@@ -1,23 +1,28 @@
 """The ``impact-env plan`` subcommand: run the spatially robust or the impact-robust planner on a scenario.
 
-    impact-env plan SCENARIO [--planner sr|ir] [--solver highs|scip|gurobi] [--time-limit S] [--mip-gap G]
+    impact-env plan SCENARIO [--planner sr|ir] [--solver highs|scip|gurobi] [--node-limit N] [--time-limit S]
+                    [--mip-gap G]
                     [--threads N] [--intervals N] [--degree D] [--copy-intervals W] [--smooth]
-                    [--out plan.json] [--plot plan.png] [--quiet]
-    impact-env plan corridor,relay,two_objects [--planner sr|ir] --out plans/ [--plot figures/] [--engine ray]
+                    [--json plan.json] [--plot plan.png] [--out DIR] [--quiet]
+    impact-env plan corridor,relay,two_objects [--planner sr|ir] --out plans/ [--engine ray]
 
-A comma-separated list of scenarios is planned side by side on the sweep engine (planners/offline/batch.py):
-``--out`` and ``--plot`` are then folders (one ``<scenario>.json`` / ``.png`` each).
+``--out DIR`` writes ``<scenario>.json`` and ``<scenario>.png`` into DIR; ``--json`` and ``--plot`` are the
+single files (for one scenario). A comma-separated list of scenarios is planned side by side on the sweep
+engine (planners/offline/batch.py), one ``<scenario>.json`` and ``.png`` each in ``--out``. Every output path is
+checked before the solve.
 
-Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``); prints the model size,
+Joins ``impact-env`` through the ``impact_env.commands`` entry point (``register``), with ``impact-env filter``
+(:mod:`planners.task_filter`); prints the model size,
 progress at most once a second, then the robustness, solve time, gap and one line per planned impact. Exit
-codes: 0 plan found (optimal within the gap); 3 time limit reached with a plan (still written, with a warning
-giving its gap); 2 any error that ``impact_env.cli.main`` reports in one line (bad options, infeasible task,
-unsupported STL, solver missing, no plan within the time limit).
+codes: 0 plan found (optimal within the gap); 3 node budget or time limit reached with a plan (still written,
+with a warning giving its gap); 2 any error that ``impact_env.cli.main`` reports in one line (bad options,
+infeasible task, unsupported STL, solver missing, no plan within the time limit).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import textwrap
@@ -26,12 +31,23 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from impact_env.cli_options import (
+    add_files,
+    add_out,
+    add_quiet,
+    add_seed,
+    check_outputs,
+    deprecated,
+    in_folder,
+    legacy_file_out,
+)
+from impact_env.figures import png_path
 from impact_env.transport.scenario import MAX_PLANNER_INTERVALS, MAX_ROBOT_DEGREE, MIN_ROBOT_DEGREE
 from planners.errors import PlannerError, PlanTimeoutError
 from planners.offline.solvers import SOLVERS as SOLVER_NAMES
 
 if TYPE_CHECKING:
-    from planners.offline.solvers.base import Progress
+    from planners.offline.solvers.base import Progress, SolverOptions
     from planners.plan import Plan
 
 EXIT_TIME_LIMIT = 3
@@ -52,11 +68,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "scenario's [final_box] still guaranteed")
     # a free string, checked in the handler, so that a typo is a one-line error rather than argparse usage
     p.add_argument("--solver", default="highs", help=f"MILP solver: one of {', '.join(SOLVER_NAMES)} (default highs)")
-    p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
-                   help="solver wall-clock limit in seconds (default 60); on reaching it the best plan is kept")
+    p.add_argument("--time-limit", type=float, default=None, metavar="S",
+                   help="solver wall-clock limit in seconds, a safety net (default: the planner's, 600 for sr, 60 for "
+                        "ir); on reaching it the best plan is kept")
+    p.add_argument("--node-limit", type=int, default=None, metavar="N",
+                   help="branch-and-bound node budget of the robustness stage: the same work, so the same plan, on a "
+                        "busy machine (default: the planner's, 20000 for sr, none for ir); on reaching it the best "
+                        "plan is kept")
     p.add_argument("--mip-gap", type=float, default=1e-4, metavar="G",
                    help="relative optimality gap at which the solver stops (default 1e-4)")
-    p.add_argument("--threads", type=int, default=None, metavar="N", help="solver threads (default: solver's choice)")
+    p.add_argument("--threads", type=int, default=None, metavar="N",
+                   help="solver threads; the plan depends on the count (default: the planner's, 2 for sr, the "
+                        "solver's choice for ir)")
     p.add_argument("--intervals", type=int, default=None, metavar="N",
                    help="time-grid intervals; impacts happen at its knots (default: the scenario's [planner] hint)")
     p.add_argument("--degree", type=int, default=None, metavar="D",
@@ -70,11 +93,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="branch-and-bound nodes for the second stage (fewest impacts, least acceleration, rho "
                         "kept); a node count, not a time, so the plan is the same on a busy machine; 0 skips it "
                         "(default 20)")
-    p.add_argument("--seed", type=int, default=0, help="solver random seed (solve times vary with it)")
-    p.add_argument("--out", help="write the plan as JSON (planners.plan.Plan.save); a folder for a list of scenarios")
-    p.add_argument("--plot", help="write a PNG of the plan: xy view, positions and velocities over time (a folder "
-                                  "for a list of scenarios)")
-    p.add_argument("--quiet", action="store_true", help="no header and no progress lines; only the result")
+    add_seed(p, "solver random seed (solve times vary with it)")
+    add_out(p, "<scenario>.json (the plan) and <scenario>.png (its figure), for one scenario or a list")
+    add_files(p, json="the plan as JSON (planners.plan.Plan.save)",
+              plot="a PNG of the plan: xy view, positions and velocities over time")
+    add_quiet(p, "no header and no progress lines; only the result")
     from planners.tether.cli import add_arguments as add_tether_arguments
 
     add_tether_arguments(p)  # a tether station (impact-env plan L) is planned by planners/tether/cli.py
@@ -82,27 +105,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     add_engine_arguments(p)  # a list of scenarios (impact-env plan a,b,c) is planned side by side
     p.set_defaults(func=_cmd_plan)
+    from planners.task_filter import register as register_filter
+
+    register_filter(subparsers)  # impact-env filter: generated tasks kept if the MILP plans them
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
     from impact_env.tether.station import is_station_file
     from impact_env.transport.scenario import load_scenario
-    from planners.offline.config import IRPlannerConfig, PlannerConfig, SolverOptions
+    from planners.offline.config import IRPlannerConfig, PlannerConfig
     from planners.offline.impact_robust import build_ir_model, plan_impact_robust
     from planners.offline.spatially_robust import build_model, plan_spatially_robust
 
     if "," in args.scenario:
         return _plan_list(args)
+    legacy_file_out(args, "--json", (".json",))
+    name = Path(args.scenario).stem if args.scenario.endswith(".toml") else args.scenario
+    args.json = in_folder(args, "--json", f"{name}.json")
+    args.plot = in_folder(args, "--plot", f"{name}.png")
     if is_station_file(args.scenario):
         from planners.tether.cli import plan_station
 
+        check_outputs({"--json": args.json, "--plot": args.plot, "--drh": args.drh}, {"--out": args.out})
+        args.plot = args.plot and str(png_path(args.plot))
         return plan_station(args)
 
     _check_options(args)
     scenario = load_scenario(args.scenario)
+    check_outputs({"--json": args.json, "--plot": args.plot}, {"--out": args.out})
+    args.plot = args.plot and str(png_path(args.plot))
     say = (lambda text: None) if args.quiet else (lambda text: print(text, flush=True))
-    budget = SolverOptions(time_limit_s=args.time_limit, mip_gap=args.mip_gap, threads=args.threads, seed=args.seed,
-                           progress=None if args.quiet else progress_printer())
+    budget = _budget(args, progress=None if args.quiet else progress_printer())
     common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth, solver=args.solver,
                   solver_options=budget, refine_nodes=args.refine_nodes)
     if args.planner == "ir":
@@ -119,11 +152,11 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         # a separate build only to show the model size before the (possibly long) solve; it costs ~0.1 s
         built = build(scenario, config)
         m = built.model
-        limit = "none" if args.time_limit is None else f"{args.time_limit:g} s"
+        limit = _limits(budget)
         say(f"model: {built.grid.intervals} intervals, robot degree {built.robots[0].degree}: {m.n_binaries} "
             f"binaries, {m.n_vars} variables, {m.n_rows} rows (built in {built.build_time_s:.2f} s)")
         goal = "delta, the tolerated post-impact velocity error" if args.planner == "ir" else "robustness rho"
-        say(f"solving with {args.solver} (time limit {limit}, mip gap {args.mip_gap:g}): maximise {goal}")
+        say(f"solving with {args.solver} ({limit}, mip gap {args.mip_gap:g}): maximise {goal}")
 
     code = 0
     start = time.perf_counter()
@@ -134,19 +167,22 @@ def _cmd_plan(args: argparse.Namespace) -> int:
             raise
         plan = exc.plan
         gap = "unknown" if exc.mip_gap is None else f"{100 * exc.mip_gap:.2f}%"
-        print(f"impact-env: warning: time limit of {args.time_limit:g} s reached with gap {gap}; "
+        print(f"impact-env: warning: time limit of {budget.time_limit_s:g} s reached with gap {gap}; "
               f"keeping the best plan found", file=sys.stderr, flush=True)
+        code = EXIT_TIME_LIMIT
+    if plan.stats.get("stage1_status") == "node_limit":
+        print(f"impact-env: warning: node budget of {budget.node_limit} nodes reached with gap "
+              f"{100 * plan.mip_gap:.2f}%; keeping the best plan found", file=sys.stderr, flush=True)
         code = EXIT_TIME_LIMIT
 
     print(format_summary(plan, wall_s=time.perf_counter() - start))
-    if args.out:
-        print(f"wrote {plan.save(args.out)}")
+    if args.json:
+        print(f"wrote {plan.save(args.json)}")
     if args.plot:
         from planners.plan.plotting import plot_plan
 
-        png = Path(args.plot) if Path(args.plot).suffix else Path(args.plot).with_suffix(".png")
-        plot_plan(scenario, plan, png)
-        print(f"wrote {png}")
+        plot_plan(scenario, plan, args.plot)
+        print(f"wrote {args.plot}")
     return code
 
 
@@ -156,15 +192,22 @@ def _plan_list(args: argparse.Namespace) -> int:
     from impact_env.sweep import engine_config, open_engine
     from impact_env.tether.station import is_station_file
     from planners.offline.batch import plan_scenarios
-    from planners.offline.config import IRPlannerConfig, PlannerConfig, SolverOptions
+    from planners.offline.config import IRPlannerConfig, PlannerConfig
 
     names = [n.strip() for n in args.scenario.split(",") if n.strip()]
     stations = [n for n in names if is_station_file(n)]
     if stations:
         raise PlannerError(f"plan tether stations one at a time ({', '.join(stations)}); lists are for impact "
                            "scenarios")
+    if args.json is not None:
+        raise PlannerError("a list of scenarios writes one plan per scenario: give --out DIR, not --json")
+    figures = args.out
+    if args.plot is not None:  # 0.2: --plot DIR for a list
+        deprecated(f"--plot {args.plot} (a folder) for a list", "--out DIR, which holds the figures too")
+        figures = args.plot
     _check_options(args)
-    budget = SolverOptions(time_limit_s=args.time_limit, mip_gap=args.mip_gap, threads=args.threads, seed=args.seed)
+    check_outputs(folders={"--out": args.out, "--plot": figures})
+    budget = _budget(args)
     common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth, solver=args.solver,
                   solver_options=budget, refine_nodes=args.refine_nodes)
     config = (IRPlannerConfig(copy_intervals=args.copy_intervals, **common) if args.planner == "ir"
@@ -180,21 +223,37 @@ def _plan_list(args: argparse.Namespace) -> int:
             print(f"impact-env: error: {o.scenario}: {o.error}", file=sys.stderr, flush=True)
             code = 2
             continue
-        if o.timed_out:
-            print(f"impact-env: warning: {o.scenario}: time limit reached; keeping the best plan found",
+        if o.timed_out or o.plan.stats.get("stage1_status") == "node_limit":
+            limit = "time limit" if o.timed_out else "node budget"
+            print(f"impact-env: warning: {o.scenario}: {limit} reached; keeping the best plan found",
                   file=sys.stderr, flush=True)
             code = code or EXIT_TIME_LIMIT
         print(format_summary(o.plan) + f"\nplan fingerprint {o.plan.fingerprint()}")
         if args.out:
             print(f"wrote {o.plan.save(Path(args.out) / f'{o.scenario}.json')}")
-        if args.plot:
+        if figures:
             from impact_env.transport.scenario import load_scenario
             from planners.plan.plotting import plot_plan
 
-            Path(args.plot).mkdir(parents=True, exist_ok=True)
-            plot_plan(load_scenario(o.scenario), o.plan, Path(args.plot) / f"{o.scenario}.png")
-            print(f"wrote {Path(args.plot) / f'{o.scenario}.png'}")
+            plot_plan(load_scenario(o.scenario), o.plan, Path(figures) / f"{o.scenario}.png")
+            print(f"wrote {Path(figures) / f'{o.scenario}.png'}")
     return code
+
+
+def _budget(args: argparse.Namespace, progress: Callable[[Progress], None] | None = None) -> SolverOptions:
+    """Stage 1's solver budget: the planner's default, with the limits the options give."""
+    from planners.offline.config import IRPlannerConfig, PlannerConfig
+
+    default = (IRPlannerConfig() if args.planner == "ir" else PlannerConfig()).solver_options
+    given = (("time_limit_s", args.time_limit), ("node_limit", args.node_limit), ("threads", args.threads))
+    limits = {k: v for k, v in given if v is not None}
+    return dataclasses.replace(default, mip_gap=args.mip_gap, seed=args.seed, progress=progress, **limits)
+
+
+def _limits(budget: SolverOptions) -> str:
+    """E.g. ``node budget 20000, time limit 600 s``."""
+    nodes = "no node budget" if budget.node_limit is None else f"node budget {budget.node_limit}"
+    return nodes + (", no time limit" if budget.time_limit_s is None else f", time limit {budget.time_limit_s:g} s")
 
 
 def _check_options(args: argparse.Namespace) -> None:
@@ -212,6 +271,8 @@ def _check_options(args: argparse.Namespace) -> None:
                            f"{', '.join(SOLVER_NAMES)}")
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         raise PlannerError(f"--time-limit must be a finite number of seconds > 0, got {args.time_limit:g}")
+    if args.node_limit is not None and args.node_limit < 1:
+        raise PlannerError(f"--node-limit must be >= 1, got {args.node_limit}")
     if not 0.0 <= args.mip_gap < 1.0:
         raise PlannerError(f"--mip-gap must be in [0, 1), got {args.mip_gap:g}")
     if args.threads is not None and args.threads < 1:

@@ -41,7 +41,8 @@ class UnflyableHandoverError(InfeasiblePlanError):
 
 
 class PlanTimeoutError(PlannerError):
-    """The solver hit its time limit. ``plan`` is the best plan found (or None) and ``mip_gap`` its gap."""
+    """The solver hit its time limit, or its node budget before it found any plan. ``plan`` is the best plan found
+    (or None) and ``mip_gap`` its gap."""
 
     def __init__(self, message: str, plan: Any = None, mip_gap: float | None = None) -> None:
         super().__init__(message)
@@ -60,9 +61,11 @@ class ReplanInputError(PlannerError, ValueError):
 class PlanCheckError(PlannerError, ValueError):
     """A plan violates continuity, bounds, thrust limits or the impact law; lists every violation."""
 
-    def __init__(self, violations: list[str]) -> None:
-        super().__init__("plan check failed:\n  " + "\n  ".join(violations))
+    def __init__(self, violations: list[str], source: str | None = None) -> None:
+        where = f" for {source}" if source else ""
+        super().__init__(f"plan check failed{where}:\n  " + "\n  ".join(violations))
         self.violations = violations
+        self.source = source
 
 
 # ------------------------------------------------------------------------------------ tether planners

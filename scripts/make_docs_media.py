@@ -6,8 +6,8 @@
 - ``img/envs/<name>.gif``: one episode per registered environment. Impact scenarios are flown by the expert
   (the committed plan of ``results/baselines/plans/`` or ``--plans``, or a fresh MILP plan, then the replanner
   and the MPC).
-  Tether stations are flown by a scripted anchor sequence (:class:`ScriptedAnchors`, below), not by a planner:
-  the tether planners and their expert are not in the package yet.
+  Tether stations are flown by a scripted anchor sequence (:class:`ScriptedAnchors`, below), a hand-written
+  rule rather than the tether planners, so that the GIFs show the environment on its own.
 - ``img/planners/<scenario>_plan.png`` (the paper's Fig. 4: the plan, its positions and velocities) and
   ``img/planners/<scenario>_execution.png`` (Fig. 6: executed against planned), from the same expert episodes.
 - ``img/scenarios/<name>.png``: every shipped scenario and station as ``impact-env show`` draws it.

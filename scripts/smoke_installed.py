@@ -41,7 +41,7 @@ def main() -> int:
     assert core.world._loop is not None and type(core.monitor) is impact_env.stl.compiled.CompiledMonitor
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     assert obs.shape == env.observation_space.shape and isinstance(reward, float)
-    tether = gym.make("impact_env/TetherL-v0", fidelity="reel")
+    tether = gym.make("impact_env/TetherL-v1", fidelity="reel")
     tether.reset(seed=0)
     tether.step(np.zeros(tether.action_space.shape, dtype=np.int64))
 

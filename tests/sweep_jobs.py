@@ -38,3 +38,8 @@ def read_shared(job: tuple) -> dict:
     path = Path(local_path(handle))
     target = path / name if path.is_dir() else path
     return {"path": str(path), "bytes": target.read_bytes()}
+
+
+def worker_pid(_: object) -> int:
+    """The process that ran the job."""
+    return os.getpid()

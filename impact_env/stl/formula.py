@@ -358,6 +358,9 @@ def interval_steps(a_s: float, b_s: float, dt: float) -> tuple[int, int]:
     the interval contains no sample.
     """
     dt = check_dt(dt)
+    if not math.isfinite(b_s / dt):  # e.g. F[0, 1e308] at dt = 0.1: more samples than a float can count
+        raise STLError(f"interval [{_fmt(a_s)}, {_fmt(b_s)}] s is too long for dt = {dt} s ({b_s!r} / {dt!r} "
+                       "overflows); no trace is that long: use a bound within the task's horizon")
     a_k = math.ceil(a_s / dt - _EPS)
     b_k = math.floor(b_s / dt + _EPS)
     if a_k > b_k:

@@ -110,10 +110,16 @@ def _until(left: np.ndarray, right: np.ndarray, a_k: int, b_k: int) -> np.ndarra
     return best
 
 
-def _clamped(steps: tuple[int, int], n: int) -> tuple[int, int]:
-    """Interval offsets capped at N - 1 samples: past the end every child signal is constant (hold-last), so a
-    window reaching beyond N - 1 has the value of one that ends there, and F[0, 1e20] costs no more than N."""
-    return min(steps[0], n - 1), min(steps[1], n - 1)
+def _clamped(a_s: float, b_s: float, dt: float, n: int) -> tuple[int, int]:
+    """The sample offsets of [a_s, b_s] capped at N - 1: past the end every child signal is constant (hold-last),
+    so a window reaching beyond N - 1 has the value of one that ends there, and F[0, 1e20] costs no more than N.
+    A bound too large to count in samples (F[0, 1e308] at dt = 0.1: 1e309 overflows) is capped before it is
+    turned into an integer, so it too has a robustness."""
+    if math.isfinite(b_s / dt):
+        a_k, b_k = interval_steps(a_s, b_s, dt)
+        return min(a_k, n - 1), min(b_k, n - 1)
+    a_k = n - 1 if not math.isfinite(a_s / dt) else min(math.ceil(a_s / dt - 1e-9), n - 1)
+    return a_k, n - 1
 
 
 def _signal(f: Formula, pos: Mapping[str, np.ndarray], regions: Mapping[str, ConvexPolygon], dt: float,
@@ -136,10 +142,10 @@ def _signal(f: Formula, pos: Mapping[str, np.ndarray], regions: Mapping[str, Con
         stacked = np.stack([_signal(c, pos, regions, dt, n) for c in f.children])
         return stacked.min(axis=0) if isinstance(f, And) else stacked.max(axis=0)
     if isinstance(f, (Eventually, Always)):
-        a_k, b_k = _clamped(interval_steps(f.a_s, f.b_s, dt), n)
+        a_k, b_k = _clamped(f.a_s, f.b_s, dt, n)
         return _window(_signal(f.child, pos, regions, dt, n), a_k, b_k, maximum=isinstance(f, Eventually))
     if isinstance(f, Until):
-        a_k, b_k = _clamped(interval_steps(f.a_s, f.b_s, dt), n)
+        a_k, b_k = _clamped(f.a_s, f.b_s, dt, n)
         return _until(_signal(f.left, pos, regions, dt, n), _signal(f.right, pos, regions, dt, n), a_k, b_k)
     raise STLError(f"unknown STL node {type(f).__name__}")
 

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from impact_env.cli_options import print_catalogue, run_and_report, save_summary
-from impact_env.errors import ImpactEnvError
+from impact_env.cli_options import check_world_options, print_catalogue, run_and_report, save_summary, station_options
 
 TETHER_KEYS = ("switches", "snags", "path_length_m", "winch_work_J", "wall_contacts", "time_to_goal_s",
                "time_at_rest_in_goal_s", "speed_mps", "failed_anchors", "dropped_robots")
@@ -32,7 +31,7 @@ def show_station(args: argparse.Namespace) -> int:
     from impact_env.tether.station import load_station
 
     st = load_station(args.scenario)
-    print(f"wrote {save_station_figure(st, args.out)}")
+    print(f"wrote {save_station_figure(st, args.plot)}")
     print(f"task: {st.task}  ({st.n_anchors} anchors, k = {st.k} of {st.n_robots} robots)")
     return 0
 
@@ -46,20 +45,8 @@ def run_station(args: argparse.Namespace) -> int:
     from impact_env.tether.station import load_station
 
     st = load_station(args.scenario)
-    for flag, value, default in (("--restitution", args.restitution, None), ("--thrust-noise", args.thrust_noise, 0.0),
-                                 ("--fuel-penalty", args.fuel_penalty, 0.0),
-                                 ("--impact-velocity-noise-mps", args.impact_velocity_noise_mps, 0.0)):
-        if value != default:
-            raise ImpactEnvError(f"{flag} applies to impact scenarios, not to station {st.name!r}")
-    if args.reward_mode not in ("dense", "sparse"):
-        raise ImpactEnvError(f"--reward-mode {args.reward_mode} applies to impact scenarios; a station takes dense or "
-                             "sparse")
-    from impact_env.tether.faults import parse_faults
-
-    options = {"fidelity": args.fidelity, "reward_mode": args.reward_mode, "energy_penalty": args.energy_penalty,
-               "pull_speed_mps": args.pull_speed_mps, "max_active": args.max_active,
-               "initial_position_noise_m": args.initial_position_noise_m,
-               "faults": parse_faults(getattr(args, "faults", None))}
+    check_world_options(args, impact=False, station=True, what=f"station {st.name!r}")
+    options = station_options(args)
     env = TetherEnv(st, render_mode="rgb_array" if args.video else None, **options)
     controller = make_controller(args.controller, st, plan=args.plan)
     events = []  # each episode's tether events

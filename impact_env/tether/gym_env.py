@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from impact_env.env_shell import GymShell, required
+from impact_env.env_shell import GymShell, required, with_horizon
 from impact_env.tether.core import TetherCore
 from impact_env.tether.faults import FaultConfig
 from impact_env.tether.rendering import TetherFrame, TetherRenderer, frame_of
@@ -73,7 +74,8 @@ class TetherEnv(GymShell):
     shipped maps); the final ``info["robustness"]`` is then the trace's exact robustness and
     ``info["is_success"]`` says whether it is positive. As for the impact envs, the station ids are registered
     with ``max_episode_steps`` equal to the horizon (``TimeLimit`` also sets ``truncated`` on that last step;
-    ``terminated`` is the authoritative signal); ``impact_env/Tether-v1`` registers none.
+    ``terminated`` is the authoritative signal); ``impact_env/Tether-v1`` reads it from the station given to
+    ``make`` (:func:`make_with_horizon`).
 
     ## Info
     ``robustness`` (m), ``is_success``, ``time_s``, ``switches`` (accepted attach commands), ``snags``,
@@ -177,3 +179,14 @@ def render_tether(env: GymShell) -> Any:
 
 def close_tether(env: GymShell) -> None:
     env.close()
+
+
+def make_with_horizon(**kwargs: Any) -> gym.Env:
+    """The entry point of ``impact_env/Tether-v1``: ``TetherEnv(**kwargs)`` in Gymnasium's ``TimeLimit`` at its
+    station's horizon (:func:`~impact_env.env_shell.with_horizon`)."""
+    return with_horizon(TetherEnv(**kwargs))
+
+
+def make_v0_with_horizon(**kwargs: Any) -> gym.Env:
+    """The entry point of ``impact_env/Tether-v0``: :class:`TetherEnvV0` at its station's horizon."""
+    return with_horizon(TetherEnvV0(**kwargs))

@@ -22,6 +22,9 @@ from impact_env.tether.gym_env import STATION_HINT
 from impact_env.tether.rendering import TetherFrame, TetherRenderer, frame_of
 from impact_env.tether.station import Station
 
+# what the module-level entry points make without arguments (see impact_env.transport.pettingzoo_env)
+DEFAULT_STATION = "L"
+
 
 class TetherParallelEnv(ParallelShell):
     """Tether transport with one agent per robot, named by the station's robot names (``R1 .. Rn`` by default).
@@ -53,7 +56,7 @@ class TetherParallelEnv(ParallelShell):
 
     ## Arguments
     * ``station``: a shipped station name, a path to a TOML file or a :class:`~impact_env.tether.station.Station`;
-      required.
+      required by the class; the module's ``parallel_env``, ``env`` and ``raw_env`` default to ``"L"``.
     * ``fidelity``: ``"kinematic"``, ``"reel"`` or ``"force"``.
     * ``reward_mode``: ``"dense"`` or ``"sparse"``.
     * ``energy_penalty``: reward cost per joule of winch work (>= 0).
@@ -147,7 +150,7 @@ class TetherParallelEnvV0(TetherParallelEnv):
 
     ## Arguments
     * ``station``: a shipped station name, a path to a TOML file or a :class:`~impact_env.tether.station.Station`;
-      required.
+      required by the class (the module's entry points make station L without one).
     * ``fidelity``: ``"kinematic"``, ``"reel"`` or ``"force"``.
     * ``reward_mode``: ``"dense"`` or ``"sparse"``.
     * ``energy_penalty``: reward cost per joule of winch work (>= 0).
@@ -171,7 +174,7 @@ class TetherParallelEnvV0(TetherParallelEnv):
         return [f"robot_{i}" for i in range(station.n_robots)]
 
 
-def parallel_env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
+def parallel_env(station: Station | str = DEFAULT_STATION, fidelity: str = "kinematic", reward_mode: str = "dense",
                  energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
                  initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
                  render_width_px: int = 600, faults: FaultConfig | dict | None = None,
@@ -181,7 +184,7 @@ def parallel_env(station: Station | str | None = None, fidelity: str = "kinemati
                              initial_position_noise_m, max_cycles, render_mode, render_width_px, faults, **unknown)
 
 
-def raw_env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
+def raw_env(station: Station | str = DEFAULT_STATION, fidelity: str = "kinematic", reward_mode: str = "dense",
             energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
             initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
             render_width_px: int = 600, faults: FaultConfig | dict | None = None, **unknown: Any):
@@ -191,7 +194,7 @@ def raw_env(station: Station | str | None = None, fidelity: str = "kinematic", r
                                                 render_width_px, faults, **unknown))
 
 
-def env(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
+def env(station: Station | str = DEFAULT_STATION, fidelity: str = "kinematic", reward_mode: str = "dense",
         energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
         initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
         render_width_px: int = 600, faults: FaultConfig | dict | None = None, **unknown: Any):
@@ -202,8 +205,9 @@ def env(station: Station | str | None = None, fidelity: str = "kinematic", rewar
                                          **unknown))
 
 
-def parallel_env_v0(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
-                    energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
+def parallel_env_v0(station: Station | str = DEFAULT_STATION, fidelity: str = "kinematic",
+                    reward_mode: str = "dense", energy_penalty: float = 0.0, pull_speed_mps: float | None = None,
+                    max_active: int | None = None,
                     initial_position_noise_m: float = 0.0, max_cycles: int | None = None,
                     render_mode: str | None = None, render_width_px: int = 600,
                     faults: FaultConfig | dict | None = None, **unknown: Any) -> TetherParallelEnvV0:
@@ -212,7 +216,7 @@ def parallel_env_v0(station: Station | str | None = None, fidelity: str = "kinem
                                initial_position_noise_m, max_cycles, render_mode, render_width_px, faults, **unknown)
 
 
-def raw_env_v0(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
+def raw_env_v0(station: Station | str = DEFAULT_STATION, fidelity: str = "kinematic", reward_mode: str = "dense",
                energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
                initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
                render_width_px: int = 600, faults: FaultConfig | dict | None = None, **unknown: Any):
@@ -222,7 +226,7 @@ def raw_env_v0(station: Station | str | None = None, fidelity: str = "kinematic"
                                                    render_width_px, faults, **unknown))
 
 
-def env_v0(station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
+def env_v0(station: Station | str = DEFAULT_STATION, fidelity: str = "kinematic", reward_mode: str = "dense",
            energy_penalty: float = 0.0, pull_speed_mps: float | None = None, max_active: int | None = None,
            initial_position_noise_m: float = 0.0, max_cycles: int | None = None, render_mode: str | None = None,
            render_width_px: int = 600, faults: FaultConfig | dict | None = None, **unknown: Any):

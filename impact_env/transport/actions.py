@@ -1,9 +1,10 @@
 """Reading actions: whatever a caller passes becomes plain numbers of the documented shape, or an ActionError.
 
 Both transport environments accept an array-like of numbers (a numpy array of an integer or float dtype, or
-nested lists and tuples of Python numbers). Strings, booleans, None, dicts, ragged lists and any other shape
-than the documented ones are refused with a message naming the shape that would be accepted, rather than
-silently reinterpreted (a (3, 2) array holds six numbers, but not the (2, 3) = two robots times (Fx, Fy, torque)).
+nested lists and tuples of Python numbers). Strings, booleans, None, dicts, ragged lists, masked arrays with
+masked entries and any other shape than the documented ones are refused with a message naming the shape that
+would be accepted, rather than silently reinterpreted (a (3, 2) array holds six numbers, but not the (2, 3) =
+two robots times (Fx, Fy, torque)).
 """
 
 from __future__ import annotations
@@ -22,6 +23,14 @@ def _brief(value: object) -> str:
     return brief(value, width=80)
 
 
+def is_masked(action: object) -> bool:
+    """Whether ``action`` is a numpy masked array or a list or tuple holding one: the compiled paths would read
+    its data under the mask, so such actions take :func:`numbers_of`."""
+    if isinstance(action, np.ma.MaskedArray):
+        return True
+    return type(action) in (list, tuple) and any(isinstance(row, np.ma.MaskedArray) for row in action)
+
+
 def numbers_of(action: object, shapes: tuple[tuple[int, ...], ...], what: str, layout: str) -> list[float]:
     """The numbers of ``action`` in row-major order if its shape is one of ``shapes``; else ActionError.
 
@@ -30,6 +39,15 @@ def numbers_of(action: object, shapes: tuple[tuple[int, ...], ...], what: str, l
     """
     expected = " or ".join(str(s) for s in shapes)
     count = int(np.prod(shapes[0]))
+    if isinstance(action, (list, tuple)) and any(isinstance(row, np.ma.MaskedArray) for row in action):
+        action = np.ma.stack(action) if all(isinstance(row, np.ndarray) for row in action) else list(action)
+    if isinstance(action, np.ma.MaskedArray):
+        if np.ma.is_masked(action):  # a masked entry is no number (tolist() would make it None)
+            raise ActionError(f"{what} is a masked array with {int(np.ma.count_masked(action))} masked entries; "
+                              f"pass {count} plain numbers ({layout}), e.g. action.filled(0.0)")
+        action = np.ma.getdata(action)
+    if isinstance(action, np.ndarray) and type(action) is not np.ndarray:  # np.matrix and other subclasses
+        action = np.asarray(action)
     if isinstance(action, np.ndarray) and action.dtype.kind in _NUMERIC_KINDS:
         array = action
     else:

@@ -10,8 +10,13 @@ from __future__ import annotations
 import argparse
 import textwrap
 
-from impact_env.cli_options import print_catalogue, run_and_report, save_summary, transport_options
-from impact_env.errors import ImpactEnvError
+from impact_env.cli_options import (
+    check_world_options,
+    print_catalogue,
+    run_and_report,
+    save_summary,
+    transport_options,
+)
 
 # impact-env scenarios: (title, format, value) of each column between the name and the description
 COLUMNS = (("robots", ">7", lambda sc: len(sc.robots)), ("objects", ">8", lambda sc: len(sc.objects)),
@@ -30,7 +35,7 @@ def show_scenario(args: argparse.Namespace) -> int:
     from impact_env.transport.scenario import load_scenario
 
     sc = load_scenario(args.scenario)
-    path = save_scenario_figure(sc, args.out)
+    path = save_scenario_figure(sc, args.plot)
     print(f"wrote {path}")
     print(textwrap.fill(f"task: {' '.join(sc.task.split())}", width=100, subsequent_indent="      "))
     return 0
@@ -44,10 +49,7 @@ def run_scenario(args: argparse.Namespace) -> int:
     from impact_env.transport.plotting import count_impacts
     from impact_env.transport.scenario import load_scenario
 
-    if (args.fidelity, args.energy_penalty, args.pull_speed_mps, args.max_active, args.faults) != \
-            ("kinematic", 0.0, None, None, None):
-        raise ImpactEnvError("--fidelity, --energy-penalty, --pull-speed-mps, --max-active and --faults apply to "
-                             "tether stations, not to impact scenarios")
+    check_world_options(args, impact=True, station=False, what="impact scenarios")
     sc = load_scenario(args.scenario)
     options = transport_options(args)
     env = TransportEnv(sc, render_mode="rgb_array" if args.video else None, **options)

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from impact_env.env_shell import GymShell, required
+from impact_env.env_shell import GymShell, required, with_horizon
 from impact_env.transport.core import ACTION_PER_ROBOT, TransportCore
 from impact_env.transport.rendering import Renderer, RenderFrame, frame_of
 from impact_env.transport.scenario import Scenario
@@ -65,8 +66,9 @@ class TransportEnv(GymShell):
     ``env.spec.max_episode_steps`` tells the episode length; on the last step Gymnasium's ``TimeLimit`` then
     also sets ``truncated=True``. Read ``terminated`` as the authoritative signal (stable-baselines3 does:
     its ``TimeLimit.truncated`` is ``truncated and not terminated``). A smaller ``max_episode_steps`` passed to
-    ``gym.make`` cuts episodes short with ``truncated`` only. ``impact_env/Transport-v0`` cannot know the
-    horizon of a scenario given at ``make`` time, so it registers none.
+    ``gym.make`` cuts episodes short with ``truncated`` only. ``impact_env/Transport-v0`` reads the horizon from
+    the scenario given to ``make`` (:func:`make_with_horizon`), so its ``env.spec.max_episode_steps`` is the
+    file's too.
 
     ## Info
     ``robustness`` (current estimate, m), ``is_success`` (robustness > 0), ``impacts`` (contacts that ended
@@ -95,7 +97,10 @@ class TransportEnv(GymShell):
       they were, so the version stays v0). The error an impact-robust plan's delta tolerates.
 
     ## Version history
-    * v0: initial release (impact_env 0.1.0). In 0.2.0 the ids got ``max_episode_steps``, ``scenario`` became
+    * v0: initial release (impact_env 0.1.0). In 0.3.0 ``impact_env/Transport-v0`` got the
+      ``max_episode_steps`` of the scenario it is made with, and the scenarios relay, two_objects, ping_pong_stop
+      and long_throw_trim their ids (``impact_env/Relay-v0`` ...); no episode changes. In 0.2.0 the ids got
+      ``max_episode_steps``, ``scenario`` became
       required and the episode clock (``dt_s``, ``horizon_steps``, ``horizon_s``) moved onto the env; dynamics,
       reward and observations are unchanged, so the version stays v0. Also without a new version, because no
       episode that was valid before changes: malformed actions and options are refused, noisy starts that
@@ -126,3 +131,9 @@ class TransportEnv(GymShell):
 
     def _frame(self) -> RenderFrame:
         return frame_of(self.core)
+
+
+def make_with_horizon(**kwargs: Any) -> gym.Env:
+    """The entry point of ``impact_env/Transport-v0``: ``TransportEnv(**kwargs)`` in Gymnasium's ``TimeLimit`` at
+    its scenario's horizon (:func:`~impact_env.env_shell.with_horizon`)."""
+    return with_horizon(TransportEnv(**kwargs))

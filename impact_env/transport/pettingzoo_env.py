@@ -25,6 +25,10 @@ from impact_env.transport.scenario import Scenario
 
 _AGENT_SHAPE = (ACTION_PER_ROBOT,)
 
+# what the module-level entry points make without arguments, as pettingzoo.butterfly.pistonball_v6.env() does, so
+# PettingZoo's own tests (api_test, parallel_api_test, max_cycles_test) run on impact_env.transport_v0 as it is
+DEFAULT_SCENARIO = "corridor"
+
 
 class TransportParallelEnv(ParallelShell):
     """The transport task with one agent per robot (agent names are the robots' names).
@@ -61,7 +65,7 @@ class TransportParallelEnv(ParallelShell):
     The keywords of ``TransportEnv`` (same names as the CLI options), and:
 
     * ``scenario``: a shipped name, a path to a TOML file or a :class:`~impact_env.transport.scenario.Scenario`;
-      required.
+      required by the class; the module's ``parallel_env``, ``env`` and ``raw_env`` default to ``"corridor"``.
     * ``reward_mode``: ``"dense"``, ``"sparse"`` or ``"conjuncts"``.
     * ``fuel_penalty``: reward cost per N s of fuel (>= 0).
     * ``restitution``: simulate with this restitution instead of the scenario's; None keeps it.
@@ -78,9 +82,10 @@ class TransportParallelEnv(ParallelShell):
     SuperSuit wrappers tell the scenarios apart.
 
     ## Version history
-    * v0: initial release (impact_env 0.1.0). In 0.2.0: explicit entry-point arguments, the per-scenario
-      metadata name, the versioned module ``impact_env.transport_v0``; dynamics, reward and observations
-      unchanged.
+    * v0: initial release (impact_env 0.1.0). In 0.3.0 the module's entry points default to the corridor (so
+      ``max_cycles_test(transport_v0)`` runs); no episode changes. In 0.2.0: explicit entry-point arguments,
+      the per-scenario metadata name, the versioned module ``impact_env.transport_v0``; dynamics, reward and
+      observations unchanged.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10, "name": "transport_v0",
@@ -162,7 +167,7 @@ class TransportParallelEnv(ParallelShell):
         return frame_of(self.core)
 
 
-def parallel_env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
+def parallel_env(scenario: Scenario | str = DEFAULT_SCENARIO, reward_mode: str = "dense", fuel_penalty: float = 0.0,
                  restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
                  max_cycles: int | None = None, render_mode: str | None = None,
                  render_width_px: int = 600, impact_velocity_noise_mps: float = 0.0,
@@ -173,7 +178,7 @@ def parallel_env(scenario: Scenario | str | None = None, reward_mode: str = "den
                                 impact_velocity_noise_mps, **unknown)
 
 
-def raw_env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
+def raw_env(scenario: Scenario | str = DEFAULT_SCENARIO, reward_mode: str = "dense", fuel_penalty: float = 0.0,
             restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
             max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600,
             impact_velocity_noise_mps: float = 0.0, **unknown: Any):
@@ -183,7 +188,7 @@ def raw_env(scenario: Scenario | str | None = None, reward_mode: str = "dense", 
                                                 render_width_px, impact_velocity_noise_mps, **unknown))
 
 
-def env(scenario: Scenario | str | None = None, reward_mode: str = "dense", fuel_penalty: float = 0.0,
+def env(scenario: Scenario | str = DEFAULT_SCENARIO, reward_mode: str = "dense", fuel_penalty: float = 0.0,
         restitution: float | None = None, thrust_noise: float = 0.0, initial_position_noise_m: float = 0.0,
         max_cycles: int | None = None, render_mode: str | None = None, render_width_px: int = 600,
         impact_velocity_noise_mps: float = 0.0, **unknown: Any):

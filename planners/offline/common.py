@@ -47,9 +47,11 @@ class EncodedTask:
     rho: LinExpr | None = None
 
 
-def encode_task(model: Model, encoder: STLEncoder, scenario: Scenario, rho: LinExpr | None = None) -> EncodedTask:
-    """Encode each top-level conjunct of the task in its own group and require it satisfied (r_c >= 0);
-    with ``rho``, also rho <= r_c for every conjunct (group "robustness objective").
+def encode_task(model: Model, encoder: STLEncoder, scenario: Scenario, rho: LinExpr | None = None,
+                min_robustness_m: float = 0.0) -> EncodedTask:
+    """Encode each top-level conjunct of the task in its own group and require it satisfied (r_c >=
+    ``min_robustness_m``, ``PlannerConfig.min_robustness_m``); with ``rho``, also rho <= r_c for every conjunct
+    (group "robustness objective").
 
     Satisfaction lives in the conjuncts' own groups, not in a bound, so that an infeasible task is explained
     by the conjuncts that cause it. ``rho`` may be a callable ``rho(encoded) -> LinExpr`` creating the
@@ -65,7 +67,7 @@ def encode_task(model: Model, encoder: STLEncoder, scenario: Scenario, rho: LinE
     if callable(rho):
         rho = rho(encoded)
     for group, r_c in zip(groups, encoded):
-        model.add(r_c >= 0.0, group=group)
+        model.add(r_c >= min_robustness_m, group=group)
         if rho is not None:
             model.add(rho <= r_c, group="robustness objective")
     return EncodedTask(tuple(conjuncts), encoded, groups, rho)

@@ -30,15 +30,26 @@ from planners.offline.solvers import SOLVERS
 from planners.offline.solvers.base import SolverOptions
 from planners.plan import Plan
 
-__all__ = ["DEFAULT_COPY_INTERVALS", "DEFAULT_FINAL_BOX", "HandoverConfig", "IRPlannerConfig", "PlannerConfig",
-           "SolverOptions"]
+__all__ = ["DEFAULT_COPY_INTERVALS", "DEFAULT_FINAL_BOX", "DEFAULT_NODE_BUDGET", "DEFAULT_SAFETY_NET_S",
+           "DEFAULT_THREADS", "HandoverConfig", "IRPlannerConfig", "PlannerConfig", "SolverOptions"]
 
 DEFAULT_FINAL_BOX = (0.5, 0.05)  # position half-width (m), velocity half-width (m/s): the authors' default
 DEFAULT_COPY_INTERVALS = 2
+# Stage 1's default budget is work, not time (docs/planner_design.md#the-budget): branch-and-bound nodes, with a
+# wall-clock limit far beyond what the node budget takes on a busy machine, only as a safety net
+DEFAULT_NODE_BUDGET = 20_000
+DEFAULT_SAFETY_NET_S = 600.0
+# HiGHS's tree depends on its thread count, and left to choose it takes the machine's cores: pinned, the default
+# plan is the same on every machine (2: what the committed plans were made with on a 2-core machine)
+DEFAULT_THREADS = 2
 _SOLVER_KEYWORDS = ("time_limit_s", "node_limit", "mip_gap", "threads", "verbose", "seed", "progress")
 
 
 def _planner_budget() -> SolverOptions:
+    return SolverOptions(time_limit_s=DEFAULT_SAFETY_NET_S, node_limit=DEFAULT_NODE_BUDGET, threads=DEFAULT_THREADS)
+
+
+def _ir_budget() -> SolverOptions:
     return SolverOptions(time_limit_s=60.0)
 
 
@@ -87,8 +98,14 @@ class PlannerConfig:
     """The same for the number of impacts (m per impact)."""
     refine_nodes: int | None = 20
     """Branch-and-bound nodes of stage 2 (0 skips it; None: no limit)."""
-    refine_time_s: float = 60.0
-    """Time limit of stage 2 (s): only a safety net, ``refine_nodes`` cuts it (0 skips it)."""
+    refine_time_s: float = DEFAULT_SAFETY_NET_S
+    """Time limit of stage 2 (s): only a safety net, ``refine_nodes`` cuts it (0 skips it). It was 60 s before
+    0.3.0, which a busy machine reached (``docs/planner_design.md#the-budget``)."""
+    refine_warm_start: bool = True
+    """Stage 2 starts from stage 1's incumbent (a MIP start); False: it starts cold, and the better of its
+    incumbent and stage 1's is kept. Cold found the better stage-2 plan at the same 20-node cut on the three
+    scenarios measured (four_robots: 4 impacts instead of 5; ``docs/planner_design.md#stage-2-what-the-node-cut-buys``);
+    the default stays warm until the committed plans are re-planned and their cells re-flown."""
     smooth: bool = False
     """Stage 3 as the convex QP on squared accelerations (Eq. 28) instead of the LP: off by default, HiGHS's
     QP takes 1-30 s on these models, 10x the MILP."""
@@ -100,14 +117,26 @@ class PlannerConfig:
     solver: str = "highs"
     """The MILP backend: ``highs``, ``scip`` or ``gurobi``."""
     solver_options: SolverOptions = field(default_factory=_planner_budget)
-    """Stage 1's solver budget (time limit, MIP gap, threads, seed, node limit, progress; 60 s by default);
-    its time limit also bounds stage 3, and stage 2 takes its threads, seed and log."""
+    """Stage 1's solver budget (node limit, time limit, MIP gap, threads, seed, progress): by default
+    ``DEFAULT_NODE_BUDGET`` (20,000) branch-and-bound nodes, the same work on any machine, on
+    ``DEFAULT_THREADS`` (2) solver threads, since the search depends on the count, and a
+    ``DEFAULT_SAFETY_NET_S`` (600 s) time limit that only a pathological model reaches. A stage 1 cut by its
+    node limit returns its best plan with ``plan.mip_gap > 0`` and ``plan.stats["stage1_status"] ==
+    "node_limit"``; one cut by the time limit raises ``PlanTimeoutError``. Its time limit also bounds stage 3,
+    and stage 2 takes its threads, seed and log."""
     warm_start: Plan | None = field(default=None, compare=False)
     """A previous plan on the same grid to start from; None: a cold start."""
     diagnose_infeasibility: bool = True
     """On an infeasible task, name the conflicting constraint groups (re-solving once per group)."""
     bound_propagation: bool = True
     """Give every robustness variable its exact upper bound (off only to measure what it buys)."""
+    min_robustness_m: float = 1e-4
+    """The robustness every conjunct of the task must reach (m). STL satisfaction is strict (rho > 0): a task
+    that can only reach rho = 0, such as ``F[0,100] in(O1, goal) & G[0,100] !in(O1, goal)``, is satisfied by no
+    trajectory, yet a MILP held at r >= 0 finds "plans" at -1e-7 within its tolerances and cannot close its
+    gap. With this margin such a task is infeasible, which the solver proves in seconds and the diagnosis
+    explains. 0.1 mm lies far below any scenario's geometry and far above the solvers' tolerances (1e-7 .. 1e-6);
+    0 is the constraint of 0.2 (the online replanner keeps it, :mod:`planners.online.mission`)."""
     handover: HandoverConfig | None = field(default_factory=HandoverConfig)
     """Refuse or repair a plan in which a robot has too little time to get round an object between two of its
     impacts (:class:`HandoverConfig`); None: not checked."""
@@ -137,8 +166,9 @@ class PlannerConfig:
         check_number(self, "impact_weight", PlannerError, low=0)
         check_integer(self, "refine_nodes", PlannerError, low=0, none="no limit")
         check_number(self, "refine_time_s", PlannerError, low=0)
-        for name in ("smooth", "obstacle_clearance", "robot_object_separation", "diagnose_infeasibility",
-                     "bound_propagation"):
+        check_number(self, "min_robustness_m", PlannerError, low=0, high=1)
+        for name in ("refine_warm_start", "smooth", "obstacle_clearance", "robot_object_separation",
+                     "diagnose_infeasibility", "bound_propagation"):
             check_flag(self, name, PlannerError)
         check_choice(self, "solver", PlannerError, SOLVERS)
         check_instance(self, "warm_start", PlannerError, Plan, what="a Plan", none="a cold start")
@@ -151,6 +181,9 @@ class IRPlannerConfig(PlannerConfig):
     solver) and the ones below. Stage 1 maximises delta alone (>= ``min_delta_mps``), stage 2 minimises the
     number of impacts only, and stage 3 the L1 acceleration of all copies."""
 
+    solver_options: SolverOptions = field(default_factory=_ir_budget)
+    """As :class:`PlannerConfig`'s, but 60 s of wall clock by default and no node limit: the impact-robust
+    model's nodes cost several times the spatially robust one's, and no node budget is measured for it yet."""
     acceleration_weight: float = 0.0
     """As :class:`PlannerConfig`'s, in m/s of delta; 0: none (tie-breaks in stage 1 halved HiGHS's node
     throughput)."""

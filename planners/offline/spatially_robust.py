@@ -2,11 +2,12 @@
 
     plan = plan_spatially_robust(load_scenario("corridor"))
 
-Maximises the STL spatial robustness rho of the scenario's task subject to satisfying it (rho >= 0), the
-point-mass impact law in real velocities, conditional smoothness, velocity bounds, thrust limits, robot
-separation and obstacle clearance. The model is solved by an open-source solver (HiGHS by default); a
-second stage keeps rho and trims impacts and acceleration, and a third fixes the binaries and polishes
-(``planners/offline/stages.py``, shared with the impact-robust planner). See ``planners/offline/milp/`` for
+Maximises the STL spatial robustness rho of the scenario's task subject to satisfying it (each conjunct's
+robustness at least ``PlannerConfig.min_robustness_m``, 0.1 mm), the point-mass impact law in real velocities,
+conditional smoothness, velocity bounds, thrust limits, robot separation and obstacle clearance. The model is
+solved by an open-source solver (HiGHS by default); a second stage keeps rho and trims impacts and
+acceleration, and a third fixes the binaries and polishes (``planners/offline/stages.py``, shared with the
+impact-robust planner). See ``planners/offline/milp/`` for
 each constraint family.
 """
 
@@ -35,6 +36,7 @@ from planners.offline.milp.trajectories import (
     allowed_box,
     value,
 )
+from planners.offline.solvers import lp_optimum
 from planners.offline.stages import StagedModel, solve_to_plan
 from planners.plan import BodyPlan, Plan, PlannedImpact, Segment
 
@@ -73,12 +75,13 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
 
     trajectories = {t.spec.name: t for t in robots + objects}
     encoder = STLEncoder(model, grid, lambda body, k: trajectories[body].points(k), boxes, scenario.region_map(),
-                         bound_propagation=config.bound_propagation)
+                         bound_propagation=config.bound_propagation, lp_optimum=lp_optimum)
     if config.obstacle_clearance:
         add_obstacle_clearance(encoder, scenario, n)
     # rho <= every conjunct's robustness: its upper bound is the smallest of theirs
     task = _encode_task(model, encoder, scenario, rho=lambda encoded: model.add_var(
-        -encoder.bound, max(-encoder.bound, min(encoder.upper_bound(r) for r in encoded)), name="rho"))
+        -encoder.bound, max(-encoder.bound, min(encoder.upper_bound(r) for r in encoded)), name="rho"),
+        min_robustness_m=config.min_robustness_m)
     rho = task.rho
 
     cost = acceleration_l1(model, robots)

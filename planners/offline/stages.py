@@ -4,7 +4,8 @@ Both planners maximise one quantity (rho, the STL spatial robustness, or delta, 
 velocity error) and then, keeping it, prefer plans with fewer impacts and less acceleration:
 
 1. stage 1: maximise the primary quantity, to proven optimality or to ``solver_options.node_limit`` nodes
-   (the mission replanner's budget; stage 2 then runs only if it proved optimality);
+   (the offline planners' default budget and the mission replanner's; stage 2 then runs only if it proved
+   optimality), with a time limit as a safety net;
 2. stage 2: keep it (>= its optimum - 1e-7), minimise the number of impacts plus the L1 acceleration
    (Eq. 28), warm-started from stage 1, cut after ``refine_nodes`` branch-and-bound nodes: the same work on
    every machine, so the same plan however busy the machine is (``docs/planner_design.md#lexicographic-stages``);
@@ -100,15 +101,19 @@ def solve_stages(staged: StagedModel, config: PlannerConfig, scenario_name: str,
             # 2 s cap, which groups were named depended on how busy the machine was
             raise explain_infeasible(staged.model, config.solver,
                                      SolverOptions(time_limit_s=DIAGNOSE_SAFETY_S, node_limit=DIAGNOSE_NODES))
-        raise InfeasiblePlanError(f"no plan satisfies the task of {scenario_name!r}")
+        raise InfeasiblePlanError(f"infeasible: no plan satisfies the task of {scenario_name!r}")
     if result.status in (Status.ERROR, Status.UNBOUNDED):
         raise PlannerError(f"solver {config.solver} failed on {scenario_name!r}: {result.status.value} "
                            f"{result.message}")
     if not result.has_solution:
+        if result.status == Status.NODE_LIMIT:
+            raise PlanTimeoutError(f"no plan found within the node budget of {config.solver_options.node_limit} "
+                                   f"nodes (try a larger --node-limit or fewer intervals)")
         raise PlanTimeoutError(f"no plan found within the time limit of {config.solver_options.time_limit_s} s "
                                f"(try a longer --time-limit or fewer intervals)")
     x = result.x
-    stats: dict[str, Any] = {"refine_status": "skipped"}
+    stats: dict[str, Any] = {"refine_status": "skipped", "stage1_status": result.status.value,
+                             "stage1_nodes": result.nodes}
     if result.status == Status.OPTIMAL and config.refine_nodes != 0 and config.refine_time_s > 0:
         x, refine_stats = refine(staged, x, config)
         stats.update(refine_stats)
@@ -218,14 +223,17 @@ def refine(staged: StagedModel, x: np.ndarray, config: PlannerConfig) -> tuple[n
     m.set_objective(_stage2_objective(staged), maximize=False)
     budget = config.solver_options
     options = SolverOptions(time_limit_s=config.refine_time_s, node_limit=config.refine_nodes, mip_gap=1e-3,
-                            threads=budget.threads, verbose=budget.verbose, seed=budget.seed, warm_start=x,
+                            threads=budget.threads, verbose=budget.verbose, seed=budget.seed,
+                            warm_start=x if config.refine_warm_start else None,
                             heuristics=staged.refine_heuristics)
     result = solve(m, config.solver, options)
     stopped = (Status.OPTIMAL, Status.NODE_LIMIT, Status.TIME_LIMIT)
     if result.x is not None and result.status in stopped and not m.check(result.x, 1e-5):
-        x = result.x
+        # warm, its incumbent is never worse than x; cold, it may be (cut before it found a better one)
+        if config.refine_warm_start or m.objective.value(result.x) < m.objective.value(x):
+            x = result.x
     return x, {"refine_s": result.solve_time_s, "refine_status": result.status.value,
-               "refine_objective": float(m.objective.value(x))}
+               "refine_objective": float(m.objective.value(x)), "refine_nodes_explored": result.nodes}
 
 
 def polish(staged: StagedModel, x: np.ndarray, config: PlannerConfig) -> np.ndarray:

@@ -412,10 +412,12 @@ class MissionPlanner:
         cfg = self.config
         budget = cfg.solver_options
         warm = resample_plan(plan, t, self.scenario.tf_s, intervals, self.degree)
+        # min_robustness_m=0: a remainder that only reaches rho = 0 is still the best continuation in flight,
+        # and the remainders stay the plans 0.2 made (the offline planners refuse such a task up front)
         config = dataclasses.replace(self.planner_config, intervals=intervals, robot_degree=self.degree,
                                      solver_options=budget, refine_nodes=cfg.refine_nodes,
                                      refine_time_s=budget.time_limit_s, warm_start=warm,
-                                     diagnose_infeasibility=False)
+                                     diagnose_infeasibility=False, min_robustness_m=0.0)
         started = time.perf_counter()
         if plan.planner == "ir" and cfg.impact_robust_replans:
             why = self._solve_impact_robust(scenario, config)
@@ -447,7 +449,8 @@ class MissionPlanner:
         ir = IRPlannerConfig(intervals=config.intervals, robot_degree=config.robot_degree,
                              thrust_fraction=config.thrust_fraction, solver=config.solver,
                              solver_options=config.solver_options, refine_nodes=config.refine_nodes,
-                             refine_time_s=config.refine_time_s, diagnose_infeasibility=False)
+                             refine_time_s=config.refine_time_s, diagnose_infeasibility=False,
+                             min_robustness_m=config.min_robustness_m)
         started = time.perf_counter()
         try:
             remainder = plan_impact_robust(scenario, ir)

@@ -33,8 +33,8 @@ def read_plan_json(path: str | Path, error: Callable[[str], Exception], what: st
 
 
 def write_plan_json(path: str | Path, data: Any, indent: int) -> Path:
-    """Write ``data`` as JSON to ``path`` (its folders created), indented by ``indent``; returns the path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=indent))
-    return path
+    """Write ``data`` as JSON to ``path`` (its folders created), indented by ``indent``, atomically
+    (:func:`impact_env.results_store.write_atomic`); returns the path."""
+    from impact_env.results_store import write_atomic
+
+    return write_atomic(path, json.dumps(data, indent=indent))

@@ -141,7 +141,11 @@ class Plan:
     @classmethod
     def load(cls, path: str | Path) -> Plan:
         """Read a plan file written by :meth:`save`; any problem is a :class:`PlanCheckError` naming it."""
-        return cls.from_dict(read_plan_json(path, lambda message: PlanCheckError([message])))
+        data = read_plan_json(path, lambda message: PlanCheckError([message]))
+        try:
+            return cls.from_dict(data)
+        except PlanCheckError as exc:
+            raise PlanCheckError(exc.violations, source=str(path)) from None
 
     # ----------------------------------------------------------------------------------------- check
     def check(self, scenario: Scenario, tol: float = 1e-6) -> None:

@@ -16,6 +16,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.transforms import blended_transform_factory
 
+from impact_env.figures import png_path
+from impact_env.results_store import atomic_path
 from impact_env.transport.plotting import DPI, IMPACT_COLOUR, OBJECT_TRACE_COLOURS, ROBOT_TRACE_COLOURS, draw_scenario
 
 if TYPE_CHECKING:
@@ -69,11 +71,8 @@ def plot_plan(scenario: Scenario, plan: Plan, path: str | Path | None = None, sa
     fig.suptitle(f"{plan.scenario}: planner \"{plan.planner}\", {what}  "
                  f"({plan.solver}, {plan.solve_time_s:.1f} s{gap}; {len(plan.impacts)} impacts)")
     if path is not None:
-        path = Path(path)
-        if not path.suffix:
-            path = path.with_suffix(".png")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=DPI)
+        with atomic_path(png_path(path)) as tmp:
+            fig.savefig(tmp, dpi=DPI)
     return fig
 
 
@@ -306,6 +305,6 @@ def plot_execution(scenario: Scenario, plan: Plan, times_s: np.ndarray, position
     fig.suptitle(f"{scenario.name}: executed robustness {robustness:+.3f} m (planned {plan.robustness:.3f} m); "
                  f"{impacts_text(scenario, impacts)} ({len(plan.impacts)} planned)")
     if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=DPI)
+        with atomic_path(png_path(path)) as tmp:
+            fig.savefig(tmp, dpi=DPI)
     return fig

@@ -166,6 +166,42 @@ def json_data(value: Any, where: str, problems: list[str]) -> Any:
     return value
 
 
+def _count(low: int, high: int) -> Reader:
+    def read_count(value: Any, where: str, problems: list[str]) -> Any:
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+            problems.append(f"{where} must be an integer in {low}..{high}, got {brief(value)}")
+            return INVALID
+        return value
+    return read_count
+
+
+# the entries of ``stats`` that code reads back (the expert's replanner, the plan command's summary): their type
+# is checked, the rest is free-form JSON data
+STATS_FIELDS: dict[str, Reader] = {
+    "intervals": _count(1, 100_000),
+    "robot_degree": _count(1, MAX_DEGREE),
+    "refine_status": text,
+    "refine_s": non_negative,
+    "refine_objective": number,
+    "polish_s": non_negative,
+}
+
+
+def stats_object(value: Any, where: str, problems: list[str]) -> Any:
+    """``stats``: a JSON object of free-form data (:func:`json_data`) whose known entries (:data:`STATS_FIELDS`)
+    have their types; a tampered ``"stats": "x"`` is a problem, not an ``AttributeError`` in the expert."""
+    if not isinstance(value, dict):
+        problems.append(f"{where} must be a JSON object of the planner's numbers, got {brief(value)}")
+        return INVALID
+    before = len(problems)
+    for key, reader in STATS_FIELDS.items():
+        if key in value and value[key] is not None:
+            reader(value[key], f"{where}.{key}", problems)
+    if len(problems) > before:
+        return INVALID
+    return json_data(value, where, problems)
+
+
 def table_list(fields: dict[str, Field], non_empty: bool) -> Reader:
     """A reader for a list of objects that each follow ``fields``."""
     def reader(value: Any, where: str, problems: list[str]) -> Any:
@@ -316,7 +352,7 @@ PLAN_FIELDS: dict[str, Field] = {
     "build_time_s": Field(non_negative, 0.0),
     "mip_gap": Field(non_negative, 0.0),
     "solver": Field(text, ""),
-    "stats": Field(json_data, {}),
+    "stats": Field(stats_object, {}),
     "impacts": Field(table_list(IMPACT_FIELDS, non_empty=False)),
     "bodies": Field(table_map(BODY_FIELDS)),
     # impact-robust plans only (planners.plan.funnels)

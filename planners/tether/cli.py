@@ -1,7 +1,7 @@
 """``impact-env plan STATION``: the tether planners from the command line (called by :mod:`planners.cli`).
 
-    impact-env plan L [--method reachability|smt] [--rule region|line_of_sight] [--out plan.json]
-                      [--plot plan.png] [--drh automaton.drh] [--quiet]
+    impact-env plan L [--method reachability|smt] [--rule region|line_of_sight] [--json plan.json]
+                      [--plot plan.png] [--out DIR] [--drh automaton.drh] [--quiet]
 
 ``reachability`` (default) is the exact planner: fewest pulls, or a proof that no plan exists. ``smt`` is the
 thesis's divide and conquer with z3 under the anchor ``--rule``. ``--drh`` also writes the thesis's automaton
@@ -74,8 +74,8 @@ def plan_station(args: argparse.Namespace) -> int:
         a = st.anchor_positions[p.anchor]
         print(f"  P{i}  anchor {p.anchor} at ({a[0]:.2f}, {a[1]:.2f}): ({p.start_m[0]:.3f}, {p.start_m[1]:.3f}) -> "
               f"({p.end_m[0]:.3f}, {p.end_m[1]:.3f}) m, {p.length_m:.2f} m")
-    if args.out:
-        print(f"wrote {plan.save(args.out)}")
+    if args.json:
+        print(f"wrote {plan.save(args.json)}")
     if args.plot:
         from planners.tether.plotting import plot_tether_plan
 

@@ -344,6 +344,18 @@ class TetherExpert:
             return
         st = self.station
         stop_at = braking_distance_m(self.fidelity, speed, st.cargo.mass_kg, st.winch_force_limit_N, self.w)
+        busy = [r for r, h in enumerate(held) if h is not None]
+        spare = (self._robots_free(held) and len(busy) < self.k) or any(r != robot for r in busy)
+        if not spare:
+            # no second tether to brake with (one robot, or k = 1): the pulling robot itself trades its anchor
+            # for the brake, so the cargo coasts t_switch on the pull's line before the brake holds
+            if remaining - stop_at <= speed * self.t_switch + half_step:
+                b = self._choose_brake(end, end - x, los)
+                if b is not None and los[b]:
+                    commands[robot] = ATTACH0 + b  # lets go of the pulling anchor first; held once attached
+                    self._stop_brake = b
+                    self.mode = "stop"
+            return
         if self._stop_brake is not None and self._stop_brake in held and self.hold is not None:
             commands[held.index(self._stop_brake)] = self.hold  # the brake holds from the moment it attaches
         if self._stop_brake is None or self._stop_brake not in held:

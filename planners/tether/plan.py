@@ -22,10 +22,11 @@ from typing import Any
 import numpy as np
 import shapely
 
-from impact_env.errors import brief
+from impact_env.config_checks import brief
+from impact_env.geometry import MAX_COORDINATE_M
 from impact_env.tether.station import Station
-from impact_env.toml_fields import is_finite
 from planners.errors import PlannerError
+from planners.plan import schema
 from planners.plan.files import read_plan_json, write_plan_json
 from planners.tether.errors import TetherPlanCheckError
 
@@ -33,7 +34,6 @@ FORMAT = "impact_env.tether_plan/2"  # /2 adds the hold schedule; /1 files (none
 FORMATS = ("impact_env.tether_plan/1", FORMAT)
 MAX_PULLS = 1000  # a plan file with more is refused (the planners need a few; a check costs time per pull)
 CHECK_SAMPLES = 200_000  # the most cargo positions TetherPlan.check tests: it coarsens its spacing beyond
-MAX_COORDINATE_M = 1e6
 
 
 @dataclass(frozen=True)
@@ -207,37 +207,30 @@ class TetherPlan:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TetherPlan:
+        """Build a plan from its JSON form, every field checked (the readers of :mod:`planners.plan.schema`);
+        a :class:`PlannerError` lists every missing, unknown or malformed field by its path."""
         if not isinstance(data, dict):
             raise PlannerError(f"not a tether plan: a JSON {type(data).__name__}, expected an object with format "
                                f"{FORMAT!r}")
         if data.get("format") not in FORMATS:
             raise PlannerError(f"not a tether plan: format is {brief(data.get('format'))}, expected {FORMAT!r}")
-        try:
-            raw = data["pulls"]
-            if not isinstance(raw, list):
-                raise PlannerError(f"malformed tether plan: pulls must be a list, got {brief(raw)}")
-            if len(raw) > MAX_PULLS:
-                raise PlannerError(f"malformed tether plan: {len(raw)} pulls; at most {MAX_PULLS} are supported")
-            pulls = [Pull(anchor=_index(p["anchor"], f"pulls[{i}].anchor"),
-                          start_m=_point(p["start_m"], f"pulls[{i}].start_m"),
-                          end_m=_point(p["end_m"], f"pulls[{i}].end_m")) for i, p in enumerate(raw)]
-            hold = data.get("hold")
-            if hold is not None:
-                brake = hold["brake_anchor"]
-                hold = HoldSchedule(stop_m=_point(hold["stop_m"], "hold.stop_m"),
-                                    brake_anchor=None if brake is None else _index(brake, "hold.brake_anchor"))
-            stats = data.get("stats", {})
-            if not isinstance(stats, dict):
-                raise PlannerError(f"malformed tether plan: stats must be an object, got {brief(stats)}")
-            return cls(station=_text(data["station"], "station"), start_m=_point(data["start_m"], "start_m"),
-                       goal_box=_box(data["goal_box"]), pulls=pulls,
-                       pull_speed_mps=_number(data["pull_speed_mps"], "pull_speed_mps"),
-                       switch_time_s=_number(data["switch_time_s"], "switch_time_s"),
-                       method=_text(data.get("method", ""), "method"),
-                       solve_time_s=_number(data.get("solve_time_s", 0.0), "solve_time_s"),
-                       stats=dict(stats), hold=hold)
-        except (KeyError, TypeError, ValueError, OverflowError) as exc:
-            raise PlannerError(f"malformed tether plan: {brief(exc)}") from None
+        problems: list[str] = []
+        fields = schema.read(data, _PLAN_FIELDS, "", problems)
+        if fields is not schema.INVALID:
+            targets = fields["stats"].get("targets")
+            if targets is not None and (not isinstance(targets, list) or len(targets) != len(fields["pulls"])
+                                        or not all(type(t) is int and t >= 0 for t in targets)):
+                problems.append(f"stats.targets must be a list of {len(fields['pulls'])} integers >= 0 (one level "
+                                f"per pull), got {brief(targets)}")
+        if problems:
+            raise PlannerError("malformed tether plan:\n  " + "\n  ".join(problems))
+        pulls = [Pull(p["anchor"], p["start_m"], p["end_m"]) for p in fields["pulls"]]
+        hold = fields["hold"]
+        if hold is not None:
+            hold = HoldSchedule(stop_m=hold["stop_m"], brake_anchor=hold["brake_anchor"])
+        return cls(station=fields["station"], start_m=fields["start_m"], goal_box=fields["goal_box"], pulls=pulls,
+                   pull_speed_mps=fields["pull_speed_mps"], switch_time_s=fields["switch_time_s"],
+                   method=fields["method"], solve_time_s=fields["solve_time_s"], stats=fields["stats"], hold=hold)
 
     @classmethod
     def load(cls, path: str | Path) -> TetherPlan:
@@ -245,37 +238,79 @@ class TetherPlan:
         return cls.from_dict(read_plan_json(path, PlannerError, what="tether plan"))
 
 
-def _number(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not is_finite(value) \
-            or abs(value) > MAX_COORDINATE_M:
-        raise PlannerError(f"malformed tether plan: {where} must be a finite number within +-{MAX_COORDINATE_M:g}, "
-                           f"got {brief(value)}")
-    return float(value)
-
-
-def _point(value: Any, where: str) -> tuple[float, float]:
-    if not isinstance(value, list) or len(value) != 2:
-        raise PlannerError(f"malformed tether plan: {where} must be [x, y], got {brief(value)}")
-    return (_number(value[0], f"{where}[0]"), _number(value[1], f"{where}[1]"))
-
-
-def _box(value: Any) -> tuple[float, float, float, float]:
+def _goal_box(value: Any, where: str, problems: list[str]) -> Any:
     if not isinstance(value, list) or len(value) != 4:
-        raise PlannerError(f"malformed tether plan: goal_box must be [xmin, xmax, ymin, ymax], got {brief(value)}")
-    return tuple(_number(v, f"goal_box[{i}]") for i, v in enumerate(value))
+        problems.append(f"{where} must be [xmin, xmax, ymin, ymax] (m), got {brief(value)}")
+        return schema.INVALID
+    box = [schema.number(v, f"{where}[{i}]", problems, -MAX_COORDINATE_M, MAX_COORDINATE_M)
+           for i, v in enumerate(value)]
+    if schema.INVALID in box:
+        return schema.INVALID
+    if not (box[0] <= box[1] and box[2] <= box[3]):
+        problems.append(f"{where} = {box} must have xmin <= xmax and ymin <= ymax")
+        return schema.INVALID
+    return tuple(box)
 
 
-def _index(value: Any, where: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 1_000_000:
-        raise PlannerError(f"malformed tether plan: {where} must be an anchor index (an integer >= 0), got "
-                           f"{brief(value)}")
+def _anchor(value: Any, where: str, problems: list[str]) -> Any:
+    if type(value) is not int or not 0 <= value <= 10_000:
+        problems.append(f"{where} must be an anchor index (an integer >= 0), got {brief(value)}")
+        return schema.INVALID
     return value
 
 
-def _text(value: Any, where: str) -> str:
-    if not isinstance(value, str):
-        raise PlannerError(f"malformed tether plan: {where} must be a string, got {brief(value)}")
-    return value
+def _brake_anchor(value: Any, where: str, problems: list[str]) -> Any:
+    return None if value is None else _anchor(value, where, problems)
+
+
+def _positive(value: Any, where: str, problems: list[str]) -> Any:
+    x = schema.number(value, where, problems, 0.0)
+    if x is not schema.INVALID and x <= 0.0:
+        problems.append(f"{where} must be > 0, got {brief(value)}")
+        return schema.INVALID
+    return x
+
+
+def _summary(value: Any, where: str, problems: list[str]) -> Any:
+    """What :meth:`TetherPlan.to_dict` writes for readers of the file; recomputed from the pulls, never read."""
+    return schema.json_data(value, where, problems)
+
+
+_PULL_FIELDS = {"anchor": schema.Field(_anchor), "start_m": schema.Field(schema.vec2),
+                "end_m": schema.Field(schema.vec2)}
+_read_pull_list = schema.table_list(_PULL_FIELDS, non_empty=False)
+
+
+def _pulls(value: Any, where: str, problems: list[str]) -> Any:
+    """The pulls, at most :data:`MAX_PULLS` of them (counted before any is read)."""
+    if isinstance(value, list) and len(value) > MAX_PULLS:
+        problems.append(f"{where}: {len(value)} pulls; at most {MAX_PULLS} are supported")
+        return schema.INVALID
+    return _read_pull_list(value, where, problems)
+
+
+_HOLD_FIELDS = {"stop_m": schema.Field(schema.vec2), "brake_anchor": schema.Field(_brake_anchor)}
+
+
+def _hold(value: Any, where: str, problems: list[str]) -> Any:
+    """The hold schedule (format /2): None, or ``{"stop_m": [x, y], "brake_anchor": index or None}``."""
+    return None if value is None else schema.read(value, _HOLD_FIELDS, where, problems)
+
+
+_PLAN_FIELDS = {
+    "format": schema.Field(schema.text),
+    "station": schema.Field(schema.text),
+    "start_m": schema.Field(schema.vec2),
+    "goal_box": schema.Field(_goal_box),
+    "pull_speed_mps": schema.Field(_positive),
+    "switch_time_s": schema.Field(schema.time_s),
+    "method": schema.Field(schema.text, ""),
+    "solve_time_s": schema.Field(schema.non_negative, 0.0),
+    "pulls": schema.Field(_pulls),
+    "stats": schema.Field(schema.stats_object, {}),
+    "hold": schema.Field(_hold, None),
+    "summary": schema.Field(_summary, None),
+}
 
 
 def _sees_from(station: Station, points: np.ndarray, anchor: int) -> np.ndarray:

@@ -15,6 +15,7 @@ from matplotlib.patches import Patch
 from matplotlib.patches import Polygon as PolygonPatch
 
 from impact_env.figures import png_path
+from impact_env.results_store import atomic_path
 from impact_env.tether.plotting import draw_station_layers
 from impact_env.tether.station import Station
 from impact_env.transport.plotting import DPI
@@ -69,6 +70,7 @@ def plot_tether_plan(station: Station, plan: TetherPlan, path: str | Path, level
     ax.set_title(f"station {station.name}: {plan.method}, {plan.switches} pulls, "
                  f"{plan.travel_time_s(1):.0f} s with k = 1")
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize="small")
-    fig.savefig(path, dpi=DPI, bbox_inches="tight")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=DPI, bbox_inches="tight")
     fig.clear()
     return path

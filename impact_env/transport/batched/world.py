@@ -173,6 +173,9 @@ class BatchedTransportWorld:
         self.last_impact_step = torch.full((lay.n_contacts, N), _NEVER, **int64)
         self._obs: torch.Tensor | None = None
         self._renderers: dict[int, Any] = {}
+        # called after each substep of the reference kernel with (substep, rows before, rows after, its impact
+        # noise or None): how BatchedOneEnv rebuilds the impact events (one_env.py)
+        self._substep_hook: Any = None
         self.compiled = bool(compile)
         self._epilogue, self._fused_period = self._epilogue_impl, None
         self._fused = FusedKernel(self.scene, dtype)
@@ -263,16 +266,26 @@ class BatchedTransportWorld:
                               f"in [-1, 1]), got {a.dtype} {tuple(a.shape)}")
         return a.reshape(shapes[0]).to(self.dtype)
 
-    def step(self, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
-                                                    dict[str, torch.Tensor]]:
+    def step(self, actions: torch.Tensor, active: torch.Tensor | None = None) -> tuple[
+            torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
         """Apply actions [N, 3 R] (or [N, R, 3]) in [-1, 1] for one control period.
 
         Returns (obs [N, obs_size] float32, reward [N], terminated [N] bool, truncated [N] bool (all False:
         the horizon is part of the task), info) with info tensors ``robustness`` (m), ``is_success``,
         ``fuel_Ns`` (cumulative), ``time_s`` and ``impacts`` (contacts that ended in this step, int64).
+
+        ``active`` ([N] bool, default all): the envs outside it do not move (their state, clock and random
+        streams stay as they were; they return their current observation, reward 0, not terminated, 0
+        impacts), which is what Gymnasium's next-step autoreset needs for the envs it has just reset.
         """
         if self._obs is None:
             raise ImpactEnvError("call reset() before step()")
+        if active is not None:
+            active = self._mask(active)
+            if bool(active.all()):
+                active = None
+        if active is not None:
+            return self._step_active(actions, active)
         a = self._check_actions(actions)
         args = (a, self.ang, self.omg, self._key[0], self._key[1], self.step_count, self.episodes)
         if self._fused_period is None:
@@ -310,6 +323,36 @@ class BatchedTransportWorld:
                 "time_s": self.step_count.to(self.dtype) * self.dt_s, "impacts": impacts}
         return obs, reward, terminated, torch.zeros_like(terminated), info
 
+    def _step_active(self, actions: Any, active: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """:meth:`step` of the envs of ``active`` only: every env is stepped (the others with zero actions, from
+        a clock held below the horizon), then the others get their state back."""
+        a = self._check_actions(actions)
+        keep = ~active
+        saved = (self.rows, self.ang, self.omg, self.last_wrenches, self.last_impact_step, self.step_count,
+                 self.fuel_Ns, self.robustness, self._potential, self.monitor.state, self._obs)
+        if bool(((self.step_count >= self.horizon_steps) & active).any()):
+            envs = ((self.step_count >= self.horizon_steps) & active).nonzero().squeeze(1).tolist()
+            raise ImpactEnvError(f"envs {envs[:10]}{' ...' if len(envs) > 10 else ''} reached the task's horizon "
+                                 f"({self.horizon_steps} steps); reset them first: reset(mask=terminated)")
+        self.step_count = torch.where(keep, torch.clamp(self.step_count, max=self.horizon_steps - 1), self.step_count)
+        obs, reward, terminated, truncated, info = self.step(torch.where(keep.unsqueeze(1), 0.0, a))
+
+        def back(new: torch.Tensor, old: torch.Tensor, env_last: bool = True) -> torch.Tensor:
+            return torch.where(keep if env_last else keep.reshape(-1, *([1] * (old.dim() - 1))), old, new)
+
+        (self.rows, self.ang, self.omg, self.last_wrenches, self.last_impact_step) = (
+            back(n, o) for n, o in zip((self.rows, self.ang, self.omg, self.last_wrenches, self.last_impact_step),
+                                       saved[:5]))
+        self.step_count, self.fuel_Ns, self.robustness, self._potential = (
+            back(n, o) for n, o in zip((self.step_count, self.fuel_Ns, self.robustness, self._potential), saved[5:9]))
+        self.monitor.state = tuple(back(n, o) for n, o in zip(self.monitor.state, saved[9]))
+        self._obs = obs = back(obs, saved[10], env_last=False)
+        reward = torch.where(keep, 0.0, reward)
+        terminated = terminated & active
+        info = {"robustness": self.robustness, "is_success": self.robustness > 0.0, "fuel_Ns": self.fuel_Ns,
+                "time_s": self.step_count.to(self.dtype) * self.dt_s, "impacts": torch.where(keep, 0, info["impacts"])}
+        return obs, reward, terminated, truncated, info
+
     def _reference_period(self, rows: torch.Tensor, w: torch.Tensor, force: torch.Tensor,
                           noise: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
         """The period's substeps by the reference kernel (eager), for all envs or the ones the fused kernel
@@ -317,8 +360,12 @@ class BatchedTransportWorld:
         ended = torch.zeros(self.layout.n_contacts, rows.shape[1], device=self.device, dtype=self.dtype)
         if self.reference.clear_of_contacts(rows, torch.sqrt(w[0] * w[0] + w[1] * w[1]), self.dt_s):
             return self.reference.free_flight(rows, force), ended  # saves the detection ops of a calm period
+        hook = self._substep_hook
         for s in range(self.scene.substeps):
-            rows, ended = self.reference.substep(rows, ended, force[:, s], None if noise is None else noise[s])
+            new, ended = self.reference.substep(rows, ended, force[:, s], None if noise is None else noise[s])
+            if hook is not None:
+                hook(s, rows, new, None if noise is None else noise[s])
+            rows = new
         return rows, ended
 
     def _fused_period_impl(self, a: torch.Tensor, ang: torch.Tensor, omg: torch.Tensor, key0: torch.Tensor,

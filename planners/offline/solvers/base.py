@@ -91,6 +91,9 @@ class SolveResult:
     solve_time_s: float
     solver: str
     message: str = ""
+    nodes: int | None = None
+    """Branch-and-bound nodes the MIP solve explored (a measure of its work that no load changes); None: an LP,
+    or a backend that does not say."""
 
     @property
     def has_solution(self) -> bool:

@@ -91,11 +91,11 @@ def explain_infeasible(model: Model, solver: str = "highs", options: SolverOptio
     groups = conflicting_groups(model, solver, options)
     if groups:
         names = ", ".join(repr(g) for g in groups)
-        message = f"no plan satisfies the task: these constraint groups conflict: {names}"
+        message = f"infeasible: no plan satisfies the task; these constraint groups conflict: {names}"
     elif _proven_infeasible(feasibility_model(model).without_groups(set(model.groups())), solver,
                             _check_options(options)):
-        message = "no plan satisfies the task: the variable bounds and integrality alone admit no solution"
+        message = "infeasible: no plan satisfies the task; the variable bounds and integrality alone admit no solution"
     else:
-        message = ("no plan satisfies the task, but the solver could not prove which constraint groups "
+        message = ("infeasible: no plan satisfies the task, but the solver could not prove which constraint groups "
                    "conflict within the time limit per check")
     return InfeasiblePlanError(message, groups)

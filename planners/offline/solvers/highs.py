@@ -181,7 +181,10 @@ def solve(model: Model, options: SolverOptions | None = None) -> SolveResult:
     if h.getModelStatus() == highspy.HighsModelStatus.kUnboundedOrInfeasible:
         # presolve's verdict (common for MIPs): tell the two apart with a zero objective
         return resolve_infeasible_or_unbounded(solve, model, options, t0, NAME)
-    return _result(h, model, is_mip, time.perf_counter() - t0)
+    result = _result(h, model, is_mip, time.perf_counter() - t0)
+    if is_mip:
+        result.nodes = int(h.getInfo().mip_node_count)
+    return result
 
 
 def _result(h: highspy.Highs, model: Model, is_mip: bool, elapsed_s: float) -> SolveResult:
