@@ -206,6 +206,11 @@ def test_the_impact_robust_benchmark_flies_a_part_of_the_grid_and_again_the_cell
                                                                    delta))
     assert cell["episodes_requested"] == 5 and [e["seed"] for e in cell["episodes"]] == list(range(5))
     assert [c[:3] for c in impact_robust.conditions(0.01, 50)[:2]] == [("nominal", 0.0, 1), ("noise", 0.01, 50)]
+    identified = {**cell, "episodes": [{**e, "identification": {"R1-O1": {"estimate": 0.47, "error": 0.0},
+                                                                "R2-O1": {"estimate": 0.5, "error": -0.03}}}
+                                       for e in cell["episodes"]]}
+    assert impact_robust.row(identified).endswith("| 0.00 | 0.030 / 0.030 |")  # the estimates' error column
+    assert impact_robust.row(cell).endswith("| 0.00 | - |")  # none recorded
 
 
 def test_benchmarks_run_as_modules(tmp_path):
