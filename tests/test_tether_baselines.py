@@ -28,7 +28,7 @@ def test_ppo_on_a_station_then_expert_versus_ppo_in_one_bench(tmp_path, capsys):
                  "--no-progress", "--eval-freq", "100000", "--fidelity", "reel"]) == 0
     model = runs / "ppo_dead_end_s0" / "model.zip"
     meta = json.loads((runs / "ppo_dead_end_s0" / "train.json").read_text())
-    assert model.is_file() and meta["env_id"] == "impact_env/TetherDeadEnd-v0"
+    assert model.is_file() and meta["env_id"] == "impact_env/TetherDeadEnd-v1"  # the current version
     assert meta["env_options"]["fidelity"] == "reel"
     out = tmp_path / "bench"
     assert main(["bench", "dead_end", "--controllers", f"expert,ppo:{model},zero", "--episodes", "1",
