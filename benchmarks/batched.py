@@ -25,7 +25,10 @@ second of the wall clock (``env_steps_per_s``, the measure on an idle machine) a
 (``env_steps_per_cpu_s``), which the other jobs of a shared machine do not enter. A loop of T threads that
 keeps them all busy shows T times its wall rate's worth of CPU time, so on an idle machine the CPU rate of a
 2-thread row is up to half its wall rate; the pymunk rows are one thread. On a shared machine, compare rows
-of the same run (the load average is recorded with every line); the table prints both.
+of the same run (the load average is recorded with every line); the table prints both. Under load, run it
+with ``OMP_WAIT_POLICY=PASSIVE`` (recorded with every line; the VMAS subprocess inherits it): OpenMP's
+threads then sleep at a barrier instead of spinning, so a thread that waits for a descheduled one burns no
+CPU time.
 """
 
 from __future__ import annotations
@@ -174,7 +177,8 @@ def main(argv: list[str] | None = None) -> None:
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     run = {"run": datetime.now(timezone.utc).isoformat(timespec="seconds"), "scenario": args.scenario,
            "threads": args.threads, "dtype": args.dtype, "torch": torch.__version__, "machine": platform.machine(),
-           "cpus": os.cpu_count(), "command": "python -m benchmarks.batched " + " ".join(sys.argv[1:])}
+           "cpus": os.cpu_count(), "command": "python -m benchmarks.batched " + " ".join(sys.argv[1:]),
+           "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY")}
     lines: list[dict] = []
 
     def record(backend: str, num_envs: int, result: dict) -> None:

@@ -4,7 +4,7 @@ and 5 cm start noise, the final robustness of each shipped scenario, two-sample 
 The two backends draw their noise from different generators (Philox against numpy), so only distributions can
 agree: the test passes at alpha = 0.01 when the p-value is above it. The pymunk env flies seeds 0 .. n-1 with
 actions from ``numpy.random.default_rng(123)``; the batched world (float64, eager) flies n envs seeded
-10,000 + i with actions from ``torch.Generator().manual_seed(456)``. ``tests/transport/batched/
+10,000 + i with actions from ``torch.Generator().manual_seed(456)``. ``tests/impact_env/transport/batched/
 test_distributions.py`` runs the same functions at 30 (default suite) and 200 (slow suite) episodes. Each
 scenario is a line of ``results/batched/parity.jsonl`` (atomic, so a rerun resumes; ``--episodes`` is part
 of the key). From the repository root:

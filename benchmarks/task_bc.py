@@ -134,13 +134,14 @@ def table() -> str:
             rate = np.mean([e["success"] for e in eps])
             per_seed = ", ".join(f"{100 * np.mean([e['success'] for e in c['episodes']]):.0f}" for c in cells)
             bc = controller == "bc"
+            wall = f"{statistics.fmean(c['train_wall_s'] for c in cells):.0f}" if bc else "-"
             rows.append(
                 f"| {family} | {controller}{f' ({len(cells)} seeds)' if bc else ''} | {cells[0]['train_tasks']} / "
                 f"{len(cells[0]['heldout_tasks'])} | {100 * rate:.0f} ({100 * lo:.0f}-{100 * hi:.0f}) of {len(eps)} | "
                 f"{per_seed if bc else '-'} | {statistics.fmean(e['robustness_m'] for e in eps):+.3f} | "
                 f"{statistics.median(e['ms_per_step'] for e in eps):.2f} | "
                 f"{cells[0]['dataset_steps'] if bc else '-'} | {cells[0]['epochs'] if bc else '-'} | "
-                f"{statistics.fmean(c['train_wall_s'] for c in cells) if bc else float('nan'):.0f} |")
+                f"{wall} |")
     return "\n".join(rows) + "\n"
 
 

@@ -117,9 +117,9 @@ def _pct(x: float) -> str:
 def table(families: list[str]) -> str:
     from impact_env.results_store import CellStore
 
-    rows = ["| family | tasks | kept | keep rate % (95 % CI) | dropped (reason: n) | plan s median / p90 | "
-            "expert success % (95 % CI) | expert robustness m (mean) | plan rho m (mean) | expert ms/step "
-            "(median) |", "|" + "---|" * 10]
+    rows = ["| family | tasks | kept | keep rate % (95 % CI) | dropped (reason: n) | cut by the time limit | "
+            "plan s median / p90 | expert success % (95 % CI) | expert robustness m (mean) | plan rho m (mean) | "
+            "expert ms/step (median) |", "|" + "---|" * 11]
     for family in families:
         shipped = CellStore(_folder(family) / "shipped.jsonl", key=lambda c: c["name"])
         verdicts = CellStore(_folder(family) / "verdicts.jsonl", key=lambda c: c["name"]).cells()
@@ -139,6 +139,7 @@ def table(families: list[str]) -> str:
         rho = [v["robustness_m"] for v in verdicts if v["kept"]]
         rows.append(f"| {family} | {n} | {kept} | {_pct(kept / n)} ({_pct(lo)}-{_pct(hi)}) | "
                     f"{', '.join(f'{k}: {c}' for k, c in sorted(reasons.items())) or '-'} | "
+                    f"{sum(v['budget'] == 'time' for v in verdicts)} | "
                     f"{statistics.median(times):.1f} / {p90:.1f} | "
                     f"{_pct(ok / len(flights)) if flights else '-'} ({_pct(slo)}-{_pct(shi)}) of {len(flights)} | "
                     f"{statistics.fmean(f['robustness_m'] for f in flights) if flights else math.nan:+.3f} | "
@@ -148,7 +149,8 @@ def table(families: list[str]) -> str:
         if base is not None:
             f = base["flight"] or {}
             rows.append(f"| baseline: shipped {base['name']} | 1 | {int(base['kept'])} | - | "
-                        f"{'-' if base['kept'] else base['reason']} | {base['plan_s']:.1f} | "
+                        f"{'-' if base['kept'] else base['reason']} | {int(base['budget'] == 'time')} | "
+                        f"{base['plan_s']:.1f} | "
                         f"{_pct(float(f['success'])) if f else '-'} | "
                         f"{f.get('robustness_m', math.nan):+.3f} | {base['robustness_m'] or math.nan:.3f} | "
                         f"{f.get('ms_per_step', math.nan):.1f} |")

@@ -19,7 +19,7 @@ and ``info``: see :class:`TetherCore`.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -135,13 +135,14 @@ class TetherCore:
         self._drift_time = st.drift_time_s  # the task's bodies: see Station.task_positions
         self._goal = st.goal_box
         self._rest2 = st.rest_speed_mps ** 2
-        self.world: TetherWorld | None = None
+        self.world: TetherWorld = None  # type: ignore[assignment]  # set by reset(); no step before it
         self.sight = SightCache(st)
         self._agent_index: dict[int, np.ndarray] = {}
         self._buf = np.zeros(self.obs_size, dtype=np.float32)
-        self._buf_changes, self._buf_sight, self._buf_tethers = -1, -1, []
+        self._buf_changes, self._buf_sight = -1, -1
+        self._buf_tethers: list[tuple[int, Any]] = []  # (observation index, the world's tether)
         self._bounds4 = (self.obs_low[:4].astype(float).tolist(), self.obs_high[:4].astype(float).tolist())
-        self._obs_at = None
+        self._obs_at: tuple[TetherWorld, int] | None = None
         self.step_count = 0
         self.schedule = FaultSchedule([], (1.0,) * self.n_robots)
         self._reset_counters()
@@ -351,7 +352,8 @@ class TetherCore:
             pulling = [r for r in range(self.n_robots) if world.is_pulling(r)]
             if kind == "anchor":
                 if pulling:
-                    world.fail_anchor(world.tether_anchor(pulling[int(pick * len(pulling))]))
+                    # a pulling robot holds a tether, so it has an anchor
+                    world.fail_anchor(cast(int, world.tether_anchor(pulling[int(pick * len(pulling))])))
                 else:
                     self._armed_anchor_failures += 1
             elif kind == "snap":
@@ -401,7 +403,7 @@ class TetherCore:
         work = world.winch_work_J - work0
         t = self._drift_time
         if self._pair_monitor:
-            estimate = self.monitor.update_pair(CARGO, x1, y1, vx * t, vy * t)
+            estimate = self.monitor.update_pair(CARGO, x1, y1, vx * t, vy * t)  # type: ignore[union-attr]  # a HoldMonitor
         else:
             estimate = self.monitor.update({CARGO: (x1, y1), DRIFT: (vx * t, vy * t)})
         limit = self.robustness_limit_m

@@ -159,7 +159,7 @@ class TransportCore:
         high = np.tile(np.array([xmax, ymax, v_max, v_max, 1.0, 1.0, w_max], dtype=np.float32), self.n_bodies)
         self.obs_low = np.append(low, np.float32(0.0))
         self.obs_high = np.append(high, np.float32(1.0))
-        self.world: World | None = None
+        self.world: World = None  # type: ignore[assignment]  # set by reset(); check_can_step refuses a step before
         self.step_count = 0
         self.log = EpisodeLog()
         self._last_wrenches: list[list[float]] = [[0.0, 0.0, 0.0] for _ in range(self.n_robots)]

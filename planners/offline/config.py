@@ -31,7 +31,7 @@ from planners.offline.solvers.base import SolverOptions
 from planners.plan import Plan
 
 __all__ = ["DEFAULT_COPY_INTERVALS", "DEFAULT_FINAL_BOX", "DEFAULT_NODE_BUDGET", "DEFAULT_SAFETY_NET_S",
-           "HandoverConfig", "IRPlannerConfig", "PlannerConfig", "SolverOptions"]
+           "DEFAULT_THREADS", "HandoverConfig", "IRPlannerConfig", "PlannerConfig", "SolverOptions"]
 
 DEFAULT_FINAL_BOX = (0.5, 0.05)  # position half-width (m), velocity half-width (m/s): the authors' default
 DEFAULT_COPY_INTERVALS = 2
@@ -39,11 +39,14 @@ DEFAULT_COPY_INTERVALS = 2
 # wall-clock limit far beyond what the node budget takes on a busy machine, only as a safety net
 DEFAULT_NODE_BUDGET = 20_000
 DEFAULT_SAFETY_NET_S = 600.0
+# HiGHS's tree depends on its thread count, and left to choose it takes the machine's cores: pinned, the default
+# plan is the same on every machine (2: what the committed plans were made with on a 2-core machine)
+DEFAULT_THREADS = 2
 _SOLVER_KEYWORDS = ("time_limit_s", "node_limit", "mip_gap", "threads", "verbose", "seed", "progress")
 
 
 def _planner_budget() -> SolverOptions:
-    return SolverOptions(time_limit_s=DEFAULT_SAFETY_NET_S, node_limit=DEFAULT_NODE_BUDGET)
+    return SolverOptions(time_limit_s=DEFAULT_SAFETY_NET_S, node_limit=DEFAULT_NODE_BUDGET, threads=DEFAULT_THREADS)
 
 
 def _ir_budget() -> SolverOptions:
@@ -115,7 +118,8 @@ class PlannerConfig:
     """The MILP backend: ``highs``, ``scip`` or ``gurobi``."""
     solver_options: SolverOptions = field(default_factory=_planner_budget)
     """Stage 1's solver budget (node limit, time limit, MIP gap, threads, seed, progress): by default
-    ``DEFAULT_NODE_BUDGET`` (20,000) branch-and-bound nodes, the same work on any machine, and a
+    ``DEFAULT_NODE_BUDGET`` (20,000) branch-and-bound nodes, the same work on any machine, on
+    ``DEFAULT_THREADS`` (2) solver threads, since the search depends on the count, and a
     ``DEFAULT_SAFETY_NET_S`` (600 s) time limit that only a pathological model reaches. A stage 1 cut by its
     node limit returns its best plan with ``plan.mip_gap > 0`` and ``plan.stats["stage1_status"] ==
     "node_limit"``; one cut by the time limit raises ``PlanTimeoutError``. Its time limit also bounds stage 3,

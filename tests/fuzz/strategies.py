@@ -8,13 +8,13 @@ import math
 import re
 import sys
 from importlib import resources
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from hypothesis import strategies as st
 
 from impact_env.transport.scenario import scenario_names
+from tests.paths import DATA
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -26,11 +26,11 @@ TEXTS = {name: resources.files("impact_env.transport.scenarios").joinpath(f"{nam
          for name in SCENARIOS}
 DICTS = {name: tomllib.loads(text) for name, text in TEXTS.items()}
 # copies of the published plans (results/baselines/plans/): key "<scenario>"
-PLANS_DIR = Path(__file__).resolve().parents[1] / "data" / "plans" / "bench"
+PLANS_DIR = DATA / "plans" / "bench"
 PLANS = {path.stem: json.loads(path.read_text()) for path in sorted(PLANS_DIR.glob("*.json"))}
 # and of the published impact-robust plans (funnels and copies; results/impact_robust/plans/ir/): key
 # "<scenario>__ir_plan"
-IR_PLANS_DIR = Path(__file__).resolve().parents[1] / "data" / "plans" / "ir"
+IR_PLANS_DIR = DATA / "plans" / "ir"
 PLANS.update({f"{path.stem}__ir_plan": json.loads(path.read_text()) for path in sorted(IR_PLANS_DIR.glob("*.json"))})
 
 # numbers that sit on the edges of what a float, a TOML integer or a physical quantity can be

@@ -46,8 +46,8 @@ from planners.tether.plan import TetherPlan, is_tether_plan_file
 from tests.fuzz import strategies as S
 from tests.fuzz.invariant import COUNTS, assert_finite, attempt, cpu_deadline
 from tests.fuzz.test_fuzz import fly_scenario
+from tests.paths import DATA
 
-DATA = Path(__file__).resolve().parents[1] / "data"
 DEFAULT_EXAMPLES = {"stl_extremes": 150, "plan_bytes": 100, "model_folder": 40, "output_path": 150}
 ROUND = {"stl_extremes": 100, "plan_bytes": 50, "model_folder": 20, "output_path": 50}  # per round of the slow run
 _TMP = Path(tempfile.mkdtemp(prefix="impact_env_files_fuzz_"))

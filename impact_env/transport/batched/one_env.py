@@ -18,7 +18,7 @@ to the object's separation velocity); the four walls are named ``wall``; the con
 close in the pymunk world's fixed order of shapes, and at the episode's end the open ones close with the
 current velocities. A few contacts (2 of 25 in a full-thrust corridor episode: an object pressed into a
 wall, its gap within rounding of zero for several substeps) start or end one or two substeps from where
-pymunk's do (``tests/transport/batched/test_one_env.py``). ``impulse`` is the momentum change of the
+pymunk's do (``tests/impact_env/transport/batched/test_one_env.py``). ``impulse`` is the momentum change of the
 contact's second body (its only body, against a wall or an obstacle) from first touch to separation: the
 impulse summed over the contact when nothing else touched that body meanwhile (the batched solver does not
 report impulses). The world runs eagerly (the compiled kernel fuses the substeps that the events need).
