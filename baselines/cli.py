@@ -21,10 +21,10 @@ from impact_env.cli_options import (
     check_outputs,
     check_world_options,
     legacy_file_out,
-    station_options,
     transport_options,
 )
 from impact_env.sweep import add_engine_arguments, engine_config
+from impact_env.tether.cli import station_options
 from impact_env.transport.core import REWARD_MODES
 
 

@@ -249,16 +249,6 @@ def transport_options(args: argparse.Namespace) -> dict[str, Any]:
             "impact_velocity_noise_mps": args.impact_velocity_noise_mps}
 
 
-def station_options(args: argparse.Namespace) -> dict[str, Any]:
-    """``TetherEnv`` keywords from the parsed options (``--faults`` parsed and checked, or None)."""
-    from impact_env.tether.faults import parse_faults
-
-    return {"fidelity": args.fidelity, "reward_mode": args.reward_mode, "energy_penalty": args.energy_penalty,
-            "pull_speed_mps": args.pull_speed_mps, "max_active": args.max_active,
-            "initial_position_noise_m": args.initial_position_noise_m,
-            "faults": parse_faults(getattr(args, "faults", None))}
-
-
 def check_world_options(args: argparse.Namespace, impact: bool, station: bool, what: str) -> None:
     """Options of a world that none of the command's scenarios or stations has are errors, not ignored:
     ``--fidelity`` for impact scenarios only, ``--thrust-noise`` for stations only, ``--reward-mode

@@ -8,8 +8,9 @@ fuel.
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
-from impact_env.cli_options import check_world_options, print_catalogue, run_and_report, save_summary, station_options
+from impact_env.cli_options import check_world_options, print_catalogue, run_and_report, save_summary
 
 TETHER_KEYS = ("switches", "snags", "path_length_m", "winch_work_J", "wall_contacts", "time_to_goal_s",
                "time_at_rest_in_goal_s", "speed_mps", "failed_anchors", "dropped_robots")
@@ -17,6 +18,16 @@ TETHER_KEYS = ("switches", "snags", "path_length_m", "winch_work_J", "wall_conta
 COLUMNS = (("robots", ">7", lambda st: st.n_robots), ("k", ">3", lambda st: st.k),
            ("anchors", ">8", lambda st: st.n_anchors), ("w_mps", ">7.2f", lambda st: st.pull_speed_mps),
            ("tf_s", ">6.0f", lambda st: st.tf_s))
+
+
+def station_options(args: argparse.Namespace) -> dict[str, Any]:
+    """``TetherEnv`` keywords from the parsed options (``--faults`` parsed and checked, or None)."""
+    from impact_env.tether.faults import parse_faults
+
+    return {"fidelity": args.fidelity, "reward_mode": args.reward_mode, "energy_penalty": args.energy_penalty,
+            "pull_speed_mps": args.pull_speed_mps, "max_active": args.max_active,
+            "initial_position_noise_m": args.initial_position_noise_m,
+            "faults": parse_faults(getattr(args, "faults", None))}
 
 
 def list_stations() -> None:

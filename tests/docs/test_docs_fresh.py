@@ -81,7 +81,7 @@ def test_the_pattern_finds_what_it_is_for():
 
 
 def _block(page: str, contains: str) -> str:
-    from tests.test_docs_code import code_blocks
+    from tests.docs.test_docs_code import code_blocks
 
     blocks = [b for b in code_blocks(ROOT / "docs" / page) if b.language == "python" and contains in b.code]
     assert len(blocks) == 1, [b.where for b in blocks]
