@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from baselines.record import datasets_path, step_infos, use_datasets_path
-from impact_env.config_checks import check_integer, check_number
+from impact_env.config_checks import check_flag, check_instance, check_integer, check_number, fail
 from impact_env.errors import ImpactEnvError
 
 __all__ = ["DatasetConfig", "build_dataset", "dataset_ids", "is_heldout", "split_tasks"]
@@ -58,12 +58,16 @@ class DatasetConfig:
 
     def __post_init__(self) -> None:
         check_integer(self, "episodes_per_task", ImpactEnvError, low=1)
+        check_integer(self, "seed", ImpactEnvError, low=0)
+        check_flag(self, "quiet", ImpactEnvError)
         check_number(self, "heldout_share", ImpactEnvError, low=0, high=1)
         if self.heldout_share == 1:
-            raise ImpactEnvError("DatasetConfig.heldout_share must be < 1 (some tasks must be left to train on), got 1")
+            fail("DatasetConfig.heldout_share", self.heldout_share,
+                 "< 1 (some tasks must be left to train on)", ImpactEnvError)
         check_integer(self, "split_seed", ImpactEnvError, low=0)
-        check_integer(self, "seed", ImpactEnvError, low=0)
         check_integer(self, "max_tasks", ImpactEnvError, low=1, none="all")
+        check_instance(self, "env_options", ImpactEnvError, dict, what="a dict of TransportEnv options",
+                       none="nominal")
 
 
 def dataset_ids(family: str) -> tuple[str, str]:

@@ -14,8 +14,10 @@ parameters between agents, BenchMARL's default).
 
 The final evaluation of an impact task flies the deterministic policy (the mean action) on the batched world
 and on the pymunk Gymnasium env, on the same number of seeded episodes with the training's noise, so the
-success rates of the two worlds can be compared. This module imports no part of ``impact_env`` at import time,
-so it runs in a venv with VMAS (and no impact_env dependencies) for the external reference row.
+success rates of the two worlds can be compared. This module imports nothing of BenchMARL at import time (an
+optional extra: :class:`MarlConfig` is importable and checked without it), and of ``impact_env`` only its config
+checks and errors, read from their files where ``impact_env`` cannot be imported, so it runs in a venv with VMAS
+(and no impact_env dependencies) for the external reference row.
 """
 
 from __future__ import annotations
@@ -32,15 +34,31 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from benchmarl.experiment.callback import Callback
+
+
+def _standalone(name: str):
+    """``impact_env/<name>.py`` as a module of its own (it needs only the standard library)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(f"_impact_env_{name}",
+                                                  Path(__file__).resolve().parents[2] / "impact_env" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    return module
+
+
+try:
+    from impact_env.config_checks import check_choice, check_instance, check_integer, check_number, check_text, fail
+    from impact_env.errors import ImpactEnvError
+except ImportError:  # a venv with VMAS and BenchMARL but not impact_env's dependencies (gymnasium, pymunk)
+    _checks = _standalone("config_checks")
+    check_choice, check_instance, check_integer, check_number, check_text, fail = (
+        _checks.check_choice, _checks.check_instance, _checks.check_integer, _checks.check_number,
+        _checks.check_text, _checks.fail)
+    ImpactEnvError = _standalone("errors").ImpactEnvError  # type: ignore[misc]
 
 ALGORITHMS = ("mappo", "ippo")
 VMAS_TASK = "vmas/transport"
-
-
-def _positive(name: str, value: Any, kind: type = int) -> None:
-    if isinstance(value, bool) or not isinstance(value, (kind, int)) or not value > 0:
-        raise ValueError(f"{name} must be a {'positive integer' if kind is int else 'number > 0'}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -87,18 +105,28 @@ class MarlConfig:
     """Further task options (the batched world's, e.g. ``reward_mode``)."""
 
     def __post_init__(self) -> None:
-        if self.algorithm not in ALGORITHMS:
-            raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
+        check_choice(self, "algorithm", ImpactEnvError, ALGORITHMS)
+        check_text(self, "task", ImpactEnvError)
+        check_integer(self, "seed", ImpactEnvError, low=0)
         for name in ("frames", "num_envs", "frames_per_batch", "epochs", "minibatch_size", "checkpoint_frames",
                      "eval_episodes", "threads"):
-            _positive(name, getattr(self, name))
-        _positive("lr", self.lr, float)
+            check_integer(self, name, ImpactEnvError, low=1)
+        check_number(self, "lr", ImpactEnvError, low=0, low_open=True)
+        check_number(self, "gamma", ImpactEnvError, low=0, high=1, low_open=True)
+        check_number(self, "lmbda", ImpactEnvError, low=0, high=1)
+        for name in ("entropy_coef", "thrust_noise", "initial_position_noise_m"):
+            check_number(self, name, ImpactEnvError, low=0)
+        hidden = self.hidden
+        if not (isinstance(hidden, tuple) and hidden
+                and all(isinstance(h, int) and not isinstance(h, bool) and h >= 1 for h in hidden)):
+            fail("MarlConfig.hidden", hidden, "a non-empty tuple of integers >= 1 (layer widths)", ImpactEnvError)
+        check_instance(self, "extra", ImpactEnvError, dict, what="a dict of task options")
         if self.frames_per_batch % self.num_envs:
-            raise ValueError(f"frames_per_batch ({self.frames_per_batch}) must be a multiple of num_envs "
-                             f"({self.num_envs})")
+            fail("MarlConfig.frames_per_batch", self.frames_per_batch, f"a multiple of num_envs ({self.num_envs})",
+                 ImpactEnvError)
         if self.checkpoint_frames % self.frames_per_batch:
-            raise ValueError(f"checkpoint_frames ({self.checkpoint_frames}) must be a multiple of frames_per_batch "
-                             f"({self.frames_per_batch})")
+            fail("MarlConfig.checkpoint_frames", self.checkpoint_frames,
+                 f"a multiple of frames_per_batch ({self.frames_per_batch})", ImpactEnvError)
 
     @property
     def is_vmas(self) -> bool:
@@ -174,40 +202,47 @@ def _episodes(batch) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
     return returns, torch.full_like(returns, float("nan")), None  # VMAS: no success flag in the batch
 
 
-class CurveLogger(Callback):
-    """One line of ``curve`` per collected batch; the wall clock is carried through checkpoints."""
+def curve_logger(curve: Path):
+    """A BenchMARL callback that writes one line of ``curve`` per collected batch; the wall clock is carried
+    through checkpoints (its class is made here, so that this module imports without BenchMARL)."""
+    from benchmarl.experiment.callback import Callback
 
-    def __init__(self, curve: Path) -> None:
-        super().__init__()
-        self.curve = curve
-        self.wall_before = 0.0
-        self.t0 = time.perf_counter()
+    class CurveLogger(Callback):
+        """One line of ``curve`` per collected batch."""
 
-    def wall_s(self) -> float:
-        """Wall clock of the run so far (s), over every start of it."""
-        return self.wall_before + time.perf_counter() - self.t0
+        def __init__(self, curve: Path) -> None:
+            super().__init__()
+            self.curve = curve
+            self.wall_before = 0.0
+            self.t0 = time.perf_counter()
 
-    def on_setup(self) -> None:
-        self.t0 = time.perf_counter()
+        def wall_s(self) -> float:
+            """Wall clock of the run so far (s), over every start of it."""
+            return self.wall_before + time.perf_counter() - self.t0
 
-    def on_batch_collected(self, batch) -> None:
-        returns, success, robustness = _episodes(batch)
-        exp = self.experiment
-        n = returns.numel()
-        row = {"frames": exp.total_frames, "wall_s": round(self.wall_s(), 2),
-               "iteration": exp.n_iters_performed, "episodes": int(n),
-               "return_mean": float(returns.mean()) if n else None,
-               "success_rate": float(success.mean()) if n and not bool(success.isnan().any()) else None,
-               "robustness_mean": float(robustness.mean()) if robustness is not None and n else None}
-        with self.curve.open("a", encoding="utf-8") as f:
-            f.write(json.dumps(row) + "\n")
+        def on_setup(self) -> None:
+            self.t0 = time.perf_counter()
 
-    def on_state_dict(self, state_dict) -> None:
-        state_dict["impact_env_wall_s"] = self.wall_s()
+        def on_batch_collected(self, batch) -> None:
+            returns, success, robustness = _episodes(batch)
+            exp = self.experiment
+            n = returns.numel()
+            row = {"frames": exp.total_frames, "wall_s": round(self.wall_s(), 2),
+                   "iteration": exp.n_iters_performed, "episodes": int(n),
+                   "return_mean": float(returns.mean()) if n else None,
+                   "success_rate": float(success.mean()) if n and not bool(success.isnan().any()) else None,
+                   "robustness_mean": float(robustness.mean()) if robustness is not None and n else None}
+            with self.curve.open("a", encoding="utf-8") as f:
+                f.write(json.dumps(row) + "\n")
 
-    def on_load_state_dict(self, state_dict) -> None:
-        self.wall_before = float(state_dict.get("impact_env_wall_s", 0.0))
-        self.t0 = time.perf_counter()
+        def on_state_dict(self, state_dict) -> None:
+            state_dict["impact_env_wall_s"] = self.wall_s()
+
+        def on_load_state_dict(self, state_dict) -> None:
+            self.wall_before = float(state_dict.get("impact_env_wall_s", 0.0))
+            self.t0 = time.perf_counter()
+
+    return CurveLogger(curve)
 
 
 def _latest_checkpoint(folder: Path) -> Path | None:
@@ -296,7 +331,7 @@ def run(cfg: MarlConfig, out: Path) -> dict:
     (out / "config.json").write_text(json.dumps(asdict(cfg), indent=1), encoding="utf-8")
     curve = out / "curve.jsonl"
     restore = _latest_checkpoint(out)
-    logger = CurveLogger(curve)
+    logger = curve_logger(curve)
     if restore is None:
         curve.unlink(missing_ok=True)
     else:
@@ -356,9 +391,13 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--eval-episodes", type=int, default=MarlConfig.eval_episodes)
     parser.add_argument("--threads", type=int, default=MarlConfig.threads)
     args = parser.parse_args(argv)
-    cfg = MarlConfig(args.algorithm, args.task, seed=args.seed, frames=args.frames, num_envs=args.num_envs,
-                     frames_per_batch=args.frames_per_batch, minibatch_size=args.minibatch_size, epochs=args.epochs,
-                     checkpoint_frames=args.checkpoint_frames, eval_episodes=args.eval_episodes, threads=args.threads)
+    try:
+        cfg = MarlConfig(args.algorithm, args.task, seed=args.seed, frames=args.frames, num_envs=args.num_envs,
+                         frames_per_batch=args.frames_per_batch, minibatch_size=args.minibatch_size,
+                         epochs=args.epochs, checkpoint_frames=args.checkpoint_frames,
+                         eval_episodes=args.eval_episodes, threads=args.threads)
+    except ImpactEnvError as exc:
+        parser.error(str(exc))
     result = run(cfg, args.out)
     print(json.dumps({k: result[k] for k in ("algorithm", "task", "seed", "env_steps", "wall_s", "evaluation")}))
 

@@ -39,14 +39,12 @@ from typing import Any
 import numpy as np
 import torch
 
+from impact_env.config_checks import check_choice, check_flag, check_integer, check_number, check_text, fail
+from impact_env.errors import ImpactEnvError
 from impact_env.results_store import atomic_path, write_atomic
+from impact_env.transport.core import REWARD_MODES
 
 EVAL_FIRST_SEED = 1_000_000
-
-
-def _positive(name: str, value: Any, kind: type = int) -> None:
-    if isinstance(value, bool) or not isinstance(value, (kind, int)) or not value > 0:
-        raise ValueError(f"{name} must be a {'positive integer' if kind is int else 'number > 0'}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -98,18 +96,28 @@ class Sb3PpoConfig:
     """torch threads of the run."""
 
     def __post_init__(self) -> None:
+        check_text(self, "scenario", ImpactEnvError)
+        check_integer(self, "seed", ImpactEnvError, low=0)
         for name in ("frames", "num_envs", "n_steps", "batch_size", "n_epochs", "checkpoint_frames", "eval_episodes",
                      "threads"):
-            _positive(name, getattr(self, name))
-        for name in ("lr", "gamma", "gae_lambda", "clip_range"):
-            _positive(name, getattr(self, name), float)
-        if self.seed < 0:
-            raise ValueError(f"seed must be >= 0, got {self.seed}")
+            check_integer(self, name, ImpactEnvError, low=1)
+        for name in ("lr", "clip_range"):
+            check_number(self, name, ImpactEnvError, low=0, low_open=True)
+        check_number(self, "gamma", ImpactEnvError, low=0, high=1, low_open=True)
+        check_number(self, "gae_lambda", ImpactEnvError, low=0, high=1)
+        check_number(self, "ent_coef", ImpactEnvError, low=0)
+        check_number(self, "log_std_init", ImpactEnvError)
+        for name in ("thrust_noise", "initial_position_noise_m"):
+            check_number(self, name, ImpactEnvError, low=0)
+        check_choice(self, "reward_mode", ImpactEnvError, REWARD_MODES)
+        check_flag(self, "compile", ImpactEnvError)
+        hidden = self.hidden
+        if not (isinstance(hidden, tuple) and hidden
+                and all(isinstance(h, int) and not isinstance(h, bool) and h >= 1 for h in hidden)):
+            fail("Sb3PpoConfig.hidden", hidden, "a non-empty tuple of integers >= 1 (layer widths)", ImpactEnvError)
         if (self.num_envs * self.n_steps) % self.batch_size:
-            raise ValueError(f"batch_size ({self.batch_size}) must divide num_envs x n_steps "
-                             f"({self.num_envs} x {self.n_steps})")
-        if not self.hidden or any(isinstance(h, bool) or not isinstance(h, int) or h < 1 for h in self.hidden):
-            raise ValueError(f"hidden must be positive layer widths, got {self.hidden!r}")
+            fail("Sb3PpoConfig.batch_size", self.batch_size, f"a divisor of num_envs x n_steps ({self.num_envs} x "
+                 f"{self.n_steps} = {self.num_envs * self.n_steps})", ImpactEnvError)
 
     @property
     def rollout_frames(self) -> int:
@@ -356,10 +364,13 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--threads", type=int, default=Sb3PpoConfig.threads)
     parser.add_argument("--compile", action="store_true", help="the world's torch.compile kernels")
     args = parser.parse_args(argv)
-    cfg = Sb3PpoConfig(args.scenario, seed=args.seed, frames=args.frames, num_envs=args.num_envs,
-                       n_steps=args.n_steps, batch_size=args.batch_size, n_epochs=args.n_epochs,
-                       checkpoint_frames=args.checkpoint_frames, eval_episodes=args.eval_episodes,
-                       threads=args.threads, compile=args.compile)
+    try:
+        cfg = Sb3PpoConfig(args.scenario, seed=args.seed, frames=args.frames, num_envs=args.num_envs,
+                           n_steps=args.n_steps, batch_size=args.batch_size, n_epochs=args.n_epochs,
+                           checkpoint_frames=args.checkpoint_frames, eval_episodes=args.eval_episodes,
+                           threads=args.threads, compile=args.compile)
+    except ImpactEnvError as exc:
+        parser.error(str(exc))
     result = run(cfg, args.out)
     print(json.dumps({k: result[k] for k in ("algorithm", "task", "seed", "env_steps", "wall_s")}
                      | {"pymunk": {k: v for k, v in result["evaluation"]["pymunk"].items() if k != "robustness"}}))

@@ -16,7 +16,9 @@ import pytest
 
 from benchmarks import rl_at_scale
 from benchmarks.rl_at_scale import Run, cell_key, publish, queue, run_one, status
+from impact_env.errors import ImpactEnvError
 from tests.optional import requires
+from tests.paths import ROOT
 
 if TYPE_CHECKING:
     from baselines.batched.sb3_ppo import Sb3PpoConfig
@@ -105,10 +107,30 @@ def test_sb3_run_refuses_a_folder_of_other_settings(tmp_path, trained):
 def test_sb3_config_errors():
     from baselines.batched.sb3_ppo import Sb3PpoConfig
 
-    with pytest.raises(ValueError, match="batch_size"):
+    with pytest.raises(ImpactEnvError, match=r"Sb3PpoConfig\.batch_size must be a divisor of num_envs x n_steps "
+                                             r"\(4 x 8 = 32\), got 5"):
         Sb3PpoConfig(SCENARIO, num_envs=4, n_steps=8, batch_size=5)
-    with pytest.raises(ValueError, match="frames"):
+    with pytest.raises(ImpactEnvError, match="Sb3PpoConfig.frames must be an integer >= 1, got 0"):
         Sb3PpoConfig(SCENARIO, frames=0)
+
+
+def test_marl_config_errors_and_the_config_needs_no_benchmarl():
+    import subprocess
+
+    from baselines.batched.marl import MarlConfig
+
+    with pytest.raises(ImpactEnvError, match=r"MarlConfig\.frames_per_batch must be a multiple of num_envs \(512\), "
+                                             r"got 1000"):
+        MarlConfig("mappo", "corridor", frames_per_batch=1000)
+    with pytest.raises(ImpactEnvError, match=r"MarlConfig\.checkpoint_frames must be a multiple of frames_per_batch"):
+        MarlConfig("mappo", "corridor", checkpoint_frames=1000)
+    with pytest.raises(ImpactEnvError, match="MarlConfig.algorithm must be one of mappo, ippo, got 'qmix'"):
+        MarlConfig("qmix", "corridor")
+    # benchmarl is an optional extra: the module and its config import without it
+    code = ("import sys; sys.modules['benchmarl'] = None; from baselines.batched.marl import MarlConfig; "
+            "print(MarlConfig('ippo', 'corridor').algorithm)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert done.returncode == 0 and done.stdout.strip() == "ippo", done.stderr
 
 
 def test_queue_goes_seed_by_seed_and_rejects_unknown_kinds():

@@ -29,6 +29,9 @@ REQUIRED = {  # valid values of required fields
     "TrainConfig": {"algo": "ppo", "scenario": "corridor"},
     "RLlibTrainConfig": {"scenario": "corridor"},
     "BCConfig": {"scenario": "corridor"},
+    "Sb3PpoConfig": {"scenario": "corridor"},
+    "MarlConfig": {"algorithm": "mappo", "task": "corridor"},
+    "TaskBCConfig": {"family": "throw_and_catch"},
 }
 
 
