@@ -3,6 +3,7 @@
 #   make test   - create .venv, install with the [rl,marl,rl-analysis,dev,scip,tether,ray] extras, run the default (fast) test suite
 # Further targets: make test-slow (long checks), make fuzz (10 minutes of property-based fuzzing),
 #   make bench (benchmarks), make bench-ray (local processes vs Ray, RLlib vs SB3 sampling), make lint,
+#   make typecheck (mypy over impact_env, planners and baselines; its options in setup.cfg [mypy]),
 #   make wheel-check (sdist + wheel, smoke test of the wheel in a fresh venv), make docs (the documentation
 #   site, warnings as errors), make docs-check (its links and a headless-Chromium look at an environment page),
 #   make docs-media (re-make the GIFs and figures the site shows),
@@ -15,7 +16,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 OUT := out
 
-.PHONY: demo test test-slow fuzz bench bench-expert bench-ir bench-ray results lint clean wheel-check docs docs-check docs-media
+.PHONY: demo test test-slow fuzz bench bench-expert bench-ir bench-ray results lint typecheck clean wheel-check docs docs-check \
+	docs-media
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -55,9 +57,9 @@ test: $(VENV)/.dev-installed
 test-slow: $(VENV)/.dev-installed
 	$(BIN)/python -m pytest -q -n 2 --dist loadgroup -m slow --timeout 3600
 
-# The fuzzers of tests/fuzz/ drawing fresh inputs for FUZZ_SECONDS per fuzzer (7 fuzzers on 2 processes:
-# 170 s each is about 10 minutes), then a table of the inputs tried.
-FUZZ_SECONDS ?= 170
+# The fuzzers of tests/fuzz/ drawing fresh inputs for FUZZ_SECONDS per fuzzer (17 fuzzers on 2 processes:
+# 60 s each is about 10 minutes), then a table of the inputs tried.
+FUZZ_SECONDS ?= 60
 fuzz: $(VENV)/.dev-installed
 	mkdir -p $(OUT)
 	rm -f $(OUT)/fuzz_report.jsonl
@@ -103,13 +105,17 @@ docs: $(VENV)/.docs-installed
 	TUTORIAL_SIZE=$(TUTORIAL_SIZE) NO_MKDOCS_2_WARNING=1 SDL_VIDEODRIVER=dummy MPLBACKEND=Agg $(BIN)/mkdocs build --strict
 
 docs-check: docs
-	$(BIN)/python -m pytest -q -p no:cacheprovider tests/docs_site_check.py
+	$(BIN)/python -m pytest -q -p no:cacheprovider tests/docs/docs_site_check.py
 
 docs-media: $(VENV)/.base-installed
 	SDL_VIDEODRIVER=dummy MPLBACKEND=Agg $(BIN)/python scripts/make_docs_media.py
 
 lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check impact_env planners baselines tests benchmarks
+
+# the packages' annotations checked (setup.cfg [mypy]: the files, the options and why each exception)
+typecheck: $(VENV)/.dev-installed
+	$(BIN)/mypy
 
 clean:
 	rm -rf $(VENV) $(OUT) *.egg-info site build

@@ -24,7 +24,8 @@ done
 if grep -E "(^|/)results/|(^|/)benchmarks/" "$WORK/wheel.txt" "$WORK/sdist.txt"; then
     echo "the sdist or the wheel ships results or benchmarks (above)"; exit 1
 fi
-for f in impact_env/transport/scenarios/corridor.toml impact_env/tether/stations/L.toml baselines/hyperparams/ppo.yml planners/expert/expert.py; do
+for f in impact_env/transport/scenarios/corridor.toml impact_env/tether/stations/L.toml baselines/hyperparams/ppo.yml \
+         planners/expert/expert.py impact_env/py.typed planners/py.typed baselines/py.typed; do
     grep -q "^$f\$" "$WORK/wheel.txt" || { echo "wheel lacks $f"; exit 1; }
 done
 # the compiled helpers (setup.py): built into the wheel, their C sources in the sdist

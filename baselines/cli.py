@@ -125,8 +125,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--heldout", type=float, default=0.2, help="share of tasks held out (default 0.2)")
     p.add_argument("--split-seed", type=int, default=0, help="seed of the held-out split (default 0)")
     p.add_argument("--max-tasks", type=int, default=None, help="use at most this many kept tasks (seed order)")
-    add_out(p, "the Minari datasets folder (default: Minari's own, $MINARI_DATASETS_PATH or ~/.minari/datasets)")
-    add_seed(p, "env seed of each task's first episode")
+    add_out(p, "where the datasets go (default: Minari's own folder)")
+    add_seed(p, "env seed of each task's first episode (episode k uses seed + k)")
     add_transport_options(p, REWARD_MODES)
     add_quiet(p, "no line per episode")
     p.set_defaults(func=_dataset)
@@ -185,14 +185,14 @@ def _curves(args: argparse.Namespace) -> int:
 
 def _dataset(args: argparse.Namespace) -> int:
     from baselines.task_dataset import DatasetConfig, build_dataset
-    from impact_env.results_store import check_output_folder
 
     if args.out is not None:
-        check_output_folder(args.out, "--out")
+        check_outputs(folders={"--out": args.out})  # before any episode
+    options = {k: v for k, v in transport_options(args).items() if v not in (None, 0.0, "dense")}
     config = DatasetConfig(episodes_per_task=args.episodes_per_task, heldout_share=args.heldout,
-                           split_seed=args.split_seed, max_tasks=args.max_tasks, env_options=transport_options(args),
-                           first_seed=args.seed)
-    train, heldout = build_dataset(args.family, args.tasks, config, out=args.out, quiet=args.quiet)
+                           split_seed=args.split_seed, max_tasks=args.max_tasks, env_options=options or None,
+                           seed=args.seed, quiet=args.quiet)
+    train, heldout = build_dataset(args.family, args.tasks, config, out=args.out)
     for dataset in (train, heldout):
         if dataset is not None:
             print(f"wrote {dataset.spec.dataset_id}: {dataset.total_episodes} episodes, {dataset.total_steps} steps")

@@ -42,9 +42,11 @@ class DatasetConfig:
     """How the expert's episodes of a family's kept tasks become its datasets."""
 
     episodes_per_task: int = 1
-    """Expert episodes per task (env seeds ``first_seed``, ``first_seed + 1``, ...)."""
-    first_seed: int = 0
+    """Expert episodes per task (env seeds ``seed``, ``seed + 1``, ...)."""
+    seed: int = 0
     """The env seed of each task's first episode."""
+    quiet: bool = False
+    """No line per episode."""
     heldout_share: float = 0.2
     """The share of tasks held out (in [0, 1))."""
     split_seed: int = 0
@@ -60,7 +62,7 @@ class DatasetConfig:
         if self.heldout_share == 1:
             raise ImpactEnvError("DatasetConfig.heldout_share must be < 1 (some tasks must be left to train on), got 1")
         check_integer(self, "split_seed", ImpactEnvError, low=0)
-        check_integer(self, "first_seed", ImpactEnvError, low=0)
+        check_integer(self, "seed", ImpactEnvError, low=0)
         check_integer(self, "max_tasks", ImpactEnvError, low=1, none="all")
 
 
@@ -88,7 +90,7 @@ def split_tasks(names: list[str], share: float, split_seed: int = 0) -> tuple[li
     return [n for n in names if n not in held], held
 
 
-def _episodes(family: str, tasks: list, config: DatasetConfig, quiet: bool = False) -> tuple[list, list[dict]]:
+def _episodes(family: str, tasks: list, config: DatasetConfig, first_id: int = 0) -> tuple[list, list[dict]]:
     from minari.data_collector.episode_buffer import EpisodeBuffer
 
     from impact_env.transport.generate import FAMILY_LIMITS
@@ -102,7 +104,7 @@ def _episodes(family: str, tasks: list, config: DatasetConfig, quiet: bool = Fal
         pad = TaskObservation(scenario, FAMILY_LIMITS[family])
         expert = Expert(scenario, plan=plan)
         robots, objects = {r.name for r in scenario.robots}, {o.name for o in scenario.objects}
-        for seed in range(config.first_seed, config.first_seed + config.episodes_per_task):
+        for seed in range(config.seed, config.seed + config.episodes_per_task):
             obs, info = env.reset(seed=seed)
             expert.reset()
             observations, actions, rewards, terminations, truncations = [pad(obs)], [], [], [], []
@@ -120,13 +122,13 @@ def _episodes(family: str, tasks: list, config: DatasetConfig, quiet: bool = Fal
                     infos[key].append(value)
                 done = terminated or truncated
             infos["task_seed"] = [int(verdict["seed"])] * len(observations)
-            buffers.append(EpisodeBuffer(id=len(buffers), seed=seed, observations=observations,
+            buffers.append(EpisodeBuffer(id=first_id + len(buffers), seed=seed, observations=observations,
                                          actions=actions, rewards=rewards, terminations=terminations,
                                          truncations=truncations,
                                          infos={key: np.asarray(values) for key, values in infos.items()}))
             summaries.append({"task": scenario.name, "seed": seed, "success": bool(info["is_success"]),
                               "robustness_m": float(info["robustness"]), "steps": len(actions)})
-            if not quiet:
+            if not config.quiet:
                 print(f"  {scenario.name} seed {seed}: robustness {info['robustness']:+.3f} "
                       f"({'success' if info['is_success'] else 'failure'})", flush=True)
         env.close()
@@ -134,7 +136,7 @@ def _episodes(family: str, tasks: list, config: DatasetConfig, quiet: bool = Fal
 
 
 def build_dataset(family: str, tasks_dir: str | Path, config: DatasetConfig | None = None,
-                  out: str | Path | None = None, quiet: bool = False) -> tuple[Any, Any]:
+                  out: str | Path | None = None) -> tuple[Any, Any]:
     """Build the (training, held-out) MinariDatasets of ``family`` from the kept tasks in ``tasks_dir`` (see the
     module docstring); ``out`` is where datasets go (default: Minari's own folder). Also writes
     ``<out>/impact_env/generated_<family>/split.json``: the names of both sides, the split's settings and the
@@ -162,7 +164,7 @@ def build_dataset(family: str, tasks_dir: str | Path, config: DatasetConfig | No
         if not names:
             datasets.append(None)
             continue
-        buffers, episodes = _episodes(family, [t for t in kept if t[0].name in names], config, quiet)
+        buffers, episodes = _episodes(family, [t for t in kept if t[0].name in names], config)
         summary[dataset_id] = episodes
         if dataset_id in minari.list_local_datasets():
             minari.delete_dataset(dataset_id)
@@ -183,7 +185,6 @@ def build_dataset(family: str, tasks_dir: str | Path, config: DatasetConfig | No
     write_atomic(folder / "split.json", json.dumps({
         "family": family, "tasks_dir": str(tasks_dir), "split_seed": config.split_seed,
         "heldout_share": config.heldout_share, "episodes_per_task": config.episodes_per_task,
-        "first_seed": config.first_seed,
         "env_options": config.env_options or {}, "train": train_names, "heldout": held_names,
         "episodes": summary}, indent=1))
     return datasets[0], datasets[1]

@@ -207,8 +207,10 @@ def main(argv: list[str] | None = None) -> None:
                 trained[(job[0], job[1])] = meta
                 print(f"trained {job[0]} seed {job[1]}: {meta['timesteps_trained']:,} steps, "
                       f"{meta['wall_time_s']:.0f} s", flush=True)
-            write_atomic(out / "training.json", json.dumps({f"{k[0]}/s{k[1]}": v for k, v in trained.items()},
-                                                           indent=1))
+            runs_done = json.loads((out / "training.json").read_text()) if (out / "training.json").is_file() else {}
+            runs_done.update({f"{k[0]}/s{k[1]}": v for k, v in trained.items()})  # other stations' runs kept
+            write_atomic(out / "training.json", json.dumps(runs_done, indent=1))
+            trained = {(k.split("/s")[0], int(k.split("/s")[1])): v for k, v in runs_done.items()}
         if args.phase in ("fly", "all"):
             store = CellStore(out / "cells.jsonl", key=_cell_key)
             jobs = [(st, c, seed, args.episodes, args.runs, options) for st in stations for c in ("expert", "ppo")

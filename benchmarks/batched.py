@@ -18,8 +18,17 @@ Prints a markdown table and appends one JSON line per measurement to ``results/b
 
     python -m benchmarks.batched [--scenario corridor] [--num-envs 1 16 256 1024 4096 16384] [--threads 2]
         [--seconds 5] [--dtype float32] [--eager] [--vmas-python PATH] [--ref 0378a64 | --ref ""]
+    python -m benchmarks.batched --table-only     # the tables of the last run in the results file
 
-On a shared machine, compare rows of the same run (the load average is recorded with every line).
+Each row runs for ``--seconds`` of its process's CPU time (all threads) and records two rates: env-steps per
+second of the wall clock (``env_steps_per_s``, the measure on an idle machine) and per second of CPU time
+(``env_steps_per_cpu_s``), which the other jobs of a shared machine do not enter. A loop of T threads that
+keeps them all busy shows T times its wall rate's worth of CPU time, so on an idle machine the CPU rate of a
+2-thread row is up to half its wall rate; the pymunk rows are one thread. On a shared machine, compare rows
+of the same run (the load average is recorded with every line); the table prints both. Under load, run it
+with ``OMP_WAIT_POLICY=PASSIVE`` (recorded with every line; the VMAS subprocess inherits it): OpenMP's
+threads then sleep at a barrier instead of spinning, so a thread that waits for a descheduled one burns no
+CPU time.
 """
 
 from __future__ import annotations
@@ -54,13 +63,14 @@ gen = torch.Generator().manual_seed(0)
 pool = [[torch.rand(num_envs, 2, generator=gen) * 2 - 1 for _ in env.agents] for _ in range(64)]
 for k in range(20):
     env.step(pool[k % 64])
-steps, start = 0, time.perf_counter()
-while time.perf_counter() - start < seconds:
+steps, start, cpu = 0, time.perf_counter(), time.process_time()
+while time.process_time() - cpu < seconds:
     env.step(pool[steps % 64])
     steps += 1
-elapsed = time.perf_counter() - start
-print(json.dumps({"env_steps_per_s": steps * num_envs / elapsed, "steps": steps, "seconds": elapsed,
-                  "vmas": vmas.__version__, "agents": len(env.agents)}))
+elapsed, cpu_s = time.perf_counter() - start, time.process_time() - cpu
+print(json.dumps({"env_steps_per_s": steps * num_envs / elapsed, "env_steps_per_cpu_s": steps * num_envs / cpu_s,
+                  "steps": steps, "seconds": elapsed, "cpu_s": cpu_s, "vmas": vmas.__version__,
+                  "agents": len(env.agents)}))
 """
 
 
@@ -77,16 +87,17 @@ def measure_batched(scenario: str, num_envs: int, seconds: float, dtype: str, de
     for k in range(20):
         world.step(pool[k % POOL])
     warmup = time.perf_counter() - start
-    steps, start = 0, time.perf_counter()
-    while time.perf_counter() - start < seconds:
+    steps, start, cpu = 0, time.perf_counter(), time.process_time()
+    while time.process_time() - cpu < seconds:
         _, _, terminated, _, _ = world.step(pool[steps % POOL])
         steps += 1
         if bool(terminated.any()):
             world.reset(mask=terminated)
     if device.startswith("cuda"):
         torch.cuda.synchronize()
-    elapsed = time.perf_counter() - start
-    return {"env_steps_per_s": steps * num_envs / elapsed, "steps": steps, "seconds": elapsed, "warmup_s": warmup}
+    elapsed, cpu_s = time.perf_counter() - start, time.process_time() - cpu
+    return {"env_steps_per_s": steps * num_envs / elapsed, "env_steps_per_cpu_s": steps * num_envs / cpu_s,
+            "steps": steps, "seconds": elapsed, "cpu_s": cpu_s, "warmup_s": warmup}
 
 
 def measure_pymunk(scenario: str, seconds: float) -> dict:
@@ -100,14 +111,15 @@ def measure_pymunk(scenario: str, seconds: float) -> dict:
     pool = rng.uniform(-1.0, 1.0, (POOL * 16, *env.action_space.shape)).astype(np.float32)
     for k in range(100):
         env.step(pool[k])
-    steps, start = 0, time.perf_counter()
-    while time.perf_counter() - start < seconds:
+    steps, start, cpu = 0, time.perf_counter(), time.process_time()
+    while time.process_time() - cpu < seconds:
         _, _, terminated, _, _ = env.step(pool[steps % len(pool)])
         steps += 1
         if terminated:
             env.reset()
-    elapsed = time.perf_counter() - start
-    return {"env_steps_per_s": steps / elapsed, "steps": steps, "seconds": elapsed}
+    elapsed, cpu_s = time.perf_counter() - start, time.process_time() - cpu
+    return {"env_steps_per_s": steps / elapsed, "env_steps_per_cpu_s": steps / cpu_s, "steps": steps,
+            "seconds": elapsed, "cpu_s": cpu_s}
 
 
 def measure_vmas(python: str, num_envs: int, threads: int, seconds: float) -> dict | str:
@@ -140,7 +152,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--scenario", default="corridor")
     parser.add_argument("--num-envs", type=int, nargs="+", default=[1, 16, 256, 1024, 4096, 16384])
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--seconds", type=float, default=5.0, help="measured time per row (after the warm-up)")
+    parser.add_argument("--seconds", type=float, default=5.0,
+                        help="CPU time each row runs for, after the warm-up (the process's, all its threads)")
     parser.add_argument("--dtype", choices=("float32", "float64"), default="float32")
     parser.add_argument("--eager", action="store_true", help="the batched world without torch.compile")
     parser.add_argument("--vmas-python", default=os.environ.get("VMAS_PYTHON"),
@@ -148,7 +161,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--ref", default="0378a64",
                         help="commit whose pymunk Gym env is measured in the same run ('' to skip)")
     parser.add_argument("--no-write", action="store_true", help="print only, do not append to the results")
+    parser.add_argument("--table-only", action="store_true",
+                        help="print the tables of the last run in the results file, measure nothing")
     args = parser.parse_args(argv)
+    if args.table_only:
+        lines = [json.loads(line) for line in RESULTS.read_text(encoding="utf-8").splitlines() if line.strip()]
+        last = max(line["run"] for line in lines)
+        print(f"run {last}: {next(line['command'] for line in lines if line['run'] == last)}")
+        print_table([line for line in lines if line["run"] == last])
+        return
 
     import torch
 
@@ -156,7 +177,8 @@ def main(argv: list[str] | None = None) -> None:
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     run = {"run": datetime.now(timezone.utc).isoformat(timespec="seconds"), "scenario": args.scenario,
            "threads": args.threads, "dtype": args.dtype, "torch": torch.__version__, "machine": platform.machine(),
-           "cpus": os.cpu_count(), "command": "python -m benchmarks.batched " + " ".join(sys.argv[1:])}
+           "cpus": os.cpu_count(), "command": "python -m benchmarks.batched " + " ".join(sys.argv[1:]),
+           "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY")}
     lines: list[dict] = []
 
     def record(backend: str, num_envs: int, result: dict) -> None:
@@ -194,18 +216,26 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def print_table(lines: list[dict]) -> None:
+    """Both tables of the run: by the wall clock, then by CPU time (where every row has it)."""
+    _print_table(lines, "env_steps_per_s", "wall clock")
+    if all("env_steps_per_cpu_s" in line for line in lines):
+        _print_table(lines, "env_steps_per_cpu_s", "CPU time")
+
+
+def _print_table(lines: list[dict], rate_key: str, clock: str) -> None:
     """The run's markdown table: one row per num_envs, the batched rates against the pymunk env's (the mean of
     its rows; of this tree and of the reference commit) and VMAS's at the same num_envs."""
     pymunk_backends = sorted({line["backend"] for line in lines if line["backend"].startswith("pymunk-gym")})
-    pymunk_rate = {b: float(np.mean([line["env_steps_per_s"] for line in lines if line["backend"] == b]))
+    pymunk_rate = {b: float(np.mean([line[rate_key] for line in lines if line["backend"] == b]))
                    for b in pymunk_backends}
-    rates: dict[tuple[str, int], float] = {(line["backend"], line["num_envs"]): line["env_steps_per_s"]
+    rates: dict[tuple[str, int], float] = {(line["backend"], line["num_envs"]): line[rate_key]
                                            for line in lines if not line["backend"].startswith("pymunk-gym")}
     backends = sorted({b for b, _ in rates}, key=lambda b: (b.startswith("vmas"), b))
     first = lines[0]
     pymunk_text = "; ".join(f"{b}: {r:,.0f}" for b, r in pymunk_rate.items())
-    print(f"\n{first['scenario']}, dense STL reward, {first['dtype']}, {first['threads']} torch threads; pymunk "
-          f"Gymnasium env (one process, mean of the runs before and after), env-steps/s: {pymunk_text}\n")
+    print(f"\nBy the {clock}: {first['scenario']}, dense STL reward, {first['dtype']}, {first['threads']} torch "
+          f"threads; pymunk Gymnasium env (one process, mean of the runs before and after), env-steps/s: "
+          f"{pymunk_text}\n")
     batched = [b for b in backends if b.startswith("batched")]
     header = ["num_envs", *[f"{b} env-steps/s" for b in backends]]
     header += [f"{b} / {p}" for b in batched for p in pymunk_backends]

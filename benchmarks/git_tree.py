@@ -25,10 +25,12 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def export_tree(ref: str, prefix: str = "impact_env_ref_") -> str:
-    """``git archive`` of the ref's impact_env/ and planners/, unpacked into a new temporary folder."""
+def export_tree(ref: str, prefix: str = "impact_env_ref_",
+                paths: tuple[str, ...] | None = ("impact_env", "planners")) -> str:
+    """``git archive`` of the ref's ``paths`` (by default impact_env/ and planners/; None: the whole tree),
+    unpacked into a new temporary folder."""
     out = tempfile.mkdtemp(prefix=prefix)
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", ref, "impact_env", "planners"], check=True,
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", ref, *(paths or ())], check=True,
                              capture_output=True).stdout
     with tempfile.TemporaryFile() as f:
         f.write(archive)

@@ -19,9 +19,12 @@ unless the impacts contradict it). An IR plan is flown with its copies as contin
 Reported per cell: success rate (final STL robustness > 0), mean and min robustness, the object's final
 speed (mean and max, m/s), the share of episodes whose object ends inside the final box around its plan's
 final state (the scenario's ``[final_box]``, default 0.5 m / 0.05 m/s: the residual the IR plan tolerates),
-and mission re-plans per episode. Every cell is a line of ``--out``/cells.jsonl, written atomically when the
-cell is done (a rerun resumes; :mod:`impact_env.results_store`), and the table of every cell goes to
-``--out``/table.md; episodes run in ``--workers`` spawned processes. A cell records the fingerprint of its
+mission re-plans per episode, and the final restitution estimates' error against the simulated one (per
+episode the largest over the pairs; ``-`` for a stack without identification or a cell flown before the
+episodes recorded it; :func:`benchmarks.robustness.identification_record`). Every cell is a line of
+``--out``/cells.jsonl, written atomically when the cell is done (a rerun resumes;
+:mod:`impact_env.results_store`), and the table of every cell goes to ``--out``/table.md; episodes run in
+``--workers`` spawned processes. A cell records the fingerprint of its
 stack's config (``config``, as in :mod:`benchmarks.robustness`; a cell without one was flown before 0.4), and
 ``--stale STACKS`` flies those cells again whose config is not the stack's current one; ``--factors`` and
 ``--planners`` fly a part of the grid. From the repository root:
@@ -44,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.robustness import identification_error, identification_record
 from impact_env.results_store import CellStore, atomic_path, write_atomic
 
 RESULTS = Path(__file__).resolve().parents[1] / "results" / "impact_robust"  # cells.jsonl, table.md, plans/
@@ -130,6 +134,7 @@ def _episode(args: tuple) -> dict:
         options["restitution"] = float(np.clip(sc.restitution + level, 0.0, 1.0))
     env = TransportEnv(sc, **options)
     res = run_episode(env, expert, seed=seed)
+    simulated = options.get("restitution", sc.restitution)
     report = expert.report()
     plan, boxes = expert.offline_plan, final_boxes(sc)
     dt = sc.control_period_s
@@ -147,7 +152,8 @@ def _episode(args: tuple) -> dict:
             "impacts": len(robot_object_impacts(sc, res.impacts)),
             "final_speed": max(f["speed"] for f in finals.values()),
             "in_final_box": all(f["in_box"] for f in finals.values()),
-            "mission_replans": report.get("mission", {}).get("replans", 0), "wall_s": res.wall_time_s}
+            "mission_replans": report.get("mission", {}).get("replans", 0),
+            "identification": identification_record(expert, simulated), "wall_s": res.wall_time_s}
 
 
 def cell_key(name: str, planner: str, stack: str, axis: str, level: float) -> tuple[str, str, str, str, str]:
@@ -221,7 +227,7 @@ def row(cell: dict) -> str:
     return (f"| {cell['scenario']} | {label(cell)} | {stack} | {cell['planner']} | {len(eps)} | "
             f"{100 * np.mean([e['success'] for e in eps]):.0f}% | {np.mean(rho):+.3f} ({min(rho):+.3f}) | "
             f"{np.mean(speed):.3f} ({max(speed):.3f}) | {100 * np.mean([e['in_final_box'] for e in eps]):.0f}% | "
-            f"{np.mean([e['mission_replans'] for e in eps]):.2f} |")
+            f"{np.mean([e['mission_replans'] for e in eps]):.2f} | {identification_error(cell)} |")
 
 
 def sort_cells(cells: list[dict], scenarios) -> list[dict]:
@@ -240,8 +246,8 @@ def all_scenarios(cells: list[dict]) -> list[str]:
 def table(cells: list[dict], scenarios) -> str:
     cells = sort_cells(cells, scenarios)
     lines = ["| scenario | simulator | stack | plan | episodes | success | robustness mean (min) | "
-             "final speed m/s mean (max) | in final box | mission replans / ep |",
-             "|---|---|---|---|---:|---:|---:|---:|---:|---:|"]
+             "final speed m/s mean (max) | in final box | mission replans / ep | e error mean / max |",
+             "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     rows = [row(c) for c in cells]
     note = (["", "\\* flown with an earlier config of the stack, or before cells recorded theirs (`--stale STACK` "
              "flies it again)"] if any(" * |" in r for r in rows) else [])

@@ -10,12 +10,12 @@ Prints a markdown table.
 
 ``--gain`` measures instead what the node cut buys: per scenario stage 1 once (the default budget), then stage 2
 from its incumbent (the warm start) cut at 1, 5, 20 (the default) and 100 nodes, and once at 20 nodes without the
-warm start. Per row: stage 2's time and nodes, its objective (impacts plus the scaled acceleration term), the
-gain over the warm start's own objective (what skipping stage 2 would keep), the impacts and the fingerprint
-of the plan after the polish. Usage:
+warm start (``refine_warm_start=False``). Per row: stage 2's time and nodes, its objective (impacts plus the
+scaled acceleration term), the gain over the warm start's own objective (what skipping stage 2 would keep), the
+impacts and the fingerprint of the plan after the polish. Usage:
 
     python -m benchmarks.planner_stage2 [--scenarios a,b,c] [--cuts nodes,time5,time60]
-    python -m benchmarks.planner_stage2 --gain [--scenarios a,b,c]
+    python -m benchmarks.planner_stage2 --gain [--scenarios a,b,c] [--gain-cuts 1,5,20,100]
 """
 
 from __future__ import annotations
@@ -62,13 +62,11 @@ def row(scenario_name: str, cut: str, loaded: bool) -> str:
 GAIN_CUTS = (1, 5, 20, 100)
 
 
-def gain_rows(scenario_name: str) -> list[str]:
-    """Stage 1 once, then stage 2 cut at each of ``GAIN_CUTS`` nodes from its incumbent, and once cold."""
-    from planners.offline.milp.model import LinExpr
+def gain_rows(scenario_name: str, cuts: tuple[int, ...] = GAIN_CUTS) -> list[str]:
+    """Stage 1 once, then stage 2 cut at each of ``cuts`` nodes from its incumbent, and once cold at 20."""
     from planners.offline.solvers import solve
-    from planners.offline.solvers.base import SolverOptions
     from planners.offline.spatially_robust import build_model, extract_plan, staged_model
-    from planners.offline.stages import _stage2_objective, copy_model, polish, refine
+    from planners.offline.stages import _stage2_objective, polish, refine
 
     scenario = load_scenario(scenario_name)
     config = PlannerConfig()
@@ -92,19 +90,15 @@ def gain_rows(scenario_name: str) -> list[str]:
             f"{stage1_s:.1f} | - | - | {start:.4f} | 0 | {int(round(staged.impact_count.value(x0)))} | - |"]
     rows.append(row("none (the incumbent, polished)", x0, 0.0, None, "skipped"))
     print(rows[-2] + "\n" + rows[-1], flush=True)
-    for nodes in GAIN_CUTS:
+    for nodes in cuts:
         x, stats = refine(staged, x0, dataclasses.replace(config, refine_nodes=nodes))
         label = f"{nodes} nodes, warm" + (" (default)" if nodes == PlannerConfig().refine_nodes else "")
         rows.append(row(label, x, stats["refine_s"], stats["refine_nodes_explored"], stats["refine_status"]))
         print(rows[-1], flush=True)
-    # the same 20-node cut without the warm start (as refine builds it, less the MIP start)
-    m = copy_model(staged.model, "refine")
-    m.add(staged.primary >= staged.primary.value(x0) - 1e-7, group="keep")
-    m.set_objective(objective + LinExpr(), maximize=False)
-    cold = solve(m, config.solver, SolverOptions(time_limit_s=config.refine_time_s, node_limit=20, mip_gap=1e-3))
-    x = cold.x if cold.x is not None and not m.check(cold.x, 1e-5) else x0
-    rows.append(row("20 nodes, cold" + ("" if cold.x is not None else " (found none: the incumbent)"), x,
-                    cold.solve_time_s, cold.nodes, cold.status.value))
+    # the same 20-node cut without the warm start, the better of its incumbent and stage 1's kept
+    x, stats = refine(staged, x0, dataclasses.replace(config, refine_warm_start=False))
+    rows.append(row("20 nodes, cold (refine_warm_start=False)", x, stats["refine_s"], stats["refine_nodes_explored"],
+                    stats["refine_status"]))
     print(rows[-1], flush=True)
     return rows
 
@@ -114,13 +108,15 @@ def main() -> None:
     parser.add_argument("--scenarios", default=",".join(scenario_names()), help="comma-separated (default: all)")
     parser.add_argument("--cuts", default=",".join(CUTS), help=f"comma-separated from {', '.join(CUTS)}")
     parser.add_argument("--gain", action="store_true", help="what the node cut buys over the warm start (see above)")
+    parser.add_argument("--gain-cuts", default=",".join(map(str, GAIN_CUTS)),
+                        help="--gain: comma-separated node cuts of stage 2")
     args = parser.parse_args()
     if args.gain:
         print(f"{os.cpu_count()} CPUs; load average before: {' '.join(f'{v:.1f}' for v in os.getloadavg())}\n")
         print("| scenario | stage 2 | s | nodes | ended | stage 2 objective | gain | impacts | plan |")
         print("|---|---|---:|---:|---|---:|---:|---:|---|")
         for name in [s for s in args.scenarios.split(",") if s]:
-            gain_rows(name)
+            gain_rows(name, tuple(int(c) for c in args.gain_cuts.split(",") if c))
         print(f"\nload average after: {' '.join(f'{v:.1f}' for v in os.getloadavg())}; HiGHS, seed 0, solver "
               "threads at the solver's default")
         return

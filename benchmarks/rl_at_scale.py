@@ -182,6 +182,23 @@ def print_status(runs: list[Run], runs_dir: Path) -> dict[str, int]:
     return counts
 
 
+def status_markdown(runs: list[Run], runs_dir: Path, command: str) -> str:
+    """What of the queue has run and what remains, for a docs page: counts, env-steps, and the command that
+    finishes the rest."""
+    states = [(run, *status(run, runs_dir)) for run in runs]
+    done = [r for r, s, _ in states if s == "done"]
+    partial = [(r, n) for r, s, n in states if s in ("partial", "extend")]
+    pending = [r for r, s, _ in states if s == "pending"]
+    lines = [f"**What ran.** {len(done)} of the {len(runs)} runs of `{command}` finished "
+             f"({', '.join(sorted({r.algorithm for r in runs}))}, budget {runs[0].frames:,} env-steps a run, seeds "
+             f"{','.join(map(str, sorted({r.seed for r in runs})))})."]
+    if partial or pending:
+        parts = [f"{r.name} ({n:,} env-steps)" for r, n in partial] + [r.name for r in pending]
+        lines.append(f"**What remains:** {', '.join(parts)}. The same command trains them (the partial ones from "
+                     "their last checkpoint) and rebuilds these tables.")
+    return " ".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--kinds", default="sb3", help=f"any of {','.join(KINDS)} (comma-separated)")
@@ -199,6 +216,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--vmas-python", default=os.environ.get("VMAS_PYTHON"))
     parser.add_argument("--status", action="store_true", help="list the queue's runs and their state, then exit")
     parser.add_argument("--publish", action="store_true", help="only rebuild --out from the run folders")
+    parser.add_argument("--status-md", type=Path, default=None, help="with --status: also write what ran and "
+                        "what remains as a markdown paragraph to this file (benchmarks.rl_at_scale_report --docs "
+                        "--status reads it)")
     args = parser.parse_args(argv)
     if args.publish:
         cells = publish(args.runs, args.out)
@@ -211,6 +231,13 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(f"rl_at_scale: {exc}") from None
     if args.status:
         print_status(runs, args.runs)
+        if args.status_md:
+            from impact_env.results_store import write_atomic
+
+            given = [a for a in (argv if argv is not None else sys.argv[1:]) if a != "--status"]
+            cut = given.index("--status-md") if "--status-md" in given else len(given)
+            command = " ".join(["python -m benchmarks.rl_at_scale", *given[:cut], *given[cut + 2:]])
+            write_atomic(args.status_md, status_markdown(runs, args.runs, command))
         return
     logs = args.logs or args.runs / "logs"
     todo = [r for r in runs if status(r, args.runs)[0] != "done"]

@@ -11,9 +11,10 @@ intervals (scenarios as tasks, seeds as runs; only the seeds that every scenario
 the score matrix is rectangular). Every row states its env-step budget, the wall clock per run and the seeds.
 Writes, each file atomically: ``summary.md`` (the tables), ``summary.json`` (the same numbers),
 ``curves_steps.png`` and ``curves_wall.png`` (learning curves against env-steps and against wall clock, one
-panel a scenario, one line a seed: the reward per env-step of each rollout where the trainer logs it, else the
-finished training episodes' success rate) and ``profile.png`` (the
-performance profile of the success rate). Needs rliable and matplotlib (the ``[rl-analysis]`` extra).
+panel a scenario, one line a seed: the reward per env-step of each rollout where the trainer logs it, without
+the rollouts in which episodes end and restart, else the finished training episodes' success rate) and
+``profile.png`` (the performance profile of the success rate). Needs rliable and matplotlib (the
+``[rl-analysis]`` extra).
 """
 
 from __future__ import annotations
@@ -216,7 +217,11 @@ def plot_curves(curves: dict[str, list[dict]], x: str, path: Path) -> Path | Non
         field = _curve_field([run for runs in by_task[task].values() for run in runs])
         for algorithm, runs in sorted(by_task[task].items()):
             for run in runs:
-                pts = [(r[x], r[field]) for r in run if r.get(field) is not None]
+                # the reward of an episode's first step is the shaping's jump from zero: the rollouts where
+                # episodes end (and start) and the first rollout are left out of the reward-per-step curve
+                keep = run[1:] if field == "reward_per_step" else run
+                pts = [(r[x], r[field]) for r in keep if r.get(field) is not None
+                       and not (field == "reward_per_step" and r.get("episodes"))]
                 if pts:
                     xs, ys = zip(*pts)
                     ax.plot(np.array(xs) / (1e6 if x == "frames" else 60), ys, color=colours[algorithm], alpha=0.6,

@@ -258,9 +258,9 @@ def run(scenarios, stacks, axes, seeds_shipped, seeds_new, out: Path, engine: En
         levels: dict[str, tuple[float, ...]] | None = None, stale: tuple[str, ...] = ()) -> None:
     """Fly the cells of the grid that are not done. A cell is done when it has the episodes asked for; one with
     fewer gets the missing seeds flown and added (an episode depends on its seed only, tested in
-    ``tests/test_determinism.py``). For the stacks in ``stale``, a cell flown with another config than the
-    stack's current one (:func:`config_fingerprint`; a cell from before the cells recorded it counts as
-    another) is flown again whole."""
+    ``tests/planners/expert/test_determinism.py``). For the stacks in ``stale``, a cell flown with another
+    config than the stack's current one (:func:`config_fingerprint`; a cell from before the cells recorded it
+    counts as another) is flown again whole."""
     out.mkdir(parents=True, exist_ok=True)
     store = cell_store(out)
     fingerprints = {stack: config_fingerprint(stack) for stack in stacks}

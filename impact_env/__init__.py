@@ -7,8 +7,9 @@ Importing the package registers the Gymnasium environments: one id per shipped s
 PettingZoo's registry exists it also registers ``impact_env/transport-v0``. PettingZoo's versioned module is
 :mod:`impact_env.transport_v0` (``parallel_env``, ``env``, ``raw_env``); ``impact_env.parallel_env``,
 ``impact_env.env`` and ``impact_env.raw_env`` are the same functions. Every transport id also has a vector entry
-point, the batched torch world (``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point")``,
-the ``[rl]`` extra: :mod:`impact_env.transport.batched.vector_env`); torch is imported only when one is made.
+point, the batched torch world (``gymnasium.make_vec(id, num_envs=N)``, which picks it, or
+``vectorization_mode="vector_entry_point"``; the ``[rl]`` extra: :mod:`impact_env.transport.batched.vector_env`);
+torch is imported only when one is made. ``vectorization_mode="sync"`` still makes N pymunk envs.
 
 Tether (anchor-pull) transport: ``impact_env/Tether-v1`` with ``station=`` (a shipped name or a path; its
 ``max_episode_steps`` from that file) and one id per shipped station (``TETHER_GYM_IDS``, e.g.
@@ -100,7 +101,7 @@ def _horizon_steps(task_source) -> int:
 TRANSPORT_ENTRY_POINT = "impact_env.transport.gym_env:TransportEnv"
 # the batched torch world behind gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point"); a
 # string, so that torch is imported only when a vector env is made
-TRANSPORT_VECTOR_ENTRY_POINT = "impact_env.transport.batched.vector_env:make_vector_env"
+TRANSPORT_VECTOR_ENTRY_POINT = "impact_env.transport.vector_entry:make_vector_env"
 
 
 def _add_vector_entry_points() -> None:

@@ -1,7 +1,7 @@
 """The ``impact-env`` command: list, draw and run scenarios and stations.
 
     impact-env scenarios
-    impact-env generate --family F --seed S --out task.toml [--count N]
+    impact-env generate --family F --seed S [--toml task.toml | --out DIR [--count N]]
     impact-env show SCENARIO [--plot setup.png | --out DIR]
     impact-env run SCENARIO --controller zero|random|expert|path/to/model.zip [--seed N] [--episodes K]
                    [--out DIR | --json result.json --plot run.png] [--video out.mp4] [--quiet]
@@ -104,14 +104,23 @@ def _cmd_generate(args: argparse.Namespace) -> int:
         raise ImpactEnvError(f"--count must be >= 1, got {args.count}")
     if args.seed < 0:
         raise ImpactEnvError(f"--seed must be >= 0, got {args.seed}")
-    from impact_env.results_store import check_output_file, check_output_folder
-
-    if args.count == 1 and args.out.endswith(".toml"):
-        paths = [write_task(args.family, args.seed, check_output_file(args.out, "--out"))]
-    else:  # a folder of <family>_<seed>.toml
-        folder = check_output_folder(args.out, "--out")
-        paths = [write_task(args.family, seed, folder / f"{task_name(args.family, seed)}.toml")
-                 for seed in range(args.seed, args.seed + args.count)]
+    legacy_file_out(args, "--toml", (".toml",))  # --out task.toml, as the command first spelled it
+    if args.toml is not None and args.out is not None:
+        raise ImpactEnvError("give --toml PATH (one task) or --out DIR (a folder of <family>_<seed>.toml), not both")
+    if args.toml is not None and args.count > 1:
+        raise ImpactEnvError(f"--toml is one file; --count {args.count} writes a folder: give --out DIR")
+    if args.toml is None and args.out is None:
+        if args.count > 1:
+            raise ImpactEnvError(f"--count {args.count} writes a folder of tasks: give --out DIR")
+        args.toml = "task.toml"
+    if args.toml is not None:
+        targets = {args.seed: args.toml}
+        check_outputs({"--toml": args.toml})
+    else:
+        check_outputs(folders={"--out": args.out})
+        targets = {seed: f"{args.out}/{task_name(args.family, seed)}.toml"
+                   for seed in range(args.seed, args.seed + args.count)}
+    paths = [write_task(args.family, seed, path) for seed, path in targets.items()]
     for path in paths if len(paths) <= 3 else paths[:1]:
         print(f"wrote {path}")
     if len(paths) > 3:
@@ -143,9 +152,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--family", required=True, help=f"one of {', '.join(FAMILIES)}")
     p.add_argument("--seed", type=int, default=0, help="the task's seed (the first one with --count)")
     p.add_argument("--count", type=int, default=1, help="tasks to write, seeds SEED, SEED + 1, ... (default 1)")
-    p.add_argument("--out", default=".", metavar="DIR", type=output_path,
-                   help="output folder: one <family>_<seed>.toml per task (default: the current folder); a path "
-                        "ending in .toml, with one task, is the file itself")
+    add_out(p, "<family>_<seed>.toml for each task (see --toml for one file)")
+    p.add_argument("--toml", metavar="PATH", default=None, type=output_path,
+                   help="the scenario file of one task (default: task.toml when --out is not given)")
     p.set_defaults(func=_cmd_generate)
 
     p = sub.add_parser("show", help="draw a scenario or station (world, obstacles, regions, bodies, start and end)")

@@ -24,7 +24,7 @@ import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from impact_env.catalogue import suggestion
 from impact_env.results_store import check_output_file, check_output_folder, write_atomic
@@ -61,7 +61,7 @@ class Parser(argparse.ArgumentParser):
         kwargs.setdefault("allow_abbrev", False)  # --timestep must not silently mean --timesteps
         super().__init__(*args, **kwargs)
 
-    def error(self, message: str) -> None:  # noqa: D401 - argparse's hook
+    def error(self, message: str) -> NoReturn:  # noqa: D401 - argparse's hook
         choice = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
         if choice:
             options = re.findall(r"'([^']*)'", choice.group(2))
@@ -82,7 +82,7 @@ class Parser(argparse.ArgumentParser):
                 message += "; " + "; ".join(hints)
         super().error(message)
 
-    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+    def parse_args(self, args=None, namespace=None):
         import sys
 
         self._argv = list(sys.argv[1:] if args is None else args)
@@ -197,12 +197,12 @@ def check_outputs(files: dict[str, str | None] = (), folders: dict[str, str | No
             from impact_env.errors import OutputPathError
 
             raise OutputPathError(f"--video {path} must end in .mp4 (an H.264 video)")
+        check_output_file(path, option)
         if option == "--plot" and Path(path).suffix and Path(path).suffix.lower() not in figure_suffixes():
             from impact_env.errors import OutputPathError
 
             raise OutputPathError(f"--plot {path}: {Path(path).suffix} is not an image format matplotlib writes "
                                   f"({', '.join(figure_suffixes())}); .png, or no suffix, gives a PNG")
-        check_output_file(path, option)
         if option == "--plot" and not Path(path).suffix:  # the figure goes to PATH.png: check that too, but only
             check_output_file(Path(path).with_suffix(".png"), option)  # once PATH itself is not /dev/full
 
@@ -327,7 +327,8 @@ def print_catalogue(first: str, names: Sequence[str], load: Callable[[str], Any]
                     columns: Sequence[tuple[str, str, Callable[[Any], Any]]]) -> None:
     """``impact-env scenarios``' table of one kind of shipped file: a row per name, its ``columns`` (title, format
     spec, value of the loaded file) between the name (headed ``first``) and the description."""
-    widths = [re.match(r"[<>^]?\d*", spec).group() for _, spec, _ in columns]
+    # the pattern matches every string (the empty prefix at least)
+    widths = [re.match(r"[<>^]?\d*", spec).group() for _, spec, _ in columns]  # type: ignore[union-attr]
     print(f"{first:<22}" + "".join(format(title, width) for (title, _, _), width in zip(columns, widths))
           + "  description")
     for name in names:

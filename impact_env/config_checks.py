@@ -147,7 +147,8 @@ def check_instance(config: Any, name: str, error: type[Exception], kind: type | 
     value = getattr(config, name)
     if value is None and none is not None:
         return
-    ok = callable(value) if kind is callable else isinstance(value, kind)
+    # kind is a class or a tuple of classes wherever isinstance sees it (callable is taken first)
+    ok = callable(value) if kind is callable else isinstance(value, kind)  # type: ignore[arg-type]
     if not ok:
         fail(_where(config, name), value, _allowed(what, none), error)
 
@@ -183,4 +184,5 @@ def moved_into(config: Any, field: str, keywords: dict[str, Any], error: type[Ex
     names = ", ".join(f"{name}=..." for name in given)
     warn_deprecated(f"{cls}({names}) is deprecated and will be removed in 0.4.0: pass "
                     f"{cls}({field}={type(nested).__name__}({names}))", stacklevel=5)
-    object.__setattr__(config, field, dataclasses.replace(nested, **given))
+    # nested is the config's own value of the field: a dataclass instance, never a class
+    object.__setattr__(config, field, dataclasses.replace(nested, **given))  # type: ignore[type-var]

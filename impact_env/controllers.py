@@ -38,7 +38,7 @@ class ZeroController:
         self._shape = env.action_space.shape
 
     def act(self, observation: np.ndarray, info: dict[str, Any]) -> np.ndarray:
-        return np.zeros(self._shape, dtype=np.float32)
+        return np.zeros(self._shape, dtype=np.float32)  # type: ignore[arg-type]  # a Box: its shape is set
 
 
 class RandomController:
@@ -54,7 +54,7 @@ class RandomController:
         return self._space.sample()
 
 
-BUILTIN = {"zero": ZeroController, "random": RandomController}
+BUILTIN: dict[str, type[Controller]] = {"zero": ZeroController, "random": RandomController}
 
 
 def available_controllers() -> list[str]:

@@ -60,7 +60,8 @@ def arguments(cls: type) -> list[Argument]:
     """The constructor's keywords in signature order, with their type, default and documented description."""
     described = documented_arguments(cls)
     out = []
-    for name, param in inspect.signature(cls.__init__).parameters.items():
+    # the class's own constructor, read (not called): mypy's warning is about calling it on an instance
+    for name, param in inspect.signature(cls.__init__).parameters.items():  # type: ignore[misc]
         if name == "self" or param.kind in (param.VAR_POSITIONAL, param.VAR_KEYWORD):
             continue
         annotation = param.annotation if isinstance(param.annotation, str) else inspect.formatannotation(

@@ -8,7 +8,7 @@ degenerate polygon. The planners add theirs in ``planners/errors.py`` (all subcl
 :class:`ImpactEnvError`, listed in ``planners.errors.PLANNER_ERRORS``).
 
 :data:`TYPED_ERRORS` lists this package's classes. The property-based tests (``tests/fuzz/``) accept
-exactly these and the planners' as the outcome of a bad input, and ``tests/test_errors_contract.py`` checks
+exactly these and the planners' as the outcome of a bad input, and ``tests/impact_env/test_errors_contract.py`` checks
 that every exception class the packages define is listed here or there.
 """
 

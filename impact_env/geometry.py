@@ -145,7 +145,7 @@ class ConvexPolygon:
 
     def signed_distance_xy(self, x: float, y: float) -> float:
         """Scalar version of :meth:`signed_distance`, a few microseconds, for per-step monitoring."""
-        box = self._box
+        box = self._box  # type: ignore[attr-defined]  # set in __post_init__ (frozen: object.__setattr__)
         if box is not None:
             dx = max(box[0] - x, x - box[1])  # > 0 outside in x
             dy = max(box[2] - y, y - box[3])
@@ -153,14 +153,14 @@ class ConvexPolygon:
                 return -(dx if dx > dy else dy)
             return -math.hypot(dx if dx > 0.0 else 0.0, dy if dy > 0.0 else 0.0)
         worst = -math.inf
-        for _, _, _, _, nx, ny, off, _ in self._edges_py:
+        for _, _, _, _, nx, ny, off, _ in self._edges_py:  # type: ignore[attr-defined]  # as _box
             d = nx * x + ny * y - off
             if d > worst:
                 worst = d
         if worst <= 0.0:
             return -worst
         best = math.inf
-        for vx, vy, ex, ey, _, _, _, ee in self._edges_py:
+        for vx, vy, ex, ey, _, _, _, ee in self._edges_py:  # type: ignore[attr-defined]  # as _box
             t = ((x - vx) * ex + (y - vy) * ey) / ee
             t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
             dx = x - vx - t * ex

@@ -4,7 +4,8 @@ Two small C extensions are built by ``pip install .`` (``setup.py``): ``impact_e
 impact world's substep loop, action scaling and observation) and ``impact_env.stl._cmonitor`` (the online STL
 monitor of the shipped formula classes). Each is optional: without a C compiler and Python's headers the
 install still succeeds, the helper is missing, and the modules that use it run their pure-Python code, which
-gives the same numbers bit for bit (``tests/test_native_parity.py`` checks both paths against each other).
+gives the same numbers bit for bit (``tests/impact_env/transport/test_native_parity.py`` checks both paths
+against each other).
 Setting ``IMPACT_ENV_PURE_PYTHON=1`` before the import selects the Python paths on purpose (no note then).
 """
 

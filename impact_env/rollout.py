@@ -61,9 +61,9 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
     start = time.perf_counter()
     obs, info = env.reset(seed=seed)
     controller.reset(env, seed)
-    core = env.unwrapped.core
+    core = env.unwrapped.core  # type: ignore[attr-defined]  # a TransportEnv or a TetherEnv: both have one
     positions = [[s[:2] for s in core._state]]
-    frames = [env.render()] if record_frames else None
+    frames: list[Any] | None = [env.render()] if record_frames else None
     ms: list[float] = []
     total = 0.0
     impacts: list[dict[str, Any]] = []
@@ -73,10 +73,10 @@ def run_episode(env: gym.Env, controller: Controller, seed: int | None = None,
         action = controller.act(obs, info)
         ms.append(1e3 * (time.perf_counter() - t0))
         obs, reward, terminated, truncated, info = env.step(action)
-        total += reward
+        total += reward  # type: ignore[operator]  # gymnasium says SupportsFloat; both envs return a float
         impacts.extend(info.get("impacts", ()))  # the tether environments have no impacts
         positions.append([s[:2] for s in core._state])
-        if record_frames:
+        if frames is not None:  # record_frames
             frames.append(env.render())
         done = terminated or truncated
     steps = len(positions) - 1

@@ -413,7 +413,9 @@ def connect_ray(config: EngineConfig, num_cpus: int | None = None) -> bool:
     if address is None:
         options.update(num_cpus=_private_cpus(config, num_cpus), include_dashboard=False)
     try:
-        ray.init(address=address, **options)
+        # "local", not None: with None, Ray joins a `ray start` cluster it finds recorded on this machine
+        # (/tmp/ray/ray_current_cluster), which is someone else's on a shared machine
+        ray.init(address=address or "local", **options)
     except (ConnectionError, RuntimeError, ValueError) as exc:
         where = f"the Ray cluster at {address!r}" if address else "a local Ray instance"
         hint = (" (start one with `ray start --head`, or leave out --address and RAY_ADDRESS for a private local "

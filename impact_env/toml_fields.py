@@ -97,7 +97,8 @@ class Fields:
     def __init__(self, table: Any, path: str) -> None:
         if not isinstance(table, dict):
             raise ScenarioError(f"{path} must be a table, got {type(table).__name__}")
-        self.table, self.path, self.used = table, path, set()
+        self.table, self.path = table, path
+        self.used: set[str] = set()
 
     def _at(self, key: str) -> str:
         return f"{self.path}.{key}" if self.path else key

@@ -77,7 +77,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "plan is kept")
     p.add_argument("--mip-gap", type=float, default=1e-4, metavar="G",
                    help="relative optimality gap at which the solver stops (default 1e-4)")
-    p.add_argument("--threads", type=int, default=None, metavar="N", help="solver threads (default: solver's choice)")
+    p.add_argument("--threads", type=int, default=None, metavar="N",
+                   help="solver threads; the plan depends on the count (default: the planner's, 2 for sr, the "
+                        "solver's choice for ir)")
     p.add_argument("--intervals", type=int, default=None, metavar="N",
                    help="time-grid intervals; impacts happen at its knots (default: the scenario's [planner] hint)")
     p.add_argument("--degree", type=int, default=None, metavar="D",
@@ -243,9 +245,9 @@ def _budget(args: argparse.Namespace, progress: Callable[[Progress], None] | Non
     from planners.offline.config import IRPlannerConfig, PlannerConfig
 
     default = (IRPlannerConfig() if args.planner == "ir" else PlannerConfig()).solver_options
-    limits = {k: v for k, v in (("time_limit_s", args.time_limit), ("node_limit", args.node_limit)) if v is not None}
-    return dataclasses.replace(default, mip_gap=args.mip_gap, threads=args.threads, seed=args.seed, progress=progress,
-                               **limits)
+    given = (("time_limit_s", args.time_limit), ("node_limit", args.node_limit), ("threads", args.threads))
+    limits = {k: v for k, v in given if v is not None}
+    return dataclasses.replace(default, mip_gap=args.mip_gap, seed=args.seed, progress=progress, **limits)
 
 
 def _limits(budget: SolverOptions) -> str:

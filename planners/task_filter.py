@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from impact_env.cli_options import add_out, add_quiet
+from impact_env.cli_options import add_quiet, check_outputs, output_path
 from impact_env.config_checks import check_integer, check_number
 from impact_env.errors import ImpactEnvError
 from impact_env.results_store import CellStore, atomic_path, write_atomic
@@ -199,7 +199,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                           "OUT/verdicts.jsonl (a rerun skips the tasks already there).")
     p.add_argument("--family", required=True, help=f"one of {', '.join(FAMILIES)}")
     p.add_argument("--seeds", default="0:10", help="A:B (seeds A..B-1), N, or a comma-separated list (default 0:10)")
-    add_out(p, "the kept tasks, their plans and verdicts.jsonl (default: tasks/<family>)")
+    p.add_argument("--out", required=True, metavar="DIR", type=output_path,
+                   help="output folder: the kept tasks, their plans and verdicts.jsonl")
     defaults = FilterConfig()
     p.add_argument("--node-limit", type=int, default=defaults.node_limit,
                    help=f"branch-and-bound nodes per task (default {defaults.node_limit})")
@@ -207,23 +208,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"safety-net wall-clock limit per task, s (default {defaults.time_limit_s:g})")
     p.add_argument("--min-robustness", type=float, default=defaults.min_robustness_m,
                    help=f"keep a task only if its plan's rho exceeds this, m (default {defaults.min_robustness_m:g})")
-    add_quiet(p, "no line per task; only the summary")
+    add_quiet(p, "no line per task; only the count kept")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
-    from impact_env.results_store import check_output_folder
-
     seeds = parse_seeds(args.seeds)
     check_family(args.family, seeds[0])
+    check_outputs(folders={"--out": args.out})  # before any plan
     config = FilterConfig(node_limit=args.node_limit, time_limit_s=args.time_limit,
                           min_robustness_m=args.min_robustness)
-    out = check_output_folder(args.out or f"tasks/{args.family}", "--out")
-    verdicts = filter_tasks(args.family, seeds, out, config, progress=not args.quiet)
+    verdicts = filter_tasks(args.family, seeds, args.out, config, progress=not args.quiet)
     kept = sum(v.kept for v in verdicts)
     reasons: dict[str, int] = {}
     for v in verdicts:
         reasons[v.reason] = reasons.get(v.reason, 0) + 1
-    print(f"kept {kept} of {len(verdicts)} {args.family} tasks ({100 * kept / len(verdicts):.0f} %) in {out}: "
+    print(f"kept {kept} of {len(verdicts)} {args.family} tasks ({100 * kept / len(verdicts):.0f} %): "
           + json.dumps(reasons))
     return 0

@@ -5,7 +5,7 @@ and its ``[rl]`` extra, from an empty folder, on copies of the README and the do
 
     python new_user_walk.py README.md docs/*.md
 
-1. Every ``python`` block of those pages runs, as ``tests/test_docs_code.py`` runs it in the suite: a block shown
+1. Every ``python`` block of those pages runs, as ``tests/docs/test_docs_code.py`` runs it in the suite: a block shown
    on several pages runs once, under the first place it appears; a block marked ``<!-- test: skip, why -->`` on
    the line above its fence is skipped (``slow`` ones run: this is the long check). Each runs in a fresh module
    (``__docs__``, as a reader's script is) and its own empty working folder.

@@ -225,8 +225,10 @@ class _Until(_Node):
         self.out = None
         tau = k - hm  # both children are final up to tau
         if tau >= lo:
-            lv = L.out if L.h == hm else buf_l.pop(tau)
-            rv = R.out if R.h == hm else buf_r.pop(tau, None)  # None before lo + a: never read then
+            # both children have a value for tau (out is None only before a child's first); rv is None before
+            # lo + a, where it is never read
+            lv: float = L.out if L.h == hm else buf_l.pop(tau)  # type: ignore[assignment]
+            rv: float = R.out if R.h == hm else buf_r.pop(tau, None)  # type: ignore[assignment, arg-type]
             if tau <= hi:
                 runs.append(_INF)
                 bests.append(-_INF)
@@ -236,7 +238,7 @@ class _Until(_Node):
                 if lv < run:
                     run = runs[i] = lv
                 if tau >= t + i + a:
-                    m = rv if rv < run else run  # type: ignore[operator]
+                    m = rv if rv < run else run
                     if m > bests[i]:
                         bests[i] = m
             if tau - b == self.acc_t0:

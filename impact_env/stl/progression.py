@@ -183,14 +183,12 @@ def without_constants(formula: Formula) -> Formula | None:
     if isinstance(formula, (And, Or)):
         kids = [without_constants(ch) if _const_value(ch) is None else ch for ch in formula.children]
         if isinstance(formula, Or):
-            if any(_const_value(ch) is not None and _const_value(ch) >= 0 for ch in formula.children):
+            if any((value := _const_value(ch)) is not None and value >= 0 for ch in formula.children):
                 return None
-            kids = [ch for ch in kids if ch is not None and _const_value(ch) is None]
-        else:
-            kids = [ch for ch in kids if ch is not None and _const_value(ch) is None]
-        if not kids:
+        kept = [ch for ch in kids if ch is not None and _const_value(ch) is None]
+        if not kept:
             return None
-        return kids[0] if len(kids) == 1 else type(formula)(tuple(kids))
+        return kept[0] if len(kept) == 1 else type(formula)(tuple(kept))
     if isinstance(formula, Not):
         inner = without_constants(formula.child)
         return None if inner is None else Not(inner)

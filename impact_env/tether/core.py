@@ -19,12 +19,12 @@ and ``info``: see :class:`TetherCore`.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from impact_env.env_shell import check_can_step, clip_to_space, time_left
-from impact_env.errors import ActionError, EnvConfigError, ImpactEnvError
+from impact_env.errors import ActionError, EnvConfigError
 from impact_env.stl import parse
 from impact_env.tether.faults import FaultConfig, FaultSchedule
 from impact_env.tether.physics import FIDELITIES, TetherWorld
@@ -135,13 +135,14 @@ class TetherCore:
         self._drift_time = st.drift_time_s  # the task's bodies: see Station.task_positions
         self._goal = st.goal_box
         self._rest2 = st.rest_speed_mps ** 2
-        self.world: TetherWorld | None = None
+        self.world: TetherWorld = None  # type: ignore[assignment]  # set by reset(); no step before it
         self.sight = SightCache(st)
         self._agent_index: dict[int, np.ndarray] = {}
         self._buf = np.zeros(self.obs_size, dtype=np.float32)
-        self._buf_changes, self._buf_sight, self._buf_tethers = -1, -1, []
+        self._buf_changes, self._buf_sight = -1, -1
+        self._buf_tethers: list[tuple[int, Any]] = []  # (observation index, the world's tether)
         self._bounds4 = (self.obs_low[:4].astype(float).tolist(), self.obs_high[:4].astype(float).tolist())
-        self._obs_at = None
+        self._obs_at: tuple[TetherWorld, int] | None = None
         self.step_count = 0
         self.schedule = FaultSchedule([], (1.0,) * self.n_robots)
         self._reset_counters()
@@ -188,6 +189,24 @@ class TetherCore:
         return self.step_count * self.dt_s
 
     # ------------------------------------------------------------------------------------------ episode
+    def _start_in_overlap(self, rng: np.random.Generator, start: tuple[float, float]) -> tuple[float, float]:
+        """A start uniform in the noise disc and the cargo's free space, by rejection in the bounds of their
+        overlap: what the disc sampling above gives, for a disc so large that it rarely lands in the station.
+        The overlap holds the start, so this finds a point; the start itself is the last resort."""
+        import shapely
+
+        r = self.initial_position_noise_m
+        overlap = self.station.free_space().intersection(shapely.Point(start).buffer(r))
+        x0, y0, x1, y1 = overlap.bounds if not overlap.is_empty else (start[0], start[1], start[0], start[1])
+        for _ in range(400):
+            points = np.column_stack([rng.uniform(x0, x1, 256), rng.uniform(y0, y1, 256)])
+            ok = (np.hypot(points[:, 0] - start[0], points[:, 1] - start[1]) <= r) \
+                & self.station.cargo_inside_many(points)
+            if ok.any():
+                x, y = points[int(np.argmax(ok))]
+                return (float(x), float(y))
+        return start
+
     def reset(self, rng: np.random.Generator) -> None:
         """Start a new episode: a fresh pymunk world, an empty trace, the faults drawn; randomness only from
         ``rng`` (the start position first, then the faults)."""
@@ -201,8 +220,8 @@ class TetherCore:
                 if st.cargo_inside(candidate):
                     start = candidate
                     break
-            else:  # pragma: no cover - the start itself is inside, so a sample lands inside almost surely
-                raise ImpactEnvError("could not place the cargo inside the station near its start")
+            else:  # a disc much larger than the station: sample where the disc and the station overlap
+                start = self._start_in_overlap(rng, start)
         self.schedule = FaultSchedule.draw(self.faults, self.n_robots, rng)
         speeds = None
         if self.schedule.winch_factors != (1.0,) * self.n_robots:
@@ -243,6 +262,11 @@ class TetherCore:
     def decode(self, action: Any) -> list[int]:
         """The per-robot commands of an action: ``n_robots`` integers in ``0 .. n_commands - 1``."""
         n, top = self.n_robots, self.n_commands - 1
+        if isinstance(action, np.ndarray) and type(action) is not np.ndarray:  # masked arrays, np.matrix
+            if np.ma.is_masked(action):  # a masked entry is no command (tolist() would make it None)
+                raise ActionError(f"action is a masked array with {int(np.ma.count_masked(action))} masked entries; "
+                                  f"pass {n} integer commands ({self._commands_text()}), e.g. action.filled(0)")
+            action = np.asarray(np.ma.getdata(action))
         if isinstance(action, np.ndarray) and action.dtype.kind in "iu" and action.shape == (n,):
             if n and (action.min() < 0 or action.max() > top):
                 bad = int(np.flatnonzero((action < 0) | (action > top))[0])
@@ -328,7 +352,8 @@ class TetherCore:
             pulling = [r for r in range(self.n_robots) if world.is_pulling(r)]
             if kind == "anchor":
                 if pulling:
-                    world.fail_anchor(world.tether_anchor(pulling[int(pick * len(pulling))]))
+                    # a pulling robot holds a tether, so it has an anchor
+                    world.fail_anchor(cast(int, world.tether_anchor(pulling[int(pick * len(pulling))])))
                 else:
                     self._armed_anchor_failures += 1
             elif kind == "snap":
@@ -378,7 +403,7 @@ class TetherCore:
         work = world.winch_work_J - work0
         t = self._drift_time
         if self._pair_monitor:
-            estimate = self.monitor.update_pair(CARGO, x1, y1, vx * t, vy * t)
+            estimate = self.monitor.update_pair(CARGO, x1, y1, vx * t, vy * t)  # type: ignore[union-attr]  # a HoldMonitor
         else:
             estimate = self.monitor.update({CARGO: (x1, y1), DRIFT: (vx * t, vy * t)})
         limit = self.robustness_limit_m

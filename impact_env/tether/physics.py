@@ -9,7 +9,8 @@ centre to its anchor and either reels in or holds (its winch brakes). How a teth
 saturating winch tension), and its events (attached, released, arrived, snagged, blocked, and the faults) and
 the winch work are counted the same way in all three: :class:`TetherWorld` describes each. The substep loop
 calls chipmunk's C functions where pymunk exposes them (its Python properties cost more than the physics at this
-size), as the impact world does; both paths give bit-identical trajectories (``tests/test_tether_fast_path.py``).
+size), as the impact world does; both paths give bit-identical trajectories
+(``tests/impact_env/tether/test_fast_path.py``).
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ class TetherEvent:
 class _Tether:
     __slots__ = ("anchor", "ax", "ay", "ready_s", "joint", "jptr", "pulling", "held", "w", "seen_at", "clearance",
                  "length")
+    joint: pymunk.SlideJoint | None  # the reel fidelity's joint, from the moment the tether pulls
 
     def __init__(self, anchor: int, position: tuple[float, float], ready_s: float, w: float) -> None:
         self.anchor, self.ready_s, self.joint, self.jptr, self.pulling = anchor, ready_s, None, None, False

@@ -13,8 +13,8 @@ time). So the mask entry of ``a`` is unchanged while the cargo stays closer to
 its last exactly tested position than to any of ``a``'s rays: :class:`SightCache` keeps that radius per anchor,
 tests exactly only the anchors whose radius the cargo has left, and skips even that check while the cargo is
 within the smallest remaining radius of all. The masks are those of the exact test, bit for bit
-(``tests/test_tether_sight.py``). The tethers' snag check uses the same bound over the notches only (a visible
-tether can lose sight only at a reflex vertex).
+(``tests/impact_env/tether/test_fast_path.py``). The tethers' snag check uses the same bound over the notches
+only (a visible tether can lose sight only at a reflex vertex).
 """
 
 from __future__ import annotations

@@ -533,7 +533,7 @@ def _anchors(value: Any, polygon: tuple[tuple[float, float], ...], file_to_ccw: 
                 d = math.dist(p, q)
                 if best is None or d < best[0]:
                     best = (d, wall, s, q)
-            d, wall, s, q = best
+            d, wall, s, q = best  # type: ignore[misc]  # a polygon has walls: best is set
             if d > ON_WALL_TOL_M:
                 raise ScenarioError(f"anchors.points[{i}] = {list(p)} is not on a wall (nearest wall {wall} is "
                                     f"{d:.6g} m away); anchors must lie on the station's boundary")

@@ -12,7 +12,7 @@ holding its last sample (the monitor's estimate), after sample ``k``:
 
 :class:`HoldMonitor` keeps the largest final window, the deque of the sliding minimum and the running minimum
 from ``T``: constant time per sample. Its values are the generic monitor's, bit for bit (min and max of the same
-predicate values; ``tests/test_tether_task_monitor.py`` compares them on random traces), and
+predicate values; ``tests/impact_env/tether/test_fast_path.py`` compares them on random traces), and
 :func:`task_monitor` falls back to the generic monitor for any other task. A conjunction's predicates are
 evaluated boxes first; a polygon's is skipped when its 1-Lipschitz bound shows it cannot be the minimum.
 """

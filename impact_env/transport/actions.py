@@ -23,6 +23,14 @@ def _brief(value: object) -> str:
     return brief(value, width=80)
 
 
+def is_masked(action: object) -> bool:
+    """Whether ``action`` is a numpy masked array or a list or tuple holding one: the compiled paths would read
+    its data under the mask, so such actions take :func:`numbers_of`."""
+    if isinstance(action, np.ma.MaskedArray):
+        return True
+    return type(action) in (list, tuple) and any(isinstance(row, np.ma.MaskedArray) for row in action)
+
+
 def numbers_of(action: object, shapes: tuple[tuple[int, ...], ...], what: str, layout: str) -> list[float]:
     """The numbers of ``action`` in row-major order if its shape is one of ``shapes``; else ActionError.
 
@@ -31,6 +39,8 @@ def numbers_of(action: object, shapes: tuple[tuple[int, ...], ...], what: str, l
     """
     expected = " or ".join(str(s) for s in shapes)
     count = int(np.prod(shapes[0]))
+    if isinstance(action, (list, tuple)) and any(isinstance(row, np.ma.MaskedArray) for row in action):
+        action = np.ma.stack(action) if all(isinstance(row, np.ndarray) for row in action) else list(action)
     if isinstance(action, np.ma.MaskedArray):
         if np.ma.is_masked(action):  # a masked entry is no number (tolist() would make it None)
             raise ActionError(f"{what} is a masked array with {int(np.ma.count_masked(action))} masked entries; "

@@ -19,7 +19,7 @@ from impact_env.errors import ActionError, EnvConfigError
 from impact_env.stl import OnlineMonitor, conjuncts
 from impact_env.stl.compiled import CompiledMonitor, compiled_monitor
 from impact_env.transport import native, starts
-from impact_env.transport.actions import numbers_of
+from impact_env.transport.actions import is_masked, numbers_of
 from impact_env.transport.physics import ImpactEvent, World
 from impact_env.transport.scenario import Scenario, load_scenario
 
@@ -159,7 +159,7 @@ class TransportCore:
         high = np.tile(np.array([xmax, ymax, v_max, v_max, 1.0, 1.0, w_max], dtype=np.float32), self.n_bodies)
         self.obs_low = np.append(low, np.float32(0.0))
         self.obs_high = np.append(high, np.float32(1.0))
-        self.world: World | None = None
+        self.world: World = None  # type: ignore[assignment]  # set by reset(); check_can_step refuses a step before
         self.step_count = 0
         self.log = EpisodeLog()
         self._last_wrenches: list[list[float]] = [[0.0, 0.0, 0.0] for _ in range(self.n_robots)]
@@ -271,7 +271,7 @@ class TransportCore:
         The compiled loop reads float32/float64 arrays of an accepted shape and lists of one (3,) array per
         robot; anything else, and a non-finite action (for its error), takes the Python path.
         """
-        if self._set_action is None or self._set_action(action) is not True:
+        if self._set_action is None or is_masked(action) or self._set_action(action) is not True:
             wrench = self.world.wrench
             wrench[...] = self.wrenches_from_action(action)
             return wrench.tolist()

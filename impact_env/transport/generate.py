@@ -426,7 +426,7 @@ def write_task(family: str, seed: int, path: str | Path) -> Path:
     """Write task ``seed`` of ``family`` to ``path`` (a ``.toml`` file; its folder is created), atomically."""
     from impact_env.results_store import write_atomic
 
-    return write_atomic(Path(path), generate_toml(family, seed))
+    return write_atomic(path, generate_toml(family, seed))  # its folder created, never half a file
 
 
 def check_task(scenario: Scenario) -> None:

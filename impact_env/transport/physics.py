@@ -8,9 +8,10 @@ logged as an :class:`ImpactEvent` from first touch to separation, its impulse su
 lasts, and the contacts that end in one substep are closed after it in the scenario's order of the shapes
 (chipmunk's own order depends on where malloc put them: ``docs/background.md#physics``). Optional post-impact
 velocity noise perturbs an object when a robot-object contact ends: the error the impact-robust planner's delta
-bounds. Three paths drive the substeps, all bit-identical (``tests/test_physics.py``, ``tests/test_native_parity.py``):
-the compiled loop (:mod:`impact_env.transport.native`, one call per control period), chipmunk's C functions
-called from Python where that loop is not built, and pymunk's public API (``fast=False``).
+bounds. Three paths drive the substeps, all bit-identical (``tests/impact_env/transport/test_physics.py``,
+``tests/impact_env/transport/test_native_parity.py``): the compiled loop (:mod:`impact_env.transport.native`, one
+call per control period), chipmunk's C functions called from Python where that loop is not built, and pymunk's
+public API (``fast=False``).
 """
 
 from __future__ import annotations
@@ -81,6 +82,19 @@ class ImpactEvent:
 class _Contact:
     __slots__ = ("time_s", "a", "b", "body_a", "body_b", "va", "vb", "jx", "jy", "rank", "end_s", "va_end",
                  "vb_end")
+    time_s: float  # when the contact began (s)
+    a: str
+    b: str
+    body_a: pymunk.Body
+    body_b: pymunk.Body
+    va: tuple[float, float]  # velocities before (m/s)
+    vb: tuple[float, float]
+    jx: float  # the impulse summed over the contact's substeps (N s)
+    jy: float
+    rank: tuple[int, int]
+    end_s: float  # when it ended (s), and the velocities then
+    va_end: tuple[float, float]
+    vb_end: tuple[float, float]
 
 
 # Module-level callbacks (lambdas would stop a World from being pickled).

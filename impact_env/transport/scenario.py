@@ -178,7 +178,8 @@ def _region(table: Any, where: str) -> Region:
                             "or 'polygon = [[x, y], ...]'")
     f.finish()
     if box is not None:
-        return Region(name, ConvexPolygon.from_box(*box, where=f"{where}.box"))
+        # kind="box" checked four numbers: *box cannot reach where=
+        return Region(name, ConvexPolygon.from_box(*box, where=f"{where}.box"))  # type: ignore[misc]
     if not isinstance(vertices, list):
         raise ScenarioError(f"{where}.polygon must be a list of [x, y] vertices")
     pts = [check(v, "vec2", f"{where}.polygon[{i}]") for i, v in enumerate(vertices)]
@@ -231,7 +232,7 @@ def _build(data: dict, source: str) -> Scenario:
     world = Fields(top.get("world"), "world")
     world_box = world.get("box", kind="box")
     world.finish()
-    world_poly = ConvexPolygon.from_box(*world_box, where="world.box")
+    world_poly = ConvexPolygon.from_box(*world_box, where="world.box")  # type: ignore[misc]  # as in _region
 
     def tables(key: str) -> list:
         value = top.get(key, [])

@@ -136,7 +136,8 @@ class Expert:
     Args:
         scenario: the scenario (or its name/path) the environment runs.
         plan: an offline plan for it (e.g. ``Plan.load("plan.json")``); planned with the MILP if None.
-        planner_config / mpc_config: options of the planner and of the MPC.
+        planner_config: options of the planner (used when ``plan`` is None).
+        mpc_config: options of the MPC.
         config: which parts run (:class:`ExpertConfig`; default all).
         strategy: the contact strategy of the reference selection (default: the SR plan's).
     """

@@ -2,10 +2,11 @@
 
 Each scenario is one job of :mod:`impact_env.sweep` (local processes, or Ray tasks with ``--engine ray``): the
 spatially robust planner with the same :class:`~planners.offline.config.PlannerConfig`, or the impact-robust
-one when the config is an :class:`~planners.offline.config.IRPlannerConfig`. The stage-2 cut is a node count
-and the solver's threads are pinned (1 per job unless the config's ``solver_options`` set ``threads``: the jobs are
-the parallelism, and HiGHS left to choose takes a count from the worker's cores, which can change a MILP's
-last bits), so a scenario's plan is the same on any worker, bit for bit (``Plan.fingerprint()``). A scenario
+one when the config is an :class:`~planners.offline.config.IRPlannerConfig`. The budgets are node counts and
+the solver's threads are pinned: the config's (``PlannerConfig``'s default is 2, so each plan is the one
+``plan_spatially_robust`` gives on its own), else 1 per job (HiGHS left to choose takes a count from the
+worker's cores, and its search depends on the count), so a scenario's plan is the same on any worker, bit for
+bit (``Plan.fingerprint()``). A scenario
 whose task is infeasible, or that hits the time limit without a plan, does not stop the others: its outcome
 carries the error's message.
 """

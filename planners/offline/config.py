@@ -31,7 +31,7 @@ from planners.offline.solvers.base import SolverOptions
 from planners.plan import Plan
 
 __all__ = ["DEFAULT_COPY_INTERVALS", "DEFAULT_FINAL_BOX", "DEFAULT_NODE_BUDGET", "DEFAULT_SAFETY_NET_S",
-           "HandoverConfig", "IRPlannerConfig", "PlannerConfig", "SolverOptions"]
+           "DEFAULT_THREADS", "HandoverConfig", "IRPlannerConfig", "PlannerConfig", "SolverOptions"]
 
 DEFAULT_FINAL_BOX = (0.5, 0.05)  # position half-width (m), velocity half-width (m/s): the authors' default
 DEFAULT_COPY_INTERVALS = 2
@@ -39,11 +39,14 @@ DEFAULT_COPY_INTERVALS = 2
 # wall-clock limit far beyond what the node budget takes on a busy machine, only as a safety net
 DEFAULT_NODE_BUDGET = 20_000
 DEFAULT_SAFETY_NET_S = 600.0
+# HiGHS's tree depends on its thread count, and left to choose it takes the machine's cores: pinned, the default
+# plan is the same on every machine (2: what the committed plans were made with on a 2-core machine)
+DEFAULT_THREADS = 2
 _SOLVER_KEYWORDS = ("time_limit_s", "node_limit", "mip_gap", "threads", "verbose", "seed", "progress")
 
 
 def _planner_budget() -> SolverOptions:
-    return SolverOptions(time_limit_s=DEFAULT_SAFETY_NET_S, node_limit=DEFAULT_NODE_BUDGET)
+    return SolverOptions(time_limit_s=DEFAULT_SAFETY_NET_S, node_limit=DEFAULT_NODE_BUDGET, threads=DEFAULT_THREADS)
 
 
 def _ir_budget() -> SolverOptions:
@@ -96,8 +99,13 @@ class PlannerConfig:
     refine_nodes: int | None = 20
     """Branch-and-bound nodes of stage 2 (0 skips it; None: no limit)."""
     refine_time_s: float = DEFAULT_SAFETY_NET_S
-    """Time limit of stage 2 (s): only a safety net, ``refine_nodes`` cuts it (0 skips it). It was 60 s until
-    0.4: four_robots' 20 nodes took 60.3 s with the machine at load 16, so the net cut them."""
+    """Time limit of stage 2 (s): only a safety net, ``refine_nodes`` cuts it (0 skips it). It was 60 s before
+    0.3.0, which a busy machine reached (``docs/planner_design.md#the-budget``)."""
+    refine_warm_start: bool = True
+    """Stage 2 starts from stage 1's incumbent (a MIP start); False: it starts cold, and the better of its
+    incumbent and stage 1's is kept. Cold found the better stage-2 plan at the same 20-node cut on the three
+    scenarios measured (four_robots: 4 impacts instead of 5; ``docs/planner_design.md#stage-2-what-the-node-cut-buys``);
+    the default stays warm until the committed plans are re-planned and their cells re-flown."""
     smooth: bool = False
     """Stage 3 as the convex QP on squared accelerations (Eq. 28) instead of the LP: off by default, HiGHS's
     QP takes 1-30 s on these models, 10x the MILP."""
@@ -110,7 +118,8 @@ class PlannerConfig:
     """The MILP backend: ``highs``, ``scip`` or ``gurobi``."""
     solver_options: SolverOptions = field(default_factory=_planner_budget)
     """Stage 1's solver budget (node limit, time limit, MIP gap, threads, seed, progress): by default
-    ``DEFAULT_NODE_BUDGET`` (20,000) branch-and-bound nodes, the same work on any machine, and a
+    ``DEFAULT_NODE_BUDGET`` (20,000) branch-and-bound nodes, the same work on any machine, on
+    ``DEFAULT_THREADS`` (2) solver threads, since the search depends on the count, and a
     ``DEFAULT_SAFETY_NET_S`` (600 s) time limit that only a pathological model reaches. A stage 1 cut by its
     node limit returns its best plan with ``plan.mip_gap > 0`` and ``plan.stats["stage1_status"] ==
     "node_limit"``; one cut by the time limit raises ``PlanTimeoutError``. Its time limit also bounds stage 3,
@@ -158,8 +167,8 @@ class PlannerConfig:
         check_integer(self, "refine_nodes", PlannerError, low=0, none="no limit")
         check_number(self, "refine_time_s", PlannerError, low=0)
         check_number(self, "min_robustness_m", PlannerError, low=0, high=1)
-        for name in ("smooth", "obstacle_clearance", "robot_object_separation", "diagnose_infeasibility",
-                     "bound_propagation"):
+        for name in ("refine_warm_start", "smooth", "obstacle_clearance", "robot_object_separation",
+                     "diagnose_infeasibility", "bound_propagation"):
             check_flag(self, name, PlannerError)
         check_choice(self, "solver", PlannerError, SOLVERS)
         check_instance(self, "warm_start", PlannerError, Plan, what="a Plan", none="a cold start")

@@ -41,6 +41,7 @@ from planners.offline.milp.trajectories import (
     value,
     velocity_bound,
 )
+from planners.offline.solvers import lp_optimum
 from planners.offline.stages import StagedModel, solve_to_plan
 from planners.plan import BodyPlan, ImpactCopies, ObjectFunnel, Plan, PlannedImpact, Segment
 
@@ -108,7 +109,7 @@ def build_ir_model(scenario: Scenario, config: IRPlannerConfig) -> IRModel:
     point_sets = {r.spec.name: r.point_sets for r in robots}
     point_sets.update({b.spec.name: b.point_sets for b in boxes})
     encoder = STLEncoder(model, grid, lambda body, k: point_sets[body](k), allowed, scenario.region_map(),
-                         bound_propagation=config.bound_propagation, reuse_clearance=True)
+                         bound_propagation=config.bound_propagation, reuse_clearance=True, lp_optimum=lp_optimum)
     if config.obstacle_clearance:
         add_obstacle_clearance(encoder, scenario, n)
     task = encode_task(model, encoder, scenario, min_robustness_m=config.min_robustness_m)

@@ -36,6 +36,7 @@ from planners.offline.milp.trajectories import (
     allowed_box,
     value,
 )
+from planners.offline.solvers import lp_optimum
 from planners.offline.stages import StagedModel, solve_to_plan
 from planners.plan import BodyPlan, Plan, PlannedImpact, Segment
 
@@ -74,7 +75,7 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
 
     trajectories = {t.spec.name: t for t in robots + objects}
     encoder = STLEncoder(model, grid, lambda body, k: trajectories[body].points(k), boxes, scenario.region_map(),
-                         bound_propagation=config.bound_propagation)
+                         bound_propagation=config.bound_propagation, lp_optimum=lp_optimum)
     if config.obstacle_clearance:
         add_obstacle_clearance(encoder, scenario, n)
     # rho <= every conjunct's robustness: its upper bound is the smallest of theirs

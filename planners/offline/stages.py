@@ -223,12 +223,15 @@ def refine(staged: StagedModel, x: np.ndarray, config: PlannerConfig) -> tuple[n
     m.set_objective(_stage2_objective(staged), maximize=False)
     budget = config.solver_options
     options = SolverOptions(time_limit_s=config.refine_time_s, node_limit=config.refine_nodes, mip_gap=1e-3,
-                            threads=budget.threads, verbose=budget.verbose, seed=budget.seed, warm_start=x,
+                            threads=budget.threads, verbose=budget.verbose, seed=budget.seed,
+                            warm_start=x if config.refine_warm_start else None,
                             heuristics=staged.refine_heuristics)
     result = solve(m, config.solver, options)
     stopped = (Status.OPTIMAL, Status.NODE_LIMIT, Status.TIME_LIMIT)
     if result.x is not None and result.status in stopped and not m.check(result.x, 1e-5):
-        x = result.x
+        # warm, its incumbent is never worse than x; cold, it may be (cut before it found a better one)
+        if config.refine_warm_start or m.objective.value(result.x) < m.objective.value(x):
+            x = result.x
     return x, {"refine_s": result.solve_time_s, "refine_status": result.status.value,
                "refine_objective": float(m.objective.value(x)), "refine_nodes_explored": result.nodes}
 

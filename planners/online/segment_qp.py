@@ -177,9 +177,9 @@ class _SegmentQP:
 
         DAQP reports success on some infeasible QPs (a known DAQP defect, darnstrom/daqp#82): the answer then
         keeps the rows but moves the fixed control points, by up to 5 cm in the relay episodes, so the segment
-        misses the contact it was for (``tests/test_segment_feasibility.py`` has such a QP). On feasible QPs
-        the fixed points hold to 1e-11 m and the rows to 1e-12: the tolerances separate the two by orders of
-        magnitude (the moved answers moved them by 1e-6 m and more)."""
+        misses the contact it was for (``tests/planners/online/test_segment_feasibility.py`` has such a QP). On
+        feasible QPs the fixed points hold to 1e-11 m and the rows to 1e-12: the tolerances separate the two by
+        orders of magnitude (the moved answers moved them by 1e-6 m and more)."""
         arrays = self._local.arrays
         x = arrays["x"]
         if not ((x >= arrays["lbx"] - FIXED_TOL_M) & (x <= arrays["ubx"] + FIXED_TOL_M)).all():

@@ -8,20 +8,21 @@ from __future__ import annotations
 
 import json
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-pytest.importorskip("minari")
+from baselines.task_dataset import DatasetConfig, build_dataset, dataset_ids, is_heldout, split_tasks
+from impact_env.cli import main
+from impact_env.errors import ImpactEnvError
+from impact_env.transport.generate import FAMILY_LIMITS, generate_task
+from impact_env.transport.task_observation import TaskObservation
+from tests.optional import requires
+from tests.paths import DATA
 
-from baselines.task_dataset import DatasetConfig, build_dataset, dataset_ids, is_heldout, split_tasks  # noqa: E402
-from impact_env.cli import main  # noqa: E402
-from impact_env.errors import ImpactEnvError  # noqa: E402
-from impact_env.transport.generate import FAMILY_LIMITS, generate_task  # noqa: E402
-from impact_env.transport.task_observation import TaskObservation  # noqa: E402
+pytestmark = requires("minari")  # looked up, not imported: the tests import it when they run
 
-DATA = Path(__file__).parents[1] / "data" / "generated"
+GENERATED = DATA / "generated"
 
 
 def test_the_split_is_a_function_of_name_and_seed_only():
@@ -49,7 +50,7 @@ def test_build_dataset_writes_both_sides_with_padded_spaces(tmp_path, monkeypatc
 
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "ds"))  # restored after the test
     tasks = tmp_path / "tasks"
-    shutil.copytree(DATA, tasks)
+    shutil.copytree(GENERATED, tasks)
     assert main(["dataset", "--family", "throw_and_catch", "--tasks", str(tasks), "--out", str(tmp_path / "ds")]) == 0
     split = json.loads((tmp_path / "ds" / "impact_env" / "generated_throw_and_catch" / "split.json").read_text())
     assert sorted(split["train"] + split["heldout"]) == ["throw_and_catch_0", "throw_and_catch_2"]
@@ -90,7 +91,7 @@ def test_build_dataset_writes_both_sides_with_padded_spaces(tmp_path, monkeypatc
 def test_a_folder_with_too_few_tasks_is_refused(tmp_path, monkeypatch):
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "ds"))
     tasks = tmp_path / "tasks"
-    shutil.copytree(DATA, tasks)
+    shutil.copytree(GENERATED, tasks)
     with pytest.raises(ImpactEnvError, match="1 kept throw_and_catch task"):
         build_dataset("throw_and_catch", tasks, DatasetConfig(max_tasks=1), out=tmp_path / "ds")
     with pytest.raises(ImpactEnvError, match="unknown task family"):

@@ -5,15 +5,16 @@ from __future__ import annotations
 import copy
 import json
 import math
+import re
 import sys
 from importlib import resources
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from hypothesis import strategies as st
 
 from impact_env.transport.scenario import scenario_names
+from tests.paths import DATA
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -25,11 +26,11 @@ TEXTS = {name: resources.files("impact_env.transport.scenarios").joinpath(f"{nam
          for name in SCENARIOS}
 DICTS = {name: tomllib.loads(text) for name, text in TEXTS.items()}
 # copies of the published plans (results/baselines/plans/): key "<scenario>"
-PLANS_DIR = Path(__file__).resolve().parents[1] / "data" / "plans" / "bench"
+PLANS_DIR = DATA / "plans" / "bench"
 PLANS = {path.stem: json.loads(path.read_text()) for path in sorted(PLANS_DIR.glob("*.json"))}
 # and of the published impact-robust plans (funnels and copies; results/impact_robust/plans/ir/): key
 # "<scenario>__ir_plan"
-IR_PLANS_DIR = Path(__file__).resolve().parents[1] / "data" / "plans" / "ir"
+IR_PLANS_DIR = DATA / "plans" / "ir"
 PLANS.update({f"{path.stem}__ir_plan": json.loads(path.read_text()) for path in sorted(IR_PLANS_DIR.glob("*.json"))})
 
 # numbers that sit on the edges of what a float, a TOML integer or a physical quantity can be
@@ -235,3 +236,38 @@ env_options = st.fixed_dictionaries({}, optional={
     "initial_position_noise_m": st.one_of(option_numbers, st.sampled_from([0.05, 0.5, 1.5, 3.0, 20.0])),
     "render_width_px": st.one_of(st.integers(-10, 10_000), st.sampled_from([True, 600.0, "600"])),
 })
+
+
+# ----------------------------------------------------------------------- STL: white space and number extremes
+
+# white space the tokenizer must skip in linear time (20,000 trailing spaces once took 87 s), and the kinds it
+# must refuse (no-break and em spaces are not STL white space)
+WHITESPACE = [" ", "\t", "\n", "\r", "\f", "\v", "\r\n", "  ", "\u00a0", "\u2003", "\u3000", "\ufeff"]
+# numbers as the STL text writes them: beyond a float, below the smallest, not finite, long, signed, odd forms
+EXTREME_BOUNDS = ["0", "-0", "+5", "1e308", "1.7976931348623157e308", "1e309", "1e-400", "5e-324", "2.5e-324",
+                  "1e-9", "inf", "nan", "NaN", "-1", "0x10", "1_000", "1e", "1e+", ".", "00", "007", "1.", ".5e1",
+                  "9" * 400, "0." + "0" * 400 + "1", "1" + "0" * 5000, "1e99999999999999999999"]
+
+
+@st.composite
+def stl_extreme_texts(draw) -> str:
+    """A grammar formula with runs of white space (up to 20,000 characters) between and around its tokens, and
+    with its bounds replaced by extreme numbers."""
+    text = draw(formulas)
+    if draw(st.booleans()):  # extreme bounds
+        bounds = list(re.finditer(r"\[([^,\]]*),([^\]]*)\]", text))
+        for m in reversed(bounds[:4]):
+            lo = draw(st.one_of(st.sampled_from(EXTREME_BOUNDS), st.just(m.group(1))))
+            hi = draw(st.one_of(st.sampled_from(EXTREME_BOUNDS), st.just(m.group(2))))
+            text = text[:m.start()] + f"[{lo},{hi}]" + text[m.end():]
+    run = st.tuples(st.sampled_from(WHITESPACE), st.sampled_from([1, 2, 10, 1000, 20_000])).map(lambda t: t[0] * t[1])
+    tokens = text.split(" ")
+    for _ in range(draw(st.integers(0, 3))):  # runs between tokens
+        k = draw(st.integers(0, len(tokens)))
+        tokens.insert(k, draw(run))
+    text = " ".join(tokens)
+    if draw(st.booleans()):
+        text = draw(run) + text
+    if draw(st.booleans()):
+        text = text + draw(run)
+    return text

@@ -15,6 +15,7 @@ so it is fast and the same on every machine. The slow run keeps drawing fresh in
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shutil
@@ -27,28 +28,37 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, seed, settings
-from hypothesis import strategies as st
 
 import impact_env
 from impact_env.envs import TransportEnv
 from impact_env.stl import parse, robustness
 from impact_env.transport.scenario import load_scenario, scenario_from_dict
 from planners.plan import Plan
-from tests.fuzz import strategies as S
 from tests.fuzz.invariant import COUNTS, assert_finite, assert_inside, attempt, cpu_deadline, fly
 
-_TMP = Path(tempfile.mkdtemp(prefix="impact_env_fuzz_"))
+# Everything below that needs hypothesis (tests/fuzz/strategies.py), a scenario or an environment is made when
+# a fuzzer first runs, not when the suite is collected.
 STEPS = 12  # control periods flown per accepted scenario or option set
 DEFAULT_EXAMPLES = {"scenario_bytes": 150, "scenario_tree": 200, "stl_text": 400, "plan_file": 150, "gym_action": 300,
                     "pettingzoo_action": 300, "env_options": 100}
 _TRACE = {"O1": np.linspace([1.0, 2.0], [1.0, 8.0], 31), "R1": np.tile([1.0, 1.0], (31, 1)),
           "R2": np.tile([1.0, 9.0], (31, 1))}
-_REGIONS = load_scenario("corridor").region_map()
+
+
+@functools.cache
+def _tmp() -> Path:
+    """The folder the scenario-file fuzzer writes its files into (removed at the end of the module)."""
+    return Path(tempfile.mkdtemp(prefix="impact_env_fuzz_"))
+
+
+@functools.cache
+def _regions() -> dict:
+    return load_scenario("corridor").region_map()
 
 
 def teardown_module() -> None:
-    shutil.rmtree(_TMP, ignore_errors=True)
+    if _tmp.cache_info().currsize:
+        shutil.rmtree(_tmp(), ignore_errors=True)
 
 
 def fly_scenario(scenario) -> None:
@@ -62,7 +72,7 @@ def fly_scenario(scenario) -> None:
 
 def scenario_bytes(args: tuple[str, bytes]) -> None:
     name, data = args
-    path = _TMP / f"{name}.toml"
+    path = _tmp() / f"{name}.toml"
     path.write_bytes(data)
     scenario = attempt("scenario_bytes", lambda: load_scenario(path))
     if scenario is not None:
@@ -80,9 +90,11 @@ def stl_text(text: str) -> None:
     if formula is None:
         return
     assert parse(str(formula)) == formula, f"{text!r} printed as {str(formula)!r} parses differently"
-    rho = attempt("stl_text", lambda: robustness(formula, _TRACE, _REGIONS, dt=0.1))
+    rho = attempt("stl_text", lambda: robustness(formula, _TRACE, _regions(), dt=0.1))
     if rho is not None:
         assert not np.isnan(rho), f"robustness of {text!r} is NaN"
+    from tests.fuzz import strategies as S
+
     task = S.DICTS["corridor"] | {"task": text}
     scenario = attempt("stl_text", lambda: scenario_from_dict(task))
     if scenario is not None:
@@ -106,29 +118,37 @@ def plan_file(args: tuple[str, dict]) -> None:
             assert_finite(plan.velocity(body, t), f"{body} velocity")
 
 
-_GYM = TransportEnv("corridor")
-_PZ = impact_env.parallel_env(scenario="corridor")
+@functools.cache
+def _gym() -> TransportEnv:
+    return TransportEnv("corridor")
+
+
+@functools.cache
+def _pz():
+    return impact_env.parallel_env(scenario="corridor")
 
 
 def gym_action(action: Any) -> None:
-    _GYM.reset(seed=0)
-    result = attempt("gym_action", lambda: _GYM.step(action))
+    env = _gym()
+    env.reset(seed=0)
+    result = attempt("gym_action", lambda: env.step(action))
     if result is not None:
         obs, reward, *_ = result
         assert_finite(obs, "observation")
         assert_finite(reward, "reward")
-        assert_inside(_GYM)
+        assert_inside(env)
 
 
 def pettingzoo_action(actions: Any) -> None:
-    _PZ.reset(seed=0)
-    result = attempt("pettingzoo_action", lambda: _PZ.step(actions))
+    par = _pz()
+    par.reset(seed=0)
+    result = attempt("pettingzoo_action", lambda: par.step(actions))
     if result is not None:
         observations, rewards, *_ = result
         for agent in observations:
             assert_finite(observations[agent], f"observation of {agent}")
             assert_finite(rewards[agent], f"reward of {agent}")
-        assert_inside(_PZ)
+        assert_inside(par)
 
 
 def env_options(args: tuple[str, dict]) -> None:
@@ -147,22 +167,34 @@ def env_options(args: tuple[str, dict]) -> None:
                 assert_inside(par)
 
 
-scenario_names = st.sampled_from(S.SCENARIOS)
-FUZZERS: dict[str, tuple[st.SearchStrategy, Callable[[Any], None]]] = {
-    "scenario_bytes": (scenario_names.flatmap(lambda n: st.tuples(st.just(n), S.mutated_bytes(S.TEXTS[n]))),
-                       scenario_bytes),
-    "scenario_tree": (scenario_names.flatmap(lambda n: S.mutated_tree(S.DICTS[n], toml_safe=True)), scenario_tree),
-    "stl_text": (S.stl_texts(), stl_text),
-    "plan_file": (st.sampled_from(sorted(S.PLANS)).flatmap(lambda n: st.tuples(st.just(n), S.mutated_tree(S.PLANS[n]))),
-                  plan_file),
-    "gym_action": (S.actions, gym_action),
-    "pettingzoo_action": (S.agent_actions, pettingzoo_action),
-    "env_options": (st.tuples(scenario_names, S.env_options), env_options),
-}
+@functools.cache
+def fuzzers() -> dict[str, tuple[Any, Callable[[Any], None]]]:
+    """Each fuzzer's name -> (its hypothesis strategy, the property every drawn input must have)."""
+    from hypothesis import strategies as st
+
+    from tests.fuzz import strategies as S
+
+    scenario_names = st.sampled_from(S.SCENARIOS)
+    plans = st.sampled_from(sorted(S.PLANS))
+    found = {
+        "scenario_bytes": (scenario_names.flatmap(lambda n: st.tuples(st.just(n), S.mutated_bytes(S.TEXTS[n]))),
+                           scenario_bytes),
+        "scenario_tree": (scenario_names.flatmap(lambda n: S.mutated_tree(S.DICTS[n], toml_safe=True)),
+                          scenario_tree),
+        "stl_text": (S.stl_texts(), stl_text),
+        "plan_file": (plans.flatmap(lambda n: st.tuples(st.just(n), S.mutated_tree(S.PLANS[n]))), plan_file),
+        "gym_action": (S.actions, gym_action),
+        "pettingzoo_action": (S.agent_actions, pettingzoo_action),
+        "env_options": (st.tuples(scenario_names, S.env_options), env_options),
+    }
+    assert sorted(found) == sorted(DEFAULT_EXAMPLES), "every fuzzer needs its DEFAULT_EXAMPLES"
+    return found
 
 
 def hypothesis_test(name: str, max_examples: int, seed_value: int | None = None) -> Callable[[], None]:
-    strategy, prop = FUZZERS[name]
+    from hypothesis import HealthCheck, given, seed, settings
+
+    strategy, prop = fuzzers()[name]
 
     def counted(value: Any) -> None:
         COUNTS.setdefault(name, Counter())["inputs"] += 1
@@ -173,7 +205,7 @@ def hypothesis_test(name: str, max_examples: int, seed_value: int | None = None)
     return test if seed_value is None else seed(seed_value)(test)
 
 
-@pytest.mark.parametrize("name", sorted(FUZZERS))
+@pytest.mark.parametrize("name", sorted(DEFAULT_EXAMPLES))
 def test_fuzz(name):
     hypothesis_test(name, DEFAULT_EXAMPLES[name])()
     assert COUNTS[name]["inputs"] >= DEFAULT_EXAMPLES[name]
@@ -181,7 +213,7 @@ def test_fuzz(name):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", sorted(FUZZERS))
+@pytest.mark.parametrize("name", sorted(DEFAULT_EXAMPLES))
 def test_fuzz_long(name):
     budget = float(os.environ.get("IMPACT_ENV_FUZZ_SECONDS", "60"))
     start = time.monotonic()

@@ -37,6 +37,7 @@ from planners.tether.expert import TetherExpert
 from planners.tether.plan import TetherPlan
 from tests.fuzz import strategies as S
 from tests.fuzz.invariant import COUNTS, assert_finite, attempt, cpu_deadline
+from tests.paths import DATA
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -46,7 +47,7 @@ else:  # pragma: no cover
 STATIONS = tuple(station_names())
 TEXTS = {n: resources.files("impact_env.tether.stations").joinpath(f"{n}.toml").read_text() for n in STATIONS}
 DICTS = {n: tomllib.loads(t) for n, t in TEXTS.items()}
-PLANS_DIR = Path(__file__).resolve().parents[1] / "data" / "plans" / "tether"
+PLANS_DIR = DATA / "plans" / "tether"
 PLANS = {p.stem: json.loads(p.read_text()) for p in sorted(PLANS_DIR.glob("*.json"))}
 STEPS = 8  # control periods flown per accepted station, per fidelity
 DEFAULT_EXAMPLES = {"station_bytes": 60, "station_tree": 80, "tether_plan": 40, "tether_gym_action": 150,

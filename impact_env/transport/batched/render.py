@@ -9,15 +9,18 @@ an obstacle) where they are now, as :func:`impact_env.transport.rendering.impact
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from impact_env.transport.rendering import FLASH_S
 
 if TYPE_CHECKING:
-    from impact_env.transport.batched.world import BatchedTransportWorld
     from impact_env.transport.rendering import RenderFrame
+
+# the world is typed Any here: world.py imports this module (render_rgb), and the import contracts allow no
+# cycle inside the package, not even one for type checking only
+BatchedTransportWorld = Any
 
 
 def make_frame(world: BatchedTransportWorld, env_index: int) -> RenderFrame:

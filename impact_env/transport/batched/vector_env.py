@@ -22,8 +22,10 @@ an episode is both terminated and truncated.
 an env's frame only when it is read, so ``gymnasium.wrappers.vector.RecordVideo(envs, folder,
 record_first_only=True)`` draws one env per step of a batch of thousands (without ``record_first_only`` it
 tiles every env: keep such batches small).
-torch is imported here only: ``import impact_env`` stays free of it, and the id's registration names this
-module as a string.
+torch is imported here only: ``import impact_env`` stays free of it, and the ids' registration names
+:func:`impact_env.transport.vector_entry.make_vector_env`, which imports this module when a vector env is made.
+``gymnasium.make_vec(id, num_envs=N)`` without a mode picks it too (Gymnasium prefers an id's vector entry
+point); ``vectorization_mode="sync"`` makes N pymunk envs.
 """
 
 from __future__ import annotations
@@ -128,6 +130,12 @@ class TransportVectorEnv(VectorEnv):
             out[f"_{key}"] = mask.copy()
         return out
 
+    def _state_info(self) -> dict[str, torch.Tensor]:
+        """The info of envs that did not move (just reset): their current values, no impacts."""
+        w = self.world
+        return {"robustness": w.robustness, "is_success": w.robustness > 0.0, "fuel_Ns": w.fuel_Ns,
+                "time_s": w.step_count.to(w.dtype) * w.dt_s, "impacts": torch.zeros_like(w.step_count)}
+
     def reset(self, *, seed: int | Sequence[int] | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every env (``seed``: env i gets seed + i, or one seed per env); ``options`` must be None or
@@ -145,16 +153,21 @@ class TransportVectorEnv(VectorEnv):
         done = np.ones(self.num_envs, dtype=bool) if mask is None else mask
         self._autoreset[done] = False
         self._elapsed[done] = 0
-        w = self.world
-        info = {"robustness": w.robustness, "is_success": w.robustness > 0.0, "fuel_Ns": w.fuel_Ns,
-                "time_s": w.step_count.to(w.dtype) * w.dt_s, "impacts": torch.zeros_like(w.step_count)}
-        return obs.cpu().numpy(), self._infos(info, done)
+        return obs.cpu().numpy(), self._infos(self._state_info(), done)
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """One step of every env; the envs whose episode ended at the previous step are reset instead."""
         self._moves += 1
         resetting = self._autoreset.copy()
         a = torch.as_tensor(np.asarray(actions), device=self.world.device)
+        if resetting.all():  # every episode ended together (the usual case: one horizon): nothing moves
+            self.world._check_actions(a)
+            self._elapsed[:] = 0
+            obs = self.world.reset()
+            zeros = np.zeros(self.num_envs)
+            self._autoreset[:] = False
+            return obs.cpu().numpy(), zeros, zeros.astype(bool), zeros.astype(bool), self._infos(
+                self._state_info(), np.ones(self.num_envs, bool))
         if resetting.any():
             m = torch.as_tensor(resetting, device=self.world.device)
             self.world.reset(mask=m)
@@ -187,6 +200,3 @@ class TransportVectorEnv(VectorEnv):
             world._renderers.clear()
 
 
-def make_vector_env(scenario: Scenario | str | None = None, num_envs: int = 1, **kwargs: Any) -> TransportVectorEnv:
-    """The vector entry point of every impact-transport id (``gymnasium.make_vec(..., "vector_entry_point")``)."""
-    return TransportVectorEnv(scenario, num_envs, **kwargs)

@@ -173,6 +173,9 @@ class BatchedTransportWorld:
         self.last_impact_step = torch.full((lay.n_contacts, N), _NEVER, **int64)
         self._obs: torch.Tensor | None = None
         self._renderers: dict[int, Any] = {}
+        # called after each substep of the reference kernel with (substep, rows before, rows after, its impact
+        # noise or None): how BatchedOneEnv rebuilds the impact events (one_env.py)
+        self._substep_hook: Any = None
         self.compiled = bool(compile)
         self._epilogue, self._fused_period = self._epilogue_impl, None
         self._fused = FusedKernel(self.scene, dtype)
@@ -357,8 +360,12 @@ class BatchedTransportWorld:
         ended = torch.zeros(self.layout.n_contacts, rows.shape[1], device=self.device, dtype=self.dtype)
         if self.reference.clear_of_contacts(rows, torch.sqrt(w[0] * w[0] + w[1] * w[1]), self.dt_s):
             return self.reference.free_flight(rows, force), ended  # saves the detection ops of a calm period
+        hook = self._substep_hook
         for s in range(self.scene.substeps):
-            rows, ended = self.reference.substep(rows, ended, force[:, s], None if noise is None else noise[s])
+            new, ended = self.reference.substep(rows, ended, force[:, s], None if noise is None else noise[s])
+            if hook is not None:
+                hook(s, rows, new, None if noise is None else noise[s])
+            rows = new
         return rows, ended
 
     def _fused_period_impl(self, a: torch.Tensor, ang: torch.Tensor, omg: torch.Tensor, key0: torch.Tensor,

@@ -69,10 +69,10 @@ class LinExpr:
     def __truediv__(self, k: float) -> LinExpr:
         return self * (1.0 / float(k))
 
-    def __le__(self, other: LinExpr | float) -> Constraint:  # type: ignore[override]
+    def __le__(self, other: LinExpr | float) -> Constraint:
         return Constraint(self - other, -INF, 0.0)
 
-    def __ge__(self, other: LinExpr | float) -> Constraint:  # type: ignore[override]
+    def __ge__(self, other: LinExpr | float) -> Constraint:
         return Constraint(self - other, 0.0, INF)
 
     def __eq__(self, other: LinExpr | float) -> Constraint:  # type: ignore[override]

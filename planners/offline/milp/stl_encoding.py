@@ -90,12 +90,18 @@ class STLEncoder:
             every point of the body at least m beyond a face of the region has robustness >= m: use m, a
             constant, instead of encoding the faces again. Only for a planner that requires the task's
             robustness >= 0 and does not maximise it (the impact-robust one): the value is a lower bound.
+        lp_optimum: the optimal objective of a small LP, or None where it is not proven
+            (:func:`planners.offline.solvers.lp_optimum`): the bound of an ``in`` predicate is the Chebyshev
+            radius of its region within the body's box. Given by the planner, so that this model-building
+            layer needs no solver (the solvers take its models).
     """
 
     def __init__(self, model: Model, grid: Grid, points: Callable[[str, int], list[PointSet]],
                  boxes: dict[str, tuple[float, float, float, float]], regions: dict[str, ConvexPolygon],
-                 bound_propagation: bool = True, reuse_clearance: bool = False) -> None:
+                 bound_propagation: bool = True, reuse_clearance: bool = False, *,
+                 lp_optimum: Callable[[Model], float | None]) -> None:
         self.model, self.grid, self.points, self.boxes, self.regions = model, grid, points, boxes, regions
+        self.lp_optimum = lp_optimum
         self.bound_propagation = bound_propagation
         self.reuse_clearance = reuse_clearance
         self._clearance: dict[tuple[str, str, int], float] = {}
@@ -109,7 +115,8 @@ class STLEncoder:
         # its object lives, and the negation normal form of each conjunct is a new tree that the caller drops
         # once it is encoded. Keyed by the ids of dead nodes, a later conjunct's node allocated at a freed
         # address was given an earlier conjunct's encoding (two_objects: R2's pillar constraint became R1's),
-        # depending on the heap, i.e. on what the process had done before (tests/test_determinism.py).
+        # depending on the heap, i.e. on what the process had done before
+        # (tests/planners/offline/milp/test_stl_encoding.py).
         self._memo: dict[tuple[int, int], tuple[Formula, LinExpr]] = {}  # (id(node), k) -> (node, robustness)
         self._ub: dict[int, tuple[LinExpr, float]] = {}  # id(r) -> (r, an upper bound of its value)
         self._pred_ub: dict[tuple[str, str, bool], float] = {}
@@ -141,16 +148,13 @@ class STLEncoder:
             poly = self.regions[region]
             x0, x1, y0, y1 = self.boxes[body]
             if inside:
-                from planners.offline.solvers import solve
-                from planners.offline.solvers.base import Status
-
                 lp = Model(name="chebyshev")
                 cx, cy, r = lp.add_var(x0, x1), lp.add_var(y0, y1), lp.add_var(-self.bound, self.bound)
                 for n, b in zip(poly.normals, poly.offsets):
                     lp.add(cx * float(n[0]) + cy * float(n[1]) + r <= float(b), group="faces")
                 lp.set_objective(r, maximize=True)
-                result = solve(lp, "highs")
-                ub = float(result.objective) + 1e-9 if result.status == Status.OPTIMAL else self.bound
+                optimum = self.lp_optimum(lp)
+                ub = optimum + 1e-9 if optimum is not None else self.bound
             else:
                 corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
                 ub = float(np.max(corners @ poly.normals.T - poly.offsets)) + 1e-9

@@ -22,7 +22,8 @@ _INSTALL_HINTS = {
     "gurobi": "Gurobi needs gurobipy and a Gurobi licence: pip install 'impact_env[gurobi]'",
 }
 
-__all__ = ["SOLVERS", "Progress", "SolveResult", "SolverOptions", "Status", "available_solvers", "solve"]
+__all__ = ["SOLVERS", "Progress", "SolveResult", "SolverOptions", "Status", "available_solvers", "lp_optimum",
+           "solve"]
 
 
 def available_solvers() -> list[str]:
@@ -44,3 +45,11 @@ def solve(model: Model, solver: str = "highs", options: SolverOptions | None = N
         raise SolverNotAvailableError(f"{_INSTALL_HINTS[solver]} ({err})") from err
     backend = importlib.import_module(f"planners.offline.solvers.{solver}")
     return backend.solve(model, options)
+
+
+def lp_optimum(model: Model, solver: str = "highs") -> float | None:
+    """The optimal objective of a small ``model`` (an LP), None if the solver does not prove it optimal: what
+    the STL encoder's bound propagation needs (:class:`planners.offline.milp.stl_encoding.STLEncoder`, which
+    the planners give this function to)."""
+    result = solve(model, solver)
+    return float(result.objective) if result.status == Status.OPTIMAL else None

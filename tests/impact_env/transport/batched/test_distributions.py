@@ -1,0 +1,34 @@
+"""Random-action episodes under 5 % thrust noise and 5 cm start noise: the final robustness of the batched
+world and of the pymunk env have the same distribution (two-sample Kolmogorov-Smirnov test, alpha = 0.01).
+
+The two draw their noise from different generators (Philox against numpy), so only distributions can
+agree. The functions are :mod:`benchmarks.batched_parity`'s (1,000 episodes per scenario there): 30 episodes
+of two short scenarios in the default suite, 200 of every shipped scenario in the slow suite; the p-values are
+printed."""
+
+from __future__ import annotations
+
+import pytest
+
+from benchmarks.batched_parity import ALPHA, compare
+from impact_env.transport.scenario import scenario_names
+
+FAST = ("throw_and_catch_exp", "two_objects")  # the shortest horizons, one with two objects
+
+
+def check(name: str, episodes: int) -> None:
+    cell = compare(name, episodes)
+    print(f"{name}: KS p = {cell['ks_pvalue']:.3f} ({episodes} episodes each; mean final robustness "
+          f"pymunk {cell['pymunk_mean_m']:.3f} m, batched {cell['batched_mean_m']:.3f} m)")
+    assert cell["ks_pvalue"] > ALPHA
+
+
+@pytest.mark.parametrize("name", FAST)
+def test_final_robustness_distribution_matches_pymunk(name):
+    check(name, 30)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", scenario_names())
+def test_final_robustness_distribution_matches_pymunk_200_episodes(name):
+    check(name, 200)

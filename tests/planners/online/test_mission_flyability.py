@@ -1,0 +1,263 @@
+"""Mission re-plans the robots can fly (planners/online/mission.py): a re-plan is accepted only when every robot
+can fly its next segment with a margin of its thrust (planners.online.reachability.next_contacts) and every
+side switch has the time and the thrust (planners.online.side_switch); an impact the prediction drops without
+it being decisively lost does not let a re-plan in; an impact-robust plan is re-planned impact-robust."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from impact_env.transport.scenario import load_scenario
+from planners.errors import PlannerError, ReplanInputError
+from planners.online import mission as mission_module
+from planners.online.mission import MissionConfig, MissionPlanner, resample_plan
+from planners.online.reachability import box_reachable, contact_reachable, next_contacts
+from planners.online.sampling import PlanSampler
+from planners.online.side_switch import side_switches, switch_segment_feasible, unflyable_side_switches
+from planners.plan import Plan, PlannedImpact
+from tests.paths import DATA
+
+RELAY_PLAN = DATA / "plans" / "robustness" / "relay.json"
+T_CHECK = 20.0
+DONE = {0, 1}  # relay: R1's push at 10 s and R3's slow-down at 15 s observed; R3's push at 25 s is next
+
+
+def impact(t, robot, obj, before, after, position=(2.0, 3.0)) -> PlannedImpact:
+    return PlannedImpact(t, robot, obj, position, before, after, (0.0, 0.0), (0.0, 0.0))
+
+
+def file_model(scenario):
+    return lambda robot, obj: (scenario.restitution, (scenario.body(robot).mass_kg, scenario.body(obj).mass_kg))
+
+
+# ------------------------------------------------------------------------------------------- side switches
+@pytest.fixture(scope="module")
+def two_objects():
+    return load_scenario("two_objects")  # discs of 0.2 m, 16.8 kg, 0.3 m/s and 2.8 N per axis, e = 0.6
+
+
+def test_the_issues_hand_over_needs_a_margin_of_time(two_objects):
+    """The hand-over of the issue: from behind the object to its front, 9.1 s needed of the 10 s there. Without
+    a margin it passes; with the default 0.8 (8 s usable) it does not."""
+    away = 0.3 - math.pi * 0.4 / 9.1  # the object's speed away from the robot that makes getting round 9.1 s
+    plan = Plan("hand-made", "sr", 0.0, {}, [impact(18.0, "R2", "O2", (0.0, 0.0), (-away, 0.0)),
+                                              impact(28.0, "R2", "O2", (-away, 0.0), (0.0, 0.0))])
+    (sw,) = side_switches(plan)
+    assert sw.time_to_get_round_s(two_objects.body("R2"), two_objects.body("O2")) == pytest.approx(9.1)
+    assert unflyable_side_switches(plan, two_objects) == []
+    assert unflyable_side_switches(plan, two_objects, margin=0.8) == [sw]
+
+
+def stop_then_push(duration_s: float) -> Plan:
+    """R1 stops O1 (0.2 m/s along x) from the front at 8 s and pushes it on from behind ``duration_s`` later."""
+    return Plan("hand-made", "sr", 0.0, {}, [impact(8.0, "R1", "O1", (0.2, 0.0), (0.0, 0.0)),
+                                              impact(8.0 + duration_s, "R1", "O1", (0.0, 0.0), (0.2, 0.0))])
+
+
+def test_the_closed_form_refuses_a_switch_the_arc_allows(two_objects):
+    """Getting round an object at rest takes 4.2 s by the arc; but the robot, which leaves the stop moving with
+    the object's side, must also get 0.8 m behind it and up to the push speed (0.25 m/s): in 6 s no segment
+    does that even at full thrust, in 9 s one does at full thrust and none at 80 %."""
+    model = file_model(two_objects)
+    state = {"R1": np.zeros(6)}
+    robot, obj = two_objects.body("R1"), two_objects.body("O1")
+    short, long = stop_then_push(6.0), stop_then_push(9.0)
+    assert unflyable_side_switches(short, two_objects, 7.0, margin=1.0) == []  # the arc alone: flyable
+    assert len(unflyable_side_switches(short, two_objects, 7.0, 1.0, state, model)) == 1
+    (sw,) = side_switches(long)
+    assert switch_segment_feasible(sw, long, robot, obj, 7.0, state["R1"], model, 1.0)
+    assert not switch_segment_feasible(sw, long, robot, obj, 7.0, state["R1"], model, 0.8)
+    assert unflyable_side_switches(long, two_objects, 7.0, 0.8, state, model) == [sw]
+
+
+def test_the_switch_segment_starts_from_the_observed_state_once_the_first_contact_is_past(two_objects):
+    model = file_model(two_objects)
+    (sw,) = side_switches(stop_then_push(9.0))
+    robot, obj = two_objects.body("R1"), two_objects.body("O1")
+    behind = np.array([2.0 - 0.4 - 0.25 * 6.0, 3.0, 0.0, 0.25, 0.0, 0.0])  # already behind, at the push speed
+    assert switch_segment_feasible(sw, stop_then_push(9.0), robot, obj, 11.0, behind, model, 0.8)
+
+
+def test_box_reachable_keeps_a_velocity_bound():
+    """From rest, 1 m in 4 s at 1 m/s^2: reachable; not with a bound of 0.2 m/s (4 s at 0.2 m/s is 0.8 m), nor
+    when the robot is already faster than the bound; with zero tolerances it is bounds_feasible."""
+    from planners.online.segment_feasibility import bounds_feasible
+
+    args = ((0.0, 0.0), (0.0, 0.0), (1.0, 0.0), (0.0, 0.0), 4.0, 10, (1.0, 1.0))
+    assert box_reachable(*args)
+    assert not box_reachable(*args, velocity_bound=(0.2, 0.2))
+    assert box_reachable(*args, velocity_bound=(0.5, 0.5))
+    assert not box_reachable((0, 0), (0.3, 0), (1.0, 0), (0.0, 0), 4.0, 10, (1.0, 1.0), velocity_bound=(0.2, 0.2))
+    for bound in ((0.2, 0.2), (0.3, 0.3), (0.5, 0.5)):
+        assert box_reachable(*args, velocity_bound=bound) == bounds_feasible(*args[:6], bound, args[6])
+
+
+# ------------------------------------------------------------------------------------- the next contacts
+@pytest.fixture(scope="module")
+def relay():
+    scenario = load_scenario("relay")
+    plan = Plan.from_dict(json.loads(RELAY_PLAN.read_text()))
+    return scenario, plan, {b.name: i for i, b in enumerate(scenario.bodies)}
+
+
+def plan_states(plan: Plan, index: dict[str, int], t: float) -> np.ndarray:
+    sampler = PlanSampler(plan)
+    out = np.zeros((len(index), 6))
+    for name, i in index.items():
+        out[i, [0, 1, 3, 4]] = sampler.state(name, np.array([t]))[0]
+    return out
+
+
+def hard_contact_states(relay) -> np.ndarray:
+    """The plan's states at 20 s with R3 at rest on the line of its contact velocity at 25 s, as far back as
+    makes the contact need between 80 % and 100 % of its thrust (a bisection on the distance)."""
+    scenario, plan, index = relay
+    states = plan_states(plan, index, T_CHECK)
+    push = plan.impacts[2]
+    r3, o1 = scenario.body("R3"), scenario.body("O1")
+    model = file_model(scenario)
+    contact = contact_reachable(T_CHECK, push, plan, r3, states[index["R3"]], o1, states[index["O1"]],
+                                *model("R3", "O1"), True).contact
+    direction = contact.robot_velocity_before / np.linalg.norm(contact.robot_velocity_before)
+
+    def verdicts(distance):
+        s = states.copy()
+        s[index["R3"], :2], s[index["R3"], 3:5] = contact.robot_position - distance * direction, 0.0
+        return [contact_reachable(T_CHECK, push, plan, r3, s[index["R3"]], o1, s[index["O1"]], *model("R3", "O1"),
+                                  True, 0.0, 0.0, 0.0, scale, speed_limited=True).reachable for scale in (0.9, 1.0)], s
+
+    low, high = 0.0, 3.0  # reachable at 90 % of the thrust at low, not even at 100 % at high
+    for _ in range(40):
+        mid = (low + high) / 2
+        low, high = (mid, high) if verdicts(mid)[0][0] else (low, mid)
+    return verdicts(low)[1]
+
+
+def test_a_next_contact_that_needs_more_than_the_margin_is_not_flyable(relay):
+    scenario, plan, index = relay
+    states = hard_contact_states(relay)
+    model = file_model(scenario)
+    by_name = {name: states[i] for name, i in index.items()}
+    strict = next_contacts(T_CHECK, plan, scenario.robots, scenario.body, by_name, model, True, 0.8, 0.0, 0.0)
+    assert [(v.impact.robot, v.reachable) for v in strict] == [("R1", True), ("R2", True), ("R3", False)]
+    full = next_contacts(T_CHECK, plan, scenario.robots, scenario.body, by_name, model, True, 1.0, 0.0, 0.0)
+    assert all(v.reachable for v in full)
+    mission = MissionPlanner(scenario, plan, MissionConfig(reach_tolerance_m=0.0, reach_tolerance_mps=0.0),
+                             aim_final_position=True)
+    (reason,) = mission.unflyable(plan, T_CHECK, states, index, model)
+    assert reason == "next contact R3-O1 at 25.00 s out of reach with 80 % of the thrust"
+    lenient = MissionPlanner(scenario, plan, MissionConfig(reach_tolerance_m=0.0, reach_tolerance_mps=0.0,
+                                                           flyability_margin=1.0), aim_final_position=True)
+    assert lenient.unflyable(plan, T_CHECK, states, index, model) == []
+
+
+def test_a_replan_the_robots_cannot_fly_keeps_the_current_plan(relay, monkeypatch):
+    """The planner (stubbed: it returns the current plan's remainder, with more robustness than predicted) gives
+    a plan whose R3 contact at 25 s needs 80-100 % of R3's thrust: kept, with the reason, after the re-plan
+    without end states was tried too; with a margin of 1 it is accepted."""
+    scenario, plan, index = relay
+    states = hard_contact_states(relay)
+    calls = []
+
+    def planner(derived, config):
+        calls.append(derived)
+        return dataclasses.replace(resample_plan(plan, T_CHECK, scenario.tf_s, config.intervals, config.robot_degree),
+                                   robustness=0.3)
+
+    monkeypatch.setattr(mission_module, "plan_spatially_robust", planner)
+    exact = dict(reach_tolerance_m=0.0, reach_tolerance_mps=0.0)
+    for margin, accepted in ((0.8, False), (1.0, True)):
+        calls.clear()
+        mission = MissionPlanner(scenario, plan, MissionConfig(flyability_margin=margin, **exact),
+                                 aim_final_position=True)
+        mission.trace = [states[:, :2]] * (round(T_CHECK / scenario.control_period_s) + 1)
+        new = mission._replan(T_CHECK, states, index, plan, 0.1, 0.2, None, file_model(scenario))
+        record = mission.records[0]
+        assert (new is not None) is accepted
+        if accepted:
+            assert record.status == "accepted" and len(calls) == 1
+        else:
+            assert record.status == "kept: not flyable" and len(calls) == 2  # then without end states
+            assert all(r.endswith("next contact R3-O1 at 25.00 s out of reach with 80 % of the thrust")
+                       for r in record.rejected) and len(record.rejected) == 2
+
+
+def test_flyability_margin_is_validated():
+    for bad in (0.0, 1.5, -0.2, math.nan):
+        with pytest.raises(PlannerError, match=r"MissionConfig\.flyability_margin must be a finite number in "):
+            MissionConfig(flyability_margin=bad)
+    with pytest.raises(PlannerError, match="MissionConfig.impact_robust_replans must be True or False"):
+        MissionConfig(impact_robust_replans="yes")
+    with pytest.raises(ReplanInputError, match="thrust_scale must be a finite number > 0"):
+        scenario = load_scenario("relay")
+        plan = Plan.from_dict(json.loads(RELAY_PLAN.read_text()))
+        contact_reachable(20.0, plan.impacts[2], plan, scenario.body("R3"), np.zeros(6), scenario.body("O1"),
+                          np.zeros(6), 0.75, (16.8, 16.8), thrust_scale=0.0)
+
+
+# -------------------------------------------------------------------------- impacts dropped, not decisively
+def test_a_false_drop_no_longer_replaces_a_good_plan():
+    """relay, the paper's stack with mission replanning, combined condition, seed 17 (e = 0.95 where the file
+    has 0.75): computed with the file's restitution, R3's push at 30 s looked out of reach from 25.1 s, and the
+    re-plan it let in ended the episode at +0.002 m. Within reach with 1 / 0.8 of the thrust, the drop is not
+    decisive: the prediction that keeps the push stays above the threshold, and the plan is flown (+0.398 m,
+    as without the check)."""
+    from benchmarks.robustness import env_options, expert_config
+    from impact_env.rollout import run_episode
+    from impact_env.transport.gym_env import TransportEnv
+    from planners.expert import Expert
+
+    scenario = load_scenario("relay")
+    expert = Expert(scenario, plan=Plan.from_dict(json.loads(RELAY_PLAN.read_text())), config=expert_config("+mission"))
+    result = run_episode(TransportEnv(scenario, **env_options(scenario, "combined", 0.0, 17)), expert, seed=17)
+    assert result.success and result.robustness > 0.39
+    report = expert.report()["mission"]
+    assert report["unreachable"] > 0 and report["replans"] == 0
+
+
+# ----------------------------------------------------------------------------- impact-robust re-plans
+def corridor_ir_replan(config: MissionConfig):
+    """A re-plan of the corridor's impact-robust plan at 25 s, the object 20 % slow after the first push."""
+    scenario = load_scenario("corridor")
+    plan = Plan.load(DATA / "plans" / "ir" / "corridor.json")
+    index = {b.name: i for i, b in enumerate(scenario.bodies)}
+    t = 25.0
+    sampler, dt = PlanSampler(plan), scenario.control_period_s
+    mission = MissionPlanner(scenario, plan, config, aim_final_position=True)
+    mission.trace = [np.array([sampler.position(b.name, k * dt) for b in scenario.bodies])
+                     for k in range(round(t / dt) + 1)]
+    states = plan_states(plan, index, t)
+    states[index["O1"], 3:5] *= 0.8
+    return plan, mission, mission._replan(t, states, index, plan, -1.0, 0.1, None, None)
+
+
+@pytest.mark.slow
+def test_a_replan_of_an_impact_robust_plan_is_impact_robust():
+    plan, mission, new = corridor_ir_replan(MissionConfig())
+    record = mission.records[0]
+    assert record.status == "accepted" and record.planner == "ir" and record.impact_robust == ""
+    spliced, done = new
+    assert spliced.planner == "ir" and spliced.delta_mps > 0
+    assert spliced.funnels["O1"].t0_s == 25.0  # shifted with the remainder
+    assert spliced.copies and all(c.window_start_s >= 25.0 for c in spliced.copies)
+    pending = [i for i in spliced.impacts if i.time_s > 25.0]
+    assert sorted(c.time_s for c in spliced.copies) == sorted(i.time_s for i in pending)
+    assert done == {0}  # the push at 20 s
+
+
+def test_when_the_impact_robust_planner_finds_nothing_the_replan_is_spatially_robust_and_says_why():
+    """One branch-and-bound node is not enough for the impact-robust planner: the re-plan falls back to the
+    spatially robust planner, and the record says why."""
+    from planners.offline.solvers.base import SolverOptions
+
+    budget = SolverOptions(node_limit=1, time_limit_s=60.0, threads=1)
+    _, mission, new = corridor_ir_replan(MissionConfig(solver_options=budget))
+    record = mission.records[0]
+    assert record.impact_robust.startswith("the impact-robust planner")
+    if new is not None:
+        assert record.planner == "sr" and new[0].planner == "sr" and not new[0].copies
