@@ -202,13 +202,16 @@ def _episodes(batch) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
     return returns, torch.full_like(returns, float("nan")), None  # VMAS: no success flag in the batch
 
 
-def curve_logger(curve: Path):
-    """A BenchMARL callback that writes one line of ``curve`` per collected batch; the wall clock is carried
-    through checkpoints (its class is made here, so that this module imports without BenchMARL)."""
+def _curve_logger_class() -> type:
+    """:class:`CurveLogger`, a BenchMARL callback made on first use (so that this module imports without
+    BenchMARL) and kept as this module's ``CurveLogger``, where pickle (BenchMARL pickles its callbacks) finds
+    it."""
+    if "CurveLogger" in globals():
+        return globals()["CurveLogger"]
     from benchmarl.experiment.callback import Callback
 
     class CurveLogger(Callback):
-        """One line of ``curve`` per collected batch."""
+        """One line of ``curve`` per collected batch; the wall clock is carried through checkpoints."""
 
         def __init__(self, curve: Path) -> None:
             super().__init__()
@@ -242,7 +245,15 @@ def curve_logger(curve: Path):
             self.wall_before = float(state_dict.get("impact_env_wall_s", 0.0))
             self.t0 = time.perf_counter()
 
-    return CurveLogger(curve)
+    CurveLogger.__qualname__ = "CurveLogger"
+    globals()["CurveLogger"] = CurveLogger
+    return CurveLogger
+
+
+def __getattr__(name: str) -> Any:
+    if name == "CurveLogger":
+        return _curve_logger_class()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _latest_checkpoint(folder: Path) -> Path | None:
@@ -331,7 +342,7 @@ def run(cfg: MarlConfig, out: Path) -> dict:
     (out / "config.json").write_text(json.dumps(asdict(cfg), indent=1), encoding="utf-8")
     curve = out / "curve.jsonl"
     restore = _latest_checkpoint(out)
-    logger = curve_logger(curve)
+    logger = _curve_logger_class()(curve)
     if restore is None:
         curve.unlink(missing_ok=True)
     else:
