@@ -253,7 +253,9 @@ def test_on_ray_the_benchmarks_job_functions_travel_by_value(tmp_path):
         cloudpickle.unregister_pickle_by_value(benchmarks)
     code = ("import pickle, sys, types\n"
             "f = pickle.loads(sys.stdin.buffer.read())\n"
-            "try:\n    import benchmarks\nexcept ImportError:\n    pass\nelse:\n    raise SystemExit('importable')\n"
+            # this repository's benchmarks, not the top-level benchmarks/ folder torchrl 0.11's wheel installs
+            "try:\n    import benchmarks.robustness\nexcept ImportError:\n    pass\n"
+            "else:\n    raise SystemExit('importable')\n"
             "print(f(types.SimpleNamespace(restitution=0.75), 'e', 0.1, 1))")
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     done = subprocess.run([sys.executable, "-c", code], input=payload, cwd=tmp_path, env=env, capture_output=True,
