@@ -14,9 +14,12 @@ machine is busy, it does fire on a loop that never ends, and it leaves pytest-ti
 from __future__ import annotations
 
 import contextlib
+import json
 import math
+import os
 import signal
 import threading
+import time
 from collections import Counter
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -101,3 +104,45 @@ def fly(env: Any, steps: int, seed: int = 0) -> None:
         assert_inside(env)
         if terminated or truncated:
             break
+
+
+# ------------------------------------------------------------------------------------ running a fuzzer
+def hypothesis_test(name: str, strategy: Any, prop: Callable[[Any], None], max_examples: int,
+                    seed_value: int | None = None) -> Callable[[], None]:
+    """A hypothesis test of ``prop`` over ``strategy`` that counts its inputs in COUNTS[name]: derandomized
+    (the default suite's fixed inputs), or seeded with ``seed_value`` (the long runs' fresh ones)."""
+    from hypothesis import HealthCheck, given, seed, settings
+
+    def counted(value: Any) -> None:
+        COUNTS.setdefault(name, Counter())["inputs"] += 1
+        prop(value)
+
+    test = settings(max_examples=max_examples, deadline=None, database=None, derandomize=seed_value is None,
+                    suppress_health_check=list(HealthCheck), print_blob=True)(given(strategy)(counted))
+    return test if seed_value is None else seed(seed_value)(test)
+
+
+def fuzz_fixed(name: str, strategy: Any, prop: Callable[[Any], None], examples: int) -> None:
+    """The default suite's run: ``examples`` derandomized inputs, all of them drawn, reported."""
+    hypothesis_test(name, strategy, prop, examples)()
+    assert COUNTS[name]["inputs"] >= examples
+    report(name, COUNTS[name], slow=False)
+
+
+def fuzz_for_budget(name: str, strategy: Any, prop: Callable[[Any], None], per_round: int) -> None:
+    """The slow suite's run: fresh seeds, ``per_round`` inputs a round, for IMPACT_ENV_FUZZ_SECONDS (60 s)."""
+    budget = float(os.environ.get("IMPACT_ENV_FUZZ_SECONDS", "60"))
+    start = time.monotonic()
+    round_ = 0
+    while time.monotonic() - start < budget:
+        hypothesis_test(name, strategy, prop, per_round, seed_value=int(time.time_ns() % 2 ** 32) + round_)()
+        round_ += 1
+    report(name, COUNTS[name], slow=True, seconds=time.monotonic() - start)
+
+
+def report(name: str, counts, slow: bool, seconds: float | None = None) -> None:
+    """One JSON line per fuzzer in IMPACT_ENV_FUZZ_REPORT (if set); tests/fuzz/conftest.py prints the table."""
+    path = os.environ.get("IMPACT_ENV_FUZZ_REPORT")
+    if path:
+        with open(path, "a") as f:
+            f.write(json.dumps({"fuzzer": name, "slow": slow, "seconds": seconds, **counts}) + "\n")

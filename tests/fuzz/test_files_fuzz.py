@@ -21,7 +21,6 @@ import os
 import shutil
 import struct
 import tempfile
-import time
 import uuid
 import warnings
 import zipfile
@@ -32,7 +31,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 from impact_env.errors import OutputPathError
@@ -44,7 +42,7 @@ from impact_env.transport.scenario import load_scenario, scenario_from_dict
 from planners.plan import Plan
 from planners.tether.plan import TetherPlan, is_tether_plan_file
 from tests.fuzz import strategies as S
-from tests.fuzz.invariant import COUNTS, assert_finite, attempt, cpu_deadline
+from tests.fuzz.invariant import COUNTS, assert_finite, attempt, cpu_deadline, fuzz_fixed, fuzz_for_budget
 from tests.fuzz.test_fuzz import fly_scenario
 from tests.paths import DATA
 
@@ -415,43 +413,15 @@ FUZZERS: dict[str, tuple[st.SearchStrategy, Callable[[Any], None]]] = {
 }
 
 
-def hypothesis_test(name: str, max_examples: int, seed_value: int | None = None) -> Callable[[], None]:
-    strategy, prop = FUZZERS[name]
-
-    def counted(value: Any) -> None:
-        COUNTS.setdefault(name, Counter())["inputs"] += 1
-        prop(value)
-
-    test = settings(max_examples=max_examples, deadline=None, database=None, derandomize=seed_value is None,
-                    suppress_health_check=list(HealthCheck), print_blob=True)(given(strategy)(counted))
-    return test if seed_value is None else seed(seed_value)(test)
-
-
 @pytest.mark.parametrize("name", sorted(FUZZERS))
 def test_files_fuzz(name):
-    hypothesis_test(name, DEFAULT_EXAMPLES[name])()
-    assert COUNTS[name]["inputs"] >= DEFAULT_EXAMPLES[name]
-    _report(name, COUNTS[name], slow=False)
+    fuzz_fixed(name, *FUZZERS[name], DEFAULT_EXAMPLES[name])
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(FUZZERS))
 def test_files_fuzz_long(name):
-    budget = float(os.environ.get("IMPACT_ENV_FUZZ_SECONDS", "60"))
-    start = time.monotonic()
-    round_ = 0
-    while time.monotonic() - start < budget:
-        hypothesis_test(name, ROUND[name], seed_value=int(time.time_ns() % 2 ** 32) + round_)()
-        round_ += 1
-    _report(name, COUNTS[name], slow=True, seconds=time.monotonic() - start)
-
-
-def _report(name: str, counts, slow: bool, seconds: float | None = None) -> None:
-    """One JSON line per fuzzer in IMPACT_ENV_FUZZ_REPORT (if set); tests/fuzz/conftest.py prints the table."""
-    path = os.environ.get("IMPACT_ENV_FUZZ_REPORT")
-    if path:
-        with open(path, "a") as f:
-            f.write(json.dumps({"fuzzer": name, "slow": slow, "seconds": seconds, **counts}) + "\n")
+    fuzz_for_budget(name, *FUZZERS[name], ROUND[name])
 
 
 def test_the_output_places_are_what_they_say():

@@ -17,11 +17,8 @@ from __future__ import annotations
 
 import functools
 import json
-import os
 import shutil
 import tempfile
-import time
-from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -34,7 +31,15 @@ from impact_env.envs import TransportEnv
 from impact_env.stl import parse, robustness
 from impact_env.transport.scenario import load_scenario, scenario_from_dict
 from planners.plan import Plan
-from tests.fuzz.invariant import COUNTS, assert_finite, assert_inside, attempt, cpu_deadline, fly
+from tests.fuzz.invariant import (
+    assert_finite,
+    assert_inside,
+    attempt,
+    cpu_deadline,
+    fly,
+    fuzz_fixed,
+    fuzz_for_budget,
+)
 
 # Everything below that needs hypothesis (tests/fuzz/strategies.py), a scenario or an environment is made when
 # a fuzzer first runs, not when the suite is collected.
@@ -191,42 +196,12 @@ def fuzzers() -> dict[str, tuple[Any, Callable[[Any], None]]]:
     return found
 
 
-def hypothesis_test(name: str, max_examples: int, seed_value: int | None = None) -> Callable[[], None]:
-    from hypothesis import HealthCheck, given, seed, settings
-
-    strategy, prop = fuzzers()[name]
-
-    def counted(value: Any) -> None:
-        COUNTS.setdefault(name, Counter())["inputs"] += 1
-        prop(value)
-
-    test = settings(max_examples=max_examples, deadline=None, database=None, derandomize=seed_value is None,
-                    suppress_health_check=list(HealthCheck), print_blob=True)(given(strategy)(counted))
-    return test if seed_value is None else seed(seed_value)(test)
-
-
 @pytest.mark.parametrize("name", sorted(DEFAULT_EXAMPLES))
 def test_fuzz(name):
-    hypothesis_test(name, DEFAULT_EXAMPLES[name])()
-    assert COUNTS[name]["inputs"] >= DEFAULT_EXAMPLES[name]
-    _report(name, COUNTS[name], slow=False)
+    fuzz_fixed(name, *fuzzers()[name], DEFAULT_EXAMPLES[name])
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(DEFAULT_EXAMPLES))
 def test_fuzz_long(name):
-    budget = float(os.environ.get("IMPACT_ENV_FUZZ_SECONDS", "60"))
-    start = time.monotonic()
-    round_ = 0
-    while time.monotonic() - start < budget:
-        hypothesis_test(name, 200, seed_value=int(time.time_ns() % 2 ** 32) + round_)()
-        round_ += 1
-    _report(name, COUNTS[name], slow=True, seconds=time.monotonic() - start)
-
-
-def _report(name: str, counts, slow: bool, seconds: float | None = None) -> None:
-    """One JSON line per fuzzer in IMPACT_ENV_FUZZ_REPORT (if set); tests/fuzz/conftest.py prints the table."""
-    path = os.environ.get("IMPACT_ENV_FUZZ_REPORT")
-    if path:
-        with open(path, "a") as f:
-            f.write(json.dumps({"fuzzer": name, "slow": slow, "seconds": seconds, **counts}) + "\n")
+    fuzz_for_budget(name, *fuzzers()[name], 200)

@@ -14,12 +14,9 @@ from __future__ import annotations
 import copy
 import json
 import math
-import os
 import shutil
 import sys
 import tempfile
-import time
-from collections import Counter
 from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
@@ -27,7 +24,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 from impact_env.tether.gym_env import TetherEnv
@@ -36,7 +32,7 @@ from impact_env.tether.station import load_station, station_from_dict, station_n
 from planners.tether.expert import TetherExpert
 from planners.tether.plan import TetherPlan
 from tests.fuzz import strategies as S
-from tests.fuzz.invariant import COUNTS, assert_finite, attempt, cpu_deadline
+from tests.fuzz.invariant import assert_finite, attempt, cpu_deadline, fuzz_fixed, fuzz_for_budget
 from tests.paths import DATA
 
 if sys.version_info >= (3, 11):
@@ -279,40 +275,12 @@ FUZZERS: dict[str, tuple[st.SearchStrategy, Callable[[Any], None]]] = {
 }
 
 
-def hypothesis_test(name: str, max_examples: int, seed_value: int | None = None) -> Callable[[], None]:
-    strategy, prop = FUZZERS[name]
-
-    def counted(value: Any) -> None:
-        COUNTS.setdefault(name, Counter())["inputs"] += 1
-        prop(value)
-
-    test = settings(max_examples=max_examples, deadline=None, database=None, derandomize=seed_value is None,
-                    suppress_health_check=list(HealthCheck), print_blob=True)(given(strategy)(counted))
-    return test if seed_value is None else seed(seed_value)(test)
-
-
 @pytest.mark.parametrize("name", sorted(FUZZERS))
 def test_tether_fuzz(name):
-    hypothesis_test(name, DEFAULT_EXAMPLES[name])()
-    assert COUNTS[name]["inputs"] >= DEFAULT_EXAMPLES[name]
-    _report(name, COUNTS[name], slow=False)
+    fuzz_fixed(name, *FUZZERS[name], DEFAULT_EXAMPLES[name])
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(FUZZERS))
 def test_tether_fuzz_long(name):
-    budget = float(os.environ.get("IMPACT_ENV_FUZZ_SECONDS", "60"))
-    start = time.monotonic()
-    round_ = 0
-    while time.monotonic() - start < budget:
-        hypothesis_test(name, 100, seed_value=int(time.time_ns() % 2 ** 32) + round_)()
-        round_ += 1
-    _report(name, COUNTS[name], slow=True, seconds=time.monotonic() - start)
-
-
-def _report(name: str, counts, slow: bool, seconds: float | None = None) -> None:
-    """One JSON line per fuzzer in IMPACT_ENV_FUZZ_REPORT (if set); tests/fuzz/conftest.py prints the table."""
-    path = os.environ.get("IMPACT_ENV_FUZZ_REPORT")
-    if path:
-        with open(path, "a") as f:
-            f.write(json.dumps({"fuzzer": name, "slow": slow, "seconds": seconds, **counts}) + "\n")
+    fuzz_for_budget(name, *FUZZERS[name], 100)
