@@ -72,7 +72,7 @@ def read_train_json(folder: Path) -> dict[str, Any]:
     if not isinstance(meta, dict):
         raise ModelFileError(f"{path} must hold a JSON object like {{\"algo\": \"ppo\", ...}}, got a "
                              f"{type(meta).__name__}")
-    if "algo" in meta and meta["algo"] not in _POLICY_MODULES:
+    if "algo" in meta and not (isinstance(meta["algo"], str) and meta["algo"] in _POLICY_MODULES):
         raise ModelFileError(f"{path}: algo must be one of {', '.join(_POLICY_MODULES)}, got {meta['algo']!r}")
     if "multiagent" in meta and not isinstance(meta["multiagent"], bool):
         raise ModelFileError(f"{path}: multiagent must be true or false, got {meta['multiagent']!r}")

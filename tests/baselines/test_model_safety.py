@@ -113,6 +113,7 @@ def test_bench_refuses_malicious_folders_before_any_worker(tmp_path, capsys, pla
 def test_train_json_of_the_wrong_type_is_a_model_file_error(tmp_path, capsys):
     folder = model_folder(tmp_path)
     for content, message in (("[1, 2]", "must hold a JSON object"), ('{"algo": 3}', "algo must be one of"),
+                             ('{"algo": [["ppo"]]}', "algo must be one of"),  # unhashable: found by the fuzzer
                              ('{"multiagent": "yes"}', "multiagent must be true or false"), ("{", "not valid JSON")):
         (folder / "train.json").write_text(content)
         with pytest.raises(ModelFileError, match=message):
