@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Build the sdist and the wheel (python -m build: the wheel is built from the sdist, so both are checked),
 # install the wheel alone in a fresh venv and run the smoke test from a folder outside the source tree; then
-# the new-user walk in that venv with the wheel's [rl] extra added: every python block of the README and the
-# docs pages (copies), and a video recorded with RecordVideo (scripts/new_user_walk.py).
+# the new-user walk in that venv with the wheel's [rl] and [marl] extras added (the pages show SB3, TorchRL and
+# BenchMARL): every python block of the README and the docs pages (copies), and a video recorded with
+# RecordVideo (scripts/new_user_walk.py).
 # Usage: .ci/wheel_check.sh [PYTHON]   (PYTHON builds; default .venv/bin/python, which has `build`)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -43,9 +44,9 @@ cp README.md "$WORK/pages/"
 cp docs/*.md "$WORK/pages/docs/"
 cd "$WORK"  # outside the source tree: nothing can be imported from the checkout
 PATH="$WORK/venv/bin:$PATH" SDL_VIDEODRIVER=dummy MPLBACKEND=Agg "$WORK/venv/bin/python" smoke.py
-# [rl] as a new user adds it, torch pinned to the CPU build first (as the dev install does)
+# [rl] and [marl] as a new user adds them, torch pinned to the CPU build first (as the dev install does)
 "$WORK/venv/bin/pip" install --quiet torch==2.13.0
-"$WORK/venv/bin/pip" install --quiet torch==2.13.0 "$WHEEL[rl]"
+"$WORK/venv/bin/pip" install --quiet torch==2.13.0 "$WHEEL[rl,marl]"
 mkdir "$WORK/walk"
 cd "$WORK/walk"
 PATH="$WORK/venv/bin:$PATH" SDL_VIDEODRIVER=dummy MPLBACKEND=Agg "$WORK/venv/bin/python" ../walk.py \

@@ -3,8 +3,11 @@
 
     python -m benchmarks.rl_at_scale_report [--out results/rl_at_scale] [--reps 2000]
 
-A run's score is its final deterministic evaluation on the pymunk env (the reference world): the success
-rate over its evaluation episodes, in [0, 1], and the mean final STL robustness (m). Per scenario and
+A run's score is its final evaluation on the pymunk env (the reference world): the success rate over its
+evaluation episodes, in [0, 1], and the mean final STL robustness (m). SB3's PPO is scored by its
+deterministic policy (the Gaussian's mean, SB3's convention); MAPPO and IPPO by sampled actions, because
+their TanhNormal policy flown at tanh of its mean is not the policy that was trained (its deterministic
+score is reported beside it; :mod:`baselines.batched.marl`). Per scenario and
 algorithm, the IQM over seeds of the success rate and of the robustness, with a 95 % bootstrap interval over
 seeds; across scenarios, rliable's IQM, mean and optimality gap of the success rate with stratified-bootstrap
 intervals (scenarios as tasks, seeds as runs; only the seeds that every scenario of the algorithm has, so that
@@ -41,10 +44,23 @@ def _key(cell: dict) -> tuple[str, str, int]:
     return (str(cell["algorithm"]), str(cell["task"]), int(cell["seed"]))
 
 
-def run_scores(cell: dict) -> tuple[float, float]:
-    """(success rate, mean final robustness in m) of a run's final evaluation on the reference world: the
-    pymunk env for an impact task, VMAS itself for ``vmas/transport`` (no robustness: NaN)."""
+# how each algorithm's policy is flown for its score (module docstring)
+POLICY_MODE = {"sb3_ppo": "deterministic", "mappo": "sampled", "ippo": "sampled"}
+
+
+def scored_evaluation(cell: dict) -> tuple[str, dict]:
+    """(policy mode, evaluation) that scores a run: its ``sampled`` evaluation where :data:`POLICY_MODE` asks
+    for it and the run has one, else the deterministic one (the top level of ``evaluation``)."""
     evaluation = cell["evaluation"]
+    if POLICY_MODE.get(str(cell["algorithm"])) == "sampled" and "sampled" in evaluation:
+        return "sampled", evaluation["sampled"]
+    return "deterministic", evaluation
+
+
+def run_scores(cell: dict) -> tuple[float, float]:
+    """(success rate, mean final robustness in m) of a run's scored evaluation on the reference world: the
+    pymunk env for an impact task, VMAS itself for ``vmas/transport`` (no robustness: NaN)."""
+    evaluation = scored_evaluation(cell)[1]
     ref = evaluation.get("pymunk", evaluation)
     return float(ref["success_rate"]), float(ref.get("robustness_mean", float("nan")))
 
@@ -78,7 +94,8 @@ def aggregate(cells: list[dict], reps: int = 2000, seed: int = 0) -> dict[str, A
         group = sorted(group, key=lambda c: c["seed"])
         success = np.array([run_scores(c)[0] for c in group])
         robustness = np.array([run_scores(c)[1] for c in group])
-        batched = [c["evaluation"].get("batched", {}).get("success_rate") for c in group]
+        batched = [scored_evaluation(c)[1].get("batched", {}).get("success_rate") for c in group]
+        deterministic = [c["evaluation"].get("pymunk", c["evaluation"])["success_rate"] for c in group]
         s_iqm, s_lo, s_hi = iqm_interval(success, reps, seed)
         finite = robustness[np.isfinite(robustness)]
         r_iqm, r_lo, r_hi = iqm_interval(finite, reps, seed) if finite.size else (float("nan"),) * 3
@@ -90,6 +107,8 @@ def aggregate(cells: list[dict], reps: int = 2000, seed: int = 0) -> dict[str, A
                      "eval_episodes": sorted({int(c["evaluation"]["episodes"]) for c in group}),
                      "success": success.tolist(), "success_iqm": s_iqm, "success_ci": [s_lo, s_hi],
                      "batched_success": [None if b is None else float(b) for b in batched],
+                     "policy": sorted({scored_evaluation(c)[0] for c in group}),
+                     "deterministic_success": [float(d) for d in deterministic],
                      "robustness": robustness.tolist(), "robustness_iqm": r_iqm, "robustness_ci": [r_lo, r_hi]})
     overall = []
     for algorithm in _order({c["algorithm"] for c in cells}):
@@ -112,8 +131,9 @@ def aggregate(cells: list[dict], reps: int = 2000, seed: int = 0) -> dict[str, A
                         **{name: float(point[algorithm][i]) for i, name in enumerate(AGGREGATES)},
                         **{f"{name}_ci": [float(interval[algorithm][0, i]), float(interval[algorithm][1, i])]
                            for i, name in enumerate(AGGREGATES)}})
-    gaps = [(abs(c["evaluation"]["batched"]["success_rate"] - c["evaluation"]["pymunk"]["success_rate"]), c["run"])
-            for c in cells if "batched" in c["evaluation"] and "pymunk" in c["evaluation"]]
+    scored = [(scored_evaluation(c)[1], c["run"]) for c in cells]
+    gaps = [(abs(e["batched"]["success_rate"] - e["pymunk"]["success_rate"]), run)
+            for e, run in scored if "batched" in e and "pymunk" in e]
     transfer = None if not gaps else {"runs": len(gaps), "mean_abs_points": 100 * float(np.mean([g for g, _ in gaps])),
                                       "max_abs_points": 100 * max(gaps)[0], "max_run": max(gaps)[1],
                                       "within_5_points": sum(g <= 0.05 + 1e-12 for g, _ in gaps)}
@@ -133,7 +153,7 @@ def _steps(n: float) -> str:
 
 def markdown(numbers: dict[str, Any]) -> str:
     """``summary.md``: the overall IQM table, then per scenario and algorithm."""
-    lines = ["Final deterministic evaluation on the pymunk env (the reference world) of policies trained on the "
+    lines = ["Final evaluation on the pymunk env (the reference world) of policies trained on the "
              "batched world; interquartile means (IQM) with 95 % bootstrap intervals (rliable, "
              f"{numbers['reps']} resamples). Made by `python -m benchmarks.rl_at_scale --publish`.", ""]
     if numbers["overall"]:
@@ -148,17 +168,18 @@ def markdown(numbers: dict[str, Any]) -> str:
         lines.append("")
     lines += ["## Per scenario (IQM over seeds, 95 % bootstrap interval over seeds)", "",
               "| scenario | algorithm | seeds | budget (env-steps) | wall clock per run (min) | env-steps/s | "
-              "eval episodes | success % (pymunk) | success % per seed | batched-world success % per seed | "
-              "robustness (m) |",
-              "|---|---|---|---:|---:|---:|---:|---:|---|---|---:|"]
+              "eval episodes | policy | success % (pymunk) | success % per seed | batched-world success % per seed | "
+              "deterministic success % per seed | robustness (m) |",
+              "|---|---|---|---:|---:|---:|---:|---|---:|---|---|---|---:|"]
     for r in numbers["rows"]:
         per_seed = " / ".join(f"{100 * s:.0f}" for s in r["success"])
         batched = " / ".join("-" if b is None else f"{100 * b:.0f}" for b in r["batched_success"])
+        deterministic = " / ".join(f"{100 * d:.0f}" for d in r.get("deterministic_success", []))
         lines.append(f"| {r['task']} | {r['algorithm']} | {','.join(map(str, r['seeds']))} | "
                      f"{', '.join(_steps(b) for b in r['budget_env_steps'])} | "
                      f"{np.mean(r['wall_s']) / 60:.1f} | {np.mean(r['env_steps_per_s']):,.0f} | "
-                     f"{', '.join(map(str, r['eval_episodes']))} | "
-                     f"{_fmt_ci(r['success_iqm'], r['success_ci'], 100)} | {per_seed} | {batched} | "
+                     f"{', '.join(map(str, r['eval_episodes']))} | {', '.join(r.get('policy', []))} | "
+                     f"{_fmt_ci(r['success_iqm'], r['success_ci'], 100)} | {per_seed} | {batched} | {deterministic} | "
                      f"{_fmt_ci(r['robustness_iqm'], r['robustness_ci'], 1, 3, '+')} |")
     t = numbers.get("transfer")
     if t:
@@ -166,7 +187,9 @@ def markdown(numbers: dict[str, Any]) -> str:
                   f"{t['mean_abs_points']:.1f} points on average over {t['runs']} runs, at most "
                   f"{t['max_abs_points']:.0f} ({t['max_run']}); {t['within_5_points']} of {t['runs']} runs within "
                   "5 points."]
-    lines += ["", "Each run's evaluation: the deterministic policy, `eval episodes` seeded episodes per world (seeds "
+    lines += ["", "Each run's evaluation: the policy flown as `policy` says (SB3: its deterministic mean action; "
+              "MAPPO, IPPO: sampled actions, as their TanhNormal policy was trained; their deterministic score is "
+              "the column beside), `eval episodes` seeded episodes per world (seeds "
               "1,000,000 on), with the training's noise (thrust 5 %, objects start within 5 cm). The wall clock is "
               "training only (the evaluation is not in it), on the shared 2-core machine, one torch thread a run, "
               "two runs at a time."]

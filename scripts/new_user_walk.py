@@ -1,7 +1,7 @@
 """The new-user walk: what a new user meets first, run against the installed package from outside the clone.
 
 ``make wheel-check`` (``.ci/wheel_check.sh``) runs it after the smoke test, in the fresh venv that has the wheel
-and its ``[rl]`` extra, from an empty folder, on copies of the README and the documentation pages:
+and its ``[rl]`` and ``[marl]`` extras, from an empty folder, on copies of the README and the documentation pages:
 
     python new_user_walk.py README.md docs/*.md
 

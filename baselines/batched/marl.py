@@ -12,9 +12,14 @@ finished one is not run again. The hyperparameters are :class:`MarlConfig`'s, th
 algorithms (MAPPO: a central critic on the state; IPPO: a critic on each agent's observation; both share
 parameters between agents, BenchMARL's default).
 
-The final evaluation of an impact task flies the deterministic policy (the mean action) on the batched world
-and on the pymunk Gymnasium env, on the same number of seeded episodes with the training's noise, so the
-success rates of the two worlds can be compared. This module imports nothing of BenchMARL at import time (an
+The final evaluation of an impact task flies the policy twice on the batched world and on the pymunk Gymnasium
+env, on the same number of seeded episodes with the training's noise, so the success rates of the two worlds
+can be compared: deterministic (TorchRL's deterministic sample of BenchMARL's TanhNormal, tanh of the
+Gaussian's mean) and sampled (actions drawn from the policy, torch seeded with the first episode's seed). Both
+are recorded because they differ: tanh of the mean is not the squashed distribution's mode, and a policy
+whose samples saturate the thrusters can fail when flown at tanh of its mean (docs/rl_at_scale.md has both
+scores of every run). A finished run whose ``result.json`` lacks the sampled half is evaluated again from its
+last checkpoint when it is run again. This module imports nothing of BenchMARL at import time (an
 optional extra: :class:`MarlConfig` is importable and checked without it), and of ``impact_env`` only its config
 checks and errors, read from their files where ``impact_env`` cannot be imported, so it runs in a venv with VMAS
 (and no impact_env dependencies) for the external reference row.
@@ -272,19 +277,38 @@ def _truncate_curve(curve: Path, frames: int) -> None:
 
 
 # ------------------------------------------------------------------------------------------------- evaluation
-def _policy_actions(policy, group: str, observations: torch.Tensor) -> torch.Tensor:
+def _policy_actions(policy, group: str, observations: torch.Tensor, sampled: bool = False) -> torch.Tensor:
     from tensordict import TensorDict
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
     n, r = observations.shape[:2]
     td = TensorDict({group: TensorDict({"observation": observations}, batch_size=(n, r))}, batch_size=(n,))
-    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+    mode = ExplorationType.RANDOM if sampled else ExplorationType.DETERMINISTIC
+    with torch.no_grad(), set_exploration_type(mode):
         return policy(td).get((group, "action"))
 
 
+def _scores(robustness) -> dict:
+    return {"success_rate": float((robustness > 0).mean()), "robustness_mean": float(robustness.mean())}
+
+
 def evaluate_impact(policy, cfg: MarlConfig, episodes: int, first_seed: int = 1_000_000) -> dict:
-    """Success rate and final robustness of the deterministic policy on the batched world and on the pymunk
-    Gymnasium env: ``episodes`` seeded episodes each, with the training's noise."""
+    """Success rate and final robustness of the policy on the batched world and on the pymunk Gymnasium env:
+    ``episodes`` seeded episodes each, with the training's noise. The top-level ``batched`` and ``pymunk`` are
+    the deterministic policy's; ``sampled`` holds the same two for actions drawn from the policy (torch seeded
+    with ``first_seed`` before each world's episodes, so both worlds get the same draws)."""
+    out: dict[str, Any] = {"episodes": episodes, "first_seed": first_seed}
+    for sampled in (False, True):
+        scores = {world: _scores(r) for world, r in _fly(policy, cfg, episodes, first_seed, sampled).items()}
+        if sampled:
+            out["sampled"] = scores
+        else:
+            out.update(scores)
+    return out
+
+
+def _fly(policy, cfg: MarlConfig, episodes: int, first_seed: int, sampled: bool) -> dict:
+    """Final robustness per episode on each world (``batched``, ``pymunk``)."""
     import numpy as np
 
     from impact_env.transport.batched import BatchedTransportWorld
@@ -294,22 +318,21 @@ def evaluate_impact(policy, cfg: MarlConfig, episodes: int, first_seed: int = 1_
              **{k: v for k, v in cfg.extra.items() if k != "dtype"}}
     world = BatchedTransportWorld(cfg.task, episodes, **noise)
     world.reset(seeds=first_seed)
+    torch.manual_seed(first_seed)
     for _ in range(world.horizon_steps):
-        _, _, terminated, _, info = world.step(_policy_actions(policy, "agents", world.agent_observations()))
+        _, _, terminated, _, info = world.step(_policy_actions(policy, "agents", world.agent_observations(), sampled))
     batched = info["robustness"].double().numpy()
     envs = [TransportEnv(cfg.task, **noise) for _ in range(episodes)]
     cores = [env.core for env in envs]
     for i, env in enumerate(envs):
         env.reset(seed=first_seed + i)
     R = cores[0].n_robots
+    torch.manual_seed(first_seed)
     for _ in range(world.horizon_steps):
         obs = torch.tensor(np.stack([np.stack([c.agent_observation(r) for r in range(R)]) for c in cores]))
-        actions = _policy_actions(policy, "agents", obs).reshape(episodes, -1).double().numpy()
+        actions = _policy_actions(policy, "agents", obs, sampled).reshape(episodes, -1).double().numpy()
         infos = [env.step(a)[4] for env, a in zip(envs, actions)]
-    pymunk = np.array([inf["robustness"] for inf in infos])
-    return {"episodes": episodes, "first_seed": first_seed,
-            "batched": {"success_rate": float((batched > 0).mean()), "robustness_mean": float(batched.mean())},
-            "pymunk": {"success_rate": float((pymunk > 0).mean()), "robustness_mean": float(pymunk.mean())}}
+    return {"batched": batched, "pymunk": np.array([inf["robustness"] for inf in infos])}
 
 
 def evaluate_vmas(experiment, episodes: int) -> dict:
@@ -333,8 +356,9 @@ def evaluate_vmas(experiment, episodes: int) -> dict:
 def run(cfg: MarlConfig, out: Path) -> dict:
     """Train (or resume) one run in ``out``; returns its result (also ``out``/result.json)."""
     result_path = out / "result.json"
-    if result_path.exists():
-        return json.loads(result_path.read_text(encoding="utf-8"))
+    earlier = json.loads(result_path.read_text(encoding="utf-8")) if result_path.exists() else None
+    if earlier is not None and (cfg.is_vmas or "sampled" in earlier["evaluation"]):
+        return earlier
     from benchmarl.experiment import Experiment
 
     torch.set_num_threads(cfg.threads)
@@ -353,6 +377,12 @@ def run(cfg: MarlConfig, out: Path) -> dict:
                             critic_model_config=_model_config(cfg), seed=cfg.seed,
                             config=_experiment_config(cfg, out, restore), callbacks=[logger])
     setup_s = time.perf_counter() - start
+    if earlier is not None:  # finished before the sampled evaluation existed: evaluate its last checkpoint again
+        start = time.perf_counter()
+        earlier["evaluation"] = evaluate_impact(experiment.policy, cfg, cfg.eval_episodes)
+        earlier["eval_s"] = round(time.perf_counter() - start, 1)
+        _write_json(result_path, earlier)
+        return earlier
     if experiment.total_frames < cfg.frames:
         experiment.run()
     train_wall = logger.wall_s()
@@ -369,10 +399,14 @@ def run(cfg: MarlConfig, out: Path) -> dict:
               "evaluation": evaluation, "config": asdict(cfg), "curve_points": len(rows),
               "versions": _versions(), "threads": cfg.threads, "cpus": os.cpu_count(), "machine": platform.machine(),
               "load_average_1min_at_end": round(os.getloadavg()[0], 2)}
-    tmp = result_path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=1), encoding="utf-8")
-    os.replace(tmp, result_path)
+    _write_json(result_path, result)
     return result
+
+
+def _write_json(path: Path, data: dict) -> None:
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data, indent=1), encoding="utf-8")
+    os.replace(tmp, path)
 
 
 def _versions() -> dict[str, str]:

@@ -223,6 +223,9 @@ def test_report_interquartile_means_and_files(tmp_path):
     cells = [synthetic_cell("sb3_ppo", task, seed, s, s - 0.5) for task, values in successes.items()
              for seed, s in enumerate(values)]
     cells.append(synthetic_cell("mappo", "a", 0, 0.5, 0.0))  # one seed of one task only
+    # MAPPO is scored by its sampled actions (0.9 here), its deterministic 0.5 shown beside
+    cells[-1]["evaluation"]["sampled"] = {"batched": {"success_rate": 0.8, "robustness_mean": 0.1},
+                                          "pymunk": {"success_rate": 0.9, "robustness_mean": 0.2}}
     numbers = aggregate(cells, reps=50)
     rows = {(r["algorithm"], r["task"]): r for r in numbers["rows"]}
     a = rows[("sb3_ppo", "a")]
@@ -236,9 +239,13 @@ def test_report_interquartile_means_and_files(tmp_path):
     assert overall["sb3_ppo"]["iqm"] == pytest.approx(0.85)
     assert overall["sb3_ppo"]["mean"] == pytest.approx(np.mean(successes["a"] + successes["b"]))
     assert overall["sb3_ppo"]["tasks"] == ["a", "b"] and overall["sb3_ppo"]["seeds"] == [0, 1, 2, 3]
-    assert overall["mappo"]["seeds"] == [0] and overall["mappo"]["iqm"] == pytest.approx(0.5)
+    assert overall["mappo"]["seeds"] == [0] and overall["mappo"]["iqm"] == pytest.approx(0.9)
+    assert rows[("mappo", "a")]["policy"] == ["sampled"] and rows[("mappo", "a")]["deterministic_success"] == [0.5]
+    assert rows[("mappo", "a")]["batched_success"] == [0.8] and rows[("mappo", "a")]["robustness"] == [0.2]
+    assert numbers["transfer"]["max_abs_points"] == pytest.approx(10)  # mappo's sampled 0.8 against 0.9
     text = markdown(numbers)
-    assert "| a | sb3_ppo | 0,1,2,3 | 1k | 2.5 | 100 | 10 |" in text and "0 / 20 / 40 / 100" in text
+    assert "| a | sb3_ppo | 0,1,2,3 | 1k | 2.5 | 100 | 10 | deterministic |" in text and "0 / 20 / 40 / 100" in text
+    assert "| a | mappo | 0 | 1k | 1.0 | 100 | 10 | sampled | 90 [90, 90] | 90 | 80 | 50 |" in text
 
     store = CellStore(tmp_path / "cells.jsonl", cell_key)
     for cell in cells:

@@ -71,3 +71,28 @@ def test_benchmarl_trains_a_few_iterations(algorithm, tmp_path):
     experiment.run()
     assert experiment.n_iters_performed == 2 and experiment.total_frames == 800
     assert any(not torch.equal(b, p) for b, p in zip(before, experiment.policy.parameters()))
+    if algorithm == "mappo":  # the final evaluation: deterministic and sampled, on both worlds, reproducible
+        from baselines.batched.marl import MarlConfig, evaluate_impact
+
+        cfg = MarlConfig("mappo", "throw_and_catch_exp", thrust_noise=0.05)
+        first = evaluate_impact(experiment.policy, cfg, episodes=2, first_seed=7)
+        again = evaluate_impact(experiment.policy, cfg, episodes=2, first_seed=7)
+        assert first == again and first["episodes"] == 2 and first["first_seed"] == 7
+        for scores in (first, first["sampled"]):
+            for world in ("batched", "pymunk"):
+                assert 0 <= scores[world]["success_rate"] <= 1 and torch.isfinite(
+                    torch.tensor(scores[world]["robustness_mean"]))
+        # sampled actions are drawn from the policy (reproducibly under a torch seed), the deterministic ones not
+        from baselines.batched.marl import _policy_actions
+        from impact_env.transport.batched import BatchedTransportWorld
+
+        world = BatchedTransportWorld("throw_and_catch_exp", 3)
+        world.reset(seeds=0)
+        obs = world.agent_observations()
+        mean = _policy_actions(experiment.policy, "agents", obs)
+        assert torch.equal(mean, _policy_actions(experiment.policy, "agents", obs))
+        torch.manual_seed(1)
+        drawn = _policy_actions(experiment.policy, "agents", obs, sampled=True)
+        torch.manual_seed(1)
+        assert torch.equal(drawn, _policy_actions(experiment.policy, "agents", obs, sampled=True))
+        assert not torch.allclose(drawn, mean)
