@@ -52,10 +52,10 @@ demo: $(VENV)/.base-installed
 
 # --dist loadgroup: the tests marked xdist_group("ray") share one worker, so at most one Ray instance runs
 test: $(VENV)/.dev-installed
-	$(BIN)/python -m pytest -q -n 2 --dist loadgroup
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup --durations=15
 
 test-slow: $(VENV)/.dev-installed
-	$(BIN)/python -m pytest -q -n 2 --dist loadgroup -m slow --timeout 3600
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup -m slow --timeout 3600 --durations=25
 
 # The fuzzers of tests/fuzz/ drawing fresh inputs for FUZZ_SECONDS per fuzzer (17 fuzzers on 2 processes:
 # 60 s each is about 10 minutes), then a table of the inputs tried.

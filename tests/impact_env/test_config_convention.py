@@ -168,9 +168,9 @@ def test_the_solver_budget_is_declared_once_and_the_old_keywords_still_reach_it(
                                                                                     threads=2)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        # work by default, a time limit only as a safety net; the impact-robust planner keeps its 60 s
+        # work by default, a time limit only as a safety net; the impact-robust planner's own node budget
         assert PlannerConfig().solver_options == SolverOptions(time_limit_s=600.0, node_limit=20_000, threads=2)
-        assert IRPlannerConfig().solver_options == SolverOptions(time_limit_s=60.0)
+        assert IRPlannerConfig().solver_options == SolverOptions(time_limit_s=600.0, node_limit=10_000, threads=2)
         replaced = dataclasses.replace(config, intervals=4)
     assert replaced.solver_options == config.solver_options and replaced.intervals == 4
 
