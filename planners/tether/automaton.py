@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-import networkx as nx
 import numpy as np
 import shapely
 from shapely.geometry import Point, Polygon
@@ -30,6 +30,9 @@ from planners.errors import PlannerError
 from planners.tether.decomposition import mp3_decompose
 from planners.tether.extension import ExtendedRegion, extend_regions
 from planners.tether.geometry import AREA_EPS_M2, clean, free_space_polygon, polygons_of, visibility_polygon
+
+if TYPE_CHECKING:  # networkx is imported when a map is built (it costs a tenth of a second at import)
+    import networkx as nx
 
 RULES = ("region", "line_of_sight")
 HalfPlane = tuple[float, float, float]  # (a, b, c): a x + b y <= c
@@ -76,6 +79,8 @@ class ThesisMap:
 
 def build_thesis_map(station: Station, rule: str = "region", clearance_m: float = 0.02) -> ThesisMap:
     """Decompose (MP3) and extend the free space and find each region's anchors under ``rule``."""
+    import networkx as nx
+
     if rule not in RULES:
         raise PlannerError(f"rule must be one of {RULES}, got {rule!r}")
     free_all = polygons_of(free_space_polygon(station, clearance_m))

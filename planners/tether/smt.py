@@ -16,7 +16,6 @@ import time
 from dataclasses import dataclass, field
 from fractions import Fraction
 
-import networkx as nx
 import numpy as np
 import shapely
 from shapely.geometry import Point, Polygon
@@ -211,6 +210,8 @@ def plan_smt(station: Station, config: SmtConfig | None = None, tmap: ThesisMap 
     Raises:
         SmtNoPlanError: no path gave a plan within the bounds (with the checks' log in ``stats``).
     """
+    import networkx as nx  # imported here, as in build_thesis_map
+
     config = config or SmtConfig()
     t0 = time.perf_counter()
     tmap = tmap or build_thesis_map(station, config.rule, config.clearance_m)

@@ -34,7 +34,6 @@ import pytest
 from hypothesis import strategies as st
 
 from impact_env.errors import OutputPathError
-from impact_env.figures import png_path
 from impact_env.results_store import check_output_file, check_output_folder, write_atomic
 from impact_env.stl import OnlineMonitor, parse, robustness
 from impact_env.tether.station import load_station
@@ -373,6 +372,7 @@ def output_path(args: tuple[str, str, str]) -> None:
             (checked / "summary.json").unlink()
         return
     from impact_env.cli import main
+    from impact_env.figures import png_path  # matplotlib: imported when the test runs
 
     argv = {"show --plot": ["show", "corridor", "--plot", path],
             "run --json": ["run", "corridor", "--controller", "zero", "--episodes", "1", "--quiet", "--json", path],

@@ -9,7 +9,6 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from pettingzoo.test import api_test, max_cycles_test, parallel_api_test
 
 import impact_env
 from impact_env import (
@@ -113,6 +112,8 @@ def test_the_generic_ids_still_need_their_file_and_pass_the_checkers():
 
 @pytest.mark.parametrize("module", [transport_v0, tether_v1, tether_v0], ids=["transport_v0", "tether_v1", "tether_v0"])
 def test_pettingzoo_suite_on_the_modules_as_they_are(module):
+    from pettingzoo.test import api_test, max_cycles_test, parallel_api_test
+
     max_cycles_test(module)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # api_test's advice on agent names (see the environment pages)

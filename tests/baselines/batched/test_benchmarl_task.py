@@ -5,16 +5,17 @@ from __future__ import annotations
 
 import pytest
 
-pytest.importorskip("benchmarl")
+from impact_env.errors import EnvConfigError
+from tests.optional import requires
 
-import torch  # noqa: E402
-
-from baselines.batched.benchmarl_task import ImpactTask, ImpactTaskClass  # noqa: E402
-from impact_env.errors import EnvConfigError  # noqa: E402
+# benchmarl imports torch, tensordict and torchrl (seconds): looked up here, imported by the tests
+pytestmark = requires("benchmarl")
 
 
 @pytest.fixture(autouse=True)
 def _one_thread():
+    import torch
+
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     yield
@@ -22,6 +23,8 @@ def _one_thread():
 
 
 def test_task_specs_split_the_envs_keys_as_benchmarl_expects():
+    from baselines.batched.benchmarl_task import ImpactTask
+
     task = ImpactTask.THROW_AND_CATCH_EXP.get_task(config={"thrust_noise": 0.05})
     assert task.scenario == "throw_and_catch_exp" and task.env_name() == "impact_env"
     env = task.get_env_fun(num_envs=3, continuous_actions=True, seed=0, device="cpu")()
@@ -37,6 +40,10 @@ def test_task_specs_split_the_envs_keys_as_benchmarl_expects():
 
 
 def test_task_options_are_checked():
+    import torch
+
+    from baselines.batched.benchmarl_task import ImpactTaskClass
+
     with pytest.raises(EnvConfigError, match="thrust_nosie"):
         ImpactTaskClass("corridor", {"thrust_nosie": 0.05})
     with pytest.raises(EnvConfigError, match="dtype"):
@@ -48,9 +55,12 @@ def test_task_options_are_checked():
 
 @pytest.mark.parametrize("algorithm", ["mappo", pytest.param("ippo", marks=pytest.mark.slow)])
 def test_benchmarl_trains_a_few_iterations(algorithm, tmp_path):
+    import torch
     from benchmarl.algorithms import IppoConfig, MappoConfig
     from benchmarl.experiment import Experiment, ExperimentConfig
     from benchmarl.models import MlpConfig
+
+    from baselines.batched.benchmarl_task import ImpactTask
 
     ec = ExperimentConfig.get_from_yaml()
     ec.max_n_iters, ec.max_n_frames = 2, None

@@ -11,7 +11,6 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, render_test
 
 import impact_env
 from impact_env.errors import ActionError, ScenarioError
@@ -257,14 +256,20 @@ def test_pickle_and_render():
 
 
 def test_parallel_api_test():
+    from pettingzoo.test import parallel_api_test
+
     parallel_api_test(TetherParallelEnv("L", fidelity="reel"), num_cycles=200)
 
 
 def test_aec_api_test():
+    from pettingzoo.test import api_test
+
     api_test(tether_parallel.env(station="T"), num_cycles=200)
 
 
 def test_render_test():
+    from pettingzoo.test import render_test
+
     render_test(lambda render_mode=None: tether_parallel.env(station="L", render_mode=render_mode))
 
 
@@ -272,6 +277,8 @@ def test_max_cycles_test():
     """As for the impact env: PettingZoo's test passes no station, which is refused on purpose; bind one."""
     from functools import partial
     from types import SimpleNamespace
+
+    from pettingzoo.test import max_cycles_test
 
     mod = sys.modules[tether_parallel.__name__]
     max_cycles_test(SimpleNamespace(**{name: partial(getattr(mod, name), station="L")

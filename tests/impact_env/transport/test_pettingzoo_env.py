@@ -8,21 +8,26 @@ import sys
 import numpy as np
 import pettingzoo
 import pytest
-from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, render_test
 
 import impact_env
 from impact_env.transport import pettingzoo_env as transport_parallel
 
 
 def test_parallel_api_test():
+    from pettingzoo.test import parallel_api_test
+
     parallel_api_test(impact_env.parallel_env(scenario="throw_and_catch_exp"), num_cycles=300)
 
 
 def test_aec_api_test():
+    from pettingzoo.test import api_test
+
     api_test(impact_env.env(scenario="throw_and_catch_exp"), num_cycles=300)
 
 
 def test_render_test():
+    from pettingzoo.test import render_test
+
     render_test(lambda render_mode=None: impact_env.env(scenario="throw_and_catch_exp", render_mode=render_mode))
 
 
@@ -31,6 +36,8 @@ def test_max_cycles_test():
     on purpose (no silent default scenario): give it the module's entry points bound to one scenario."""
     from functools import partial
     from types import SimpleNamespace
+
+    from pettingzoo.test import max_cycles_test
 
     mod = sys.modules[transport_parallel.__name__]
     bound = SimpleNamespace(**{name: partial(getattr(mod, name), scenario="throw_and_catch_exp")

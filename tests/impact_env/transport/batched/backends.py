@@ -1,11 +1,12 @@
-"""The pymunk world and the batched world behind one small interface, for tests that run against both."""
+"""The pymunk world and the batched world behind one small interface, for tests that run against both.
+
+torch and the batched package are imported when a batched backend is made, not when a test module that
+names the backends is collected."""
 
 from __future__ import annotations
 
 import numpy as np
-import torch
 
-from impact_env.transport.batched import BatchedTransportWorld
 from impact_env.transport.physics import World
 from impact_env.transport.scenario import Scenario
 
@@ -36,11 +37,17 @@ class BatchedBackend:
     """One env of a float64 BatchedTransportWorld stepped with zero actions."""
 
     def __init__(self, scenario: Scenario) -> None:
+        import torch
+
+        from impact_env.transport.batched import BatchedTransportWorld
+
         self.world = BatchedTransportWorld(scenario, 1, dtype=torch.float64)
         self.world.reset(seeds=0)
         self.dt_s = scenario.control_period_s
 
     def step(self) -> int:
+        import torch
+
         _, _, _, _, info = self.world.step(torch.zeros(1, self.world.action_size, dtype=torch.float64))
         return int(info["impacts"][0])
 

@@ -4,13 +4,15 @@ what they had plus the robot's thrust over the substep, and momentum changes by 
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pytest
-import torch
 
-from impact_env.transport.batched.physics import ReferenceKernel, headings, world_forces
-from impact_env.transport.batched.scene import BoxShape, build_scene
 from impact_env.transport.scenario import load_scenario
+
+if TYPE_CHECKING:
+    from impact_env.transport.batched.scene import BoxShape
 
 
 def closest_on_box(shape: BoxShape, p: np.ndarray) -> np.ndarray:
@@ -20,6 +22,11 @@ def closest_on_box(shape: BoxShape, p: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("name", [pytest.param("corridor", marks=pytest.mark.slow), "two_objects",
                                   "obstacle_avoidance"])
 def test_every_isolated_impact_follows_the_law(name):
+    import torch
+
+    from impact_env.transport.batched.physics import ReferenceKernel, headings, world_forces
+    from impact_env.transport.batched.scene import build_scene
+
     sc = load_scenario(name)
     scene = build_scene(sc)
     kernel = ReferenceKernel(scene, torch.device("cpu"), torch.float64)

@@ -4,17 +4,17 @@ polygon obstacle against the pymunk world. The compiled kernels are checked in t
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pytest
-import torch
 
-from impact_env.transport.batched import BatchedTransportWorld
-from impact_env.transport.batched.fused import FusedKernel
-from impact_env.transport.batched.physics import ReferenceKernel
-from impact_env.transport.batched.scene import PolygonShape, build_scene
 from impact_env.transport.core import TransportCore
 from impact_env.transport.scenario import Scenario, load_scenario, scenario_from_dict
 from tests.helpers import two_body_dict
+
+if TYPE_CHECKING:
+    import torch
 
 
 def with_polygon() -> Scenario:
@@ -29,6 +29,8 @@ def with_polygon() -> Scenario:
 
 def random_rows(scene, layout, n: int, dtype, gen) -> torch.Tensor:
     """Bodies anywhere in the world box (overlapping walls, obstacles and each other) with random velocities."""
+    import torch
+
     rows = torch.zeros(layout.n_rows, n, dtype=dtype)
     xmin, xmax, ymin, ymax = scene.world_box
     B = scene.n_bodies
@@ -38,9 +40,16 @@ def random_rows(scene, layout, n: int, dtype, gen) -> torch.Tensor:
     return rows
 
 
-@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
 @pytest.mark.parametrize("name", ["corridor", "two_objects", "polygon"])
 def test_fused_kernel_equals_the_reference_bit_for_bit(name, dtype):
+    import torch
+
+    from impact_env.transport.batched.fused import FusedKernel
+    from impact_env.transport.batched.physics import ReferenceKernel
+    from impact_env.transport.batched.scene import PolygonShape, build_scene
+
+    dtype = getattr(torch, dtype)
     sc = with_polygon() if name == "polygon" else load_scenario(name)
     scene = build_scene(sc)
     assert (name == "polygon") == any(isinstance(o, PolygonShape) for o in scene.obstacles)
@@ -63,8 +72,14 @@ def test_fused_kernel_equals_the_reference_bit_for_bit(name, dtype):
     assert flagged > 0 and int(ended.sum()) > 300 and compared > 10_000  # contacts of every kind
 
 
-@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
 def test_free_flight_shortcut_equals_the_substeps(dtype):
+    import torch
+
+    from impact_env.transport.batched.physics import ReferenceKernel
+    from impact_env.transport.batched.scene import build_scene
+
+    dtype = getattr(torch, dtype)
     scene = build_scene(load_scenario("obstacle_avoidance"))
     ref = ReferenceKernel(scene, torch.device("cpu"), dtype)
     gen = torch.Generator().manual_seed(2)
@@ -86,6 +101,10 @@ def test_free_flight_shortcut_equals_the_substeps(dtype):
 
 
 def test_polygon_obstacle_follows_the_pymunk_world():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     sc = with_polygon()
     core = TransportCore(sc)
     core.reset(np.random.default_rng(0))
@@ -107,6 +126,10 @@ def test_polygon_obstacle_follows_the_pymunk_world():
 def test_compiled_world_follows_the_eager_world():
     """torch.compile (inductor) against eager, float64, two_objects with every noise: the same trajectory to
     rounding (inductor may contract or reorder a few operations), and the same impacts."""
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     kwargs = {"dtype": torch.float64, "thrust_noise": 0.05, "initial_position_noise_m": 0.05,
               "impact_velocity_noise_mps": 0.02}
     eager = BatchedTransportWorld("two_objects", 64, **kwargs)
@@ -127,6 +150,9 @@ def test_compiled_world_follows_the_eager_world():
 
 def test_blocks_of_envs_give_the_whole_batchs_results():
     """The compiled world runs its kernels on blocks of envs (world.in_chunks); here in eager, blocks of 7."""
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
     from impact_env.transport.batched.world import in_chunks
 
     world = BatchedTransportWorld("two_objects", 30, dtype=torch.float64, thrust_noise=0.1,

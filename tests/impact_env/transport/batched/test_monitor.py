@@ -4,15 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from impact_env.errors import STLUnsupportedError
 from impact_env.stl import OnlineMonitor, conjuncts, parse
-from impact_env.transport.batched.monitor import BatchedMonitor
 from impact_env.transport.scenario import load_scenario
 from tests.impact_env.transport.batched.backends import shipped_scenarios
 
-TOLERANCE = {torch.float64: 1e-12, torch.float32: 1e-5}
+TOLERANCE = {"float64": 1e-12, "float32": 1e-5}  # by torch dtype name
 
 
 def random_traces(sc, steps: int, n: int, seed: int) -> np.ndarray:
@@ -25,8 +23,14 @@ def random_traces(sc, steps: int, n: int, seed: int) -> np.ndarray:
     return start + walk
 
 
-def compare(sc, formulas, dtype, starts=None, seed=0, n=6) -> float:
-    """Largest |batched - scalar| over a random trace; env i starts its episode at step starts[i]."""
+def compare(sc, formulas, dtype_name: str, starts=None, seed=0, n=6) -> float:
+    """Largest |batched - scalar| over a random trace, the batched monitor in torch's ``dtype_name``; env i
+    starts its episode at step starts[i]."""
+    import torch
+
+    from impact_env.transport.batched.monitor import BatchedMonitor
+
+    dtype = getattr(torch, dtype_name)
     names = [b.name for b in sc.bodies]
     dt = sc.control_period_s
     monitor = BatchedMonitor(formulas, sc.region_map(), dt, names, n, torch.device("cpu"), dtype)
@@ -56,7 +60,7 @@ def compare(sc, formulas, dtype, starts=None, seed=0, n=6) -> float:
     return worst
 
 
-@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
 # the default suite: windows that start late, negations, five conjuncts (every task in the slow suite)
 @pytest.mark.parametrize("name", shipped_scenarios(("ping_pong_stop", "two_objects", "timed_visits")))
 def test_shipped_tasks_and_their_conjuncts(name, dtype):
@@ -65,7 +69,7 @@ def test_shipped_tasks_and_their_conjuncts(name, dtype):
     assert compare(sc, formulas, dtype) <= TOLERANCE[dtype]
 
 
-@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
 def test_envs_at_different_steps_of_their_episodes(dtype):
     sc = load_scenario("relay")
     assert compare(sc, [sc.formula], dtype, starts=[0, 3, 17, 40, 41, 90]) <= TOLERANCE[dtype]
@@ -79,7 +83,7 @@ def test_envs_at_different_steps_of_their_episodes(dtype):
     "G[0,10] false | F[2,8] in(O1, A)",
     "!(in(R1, A) U[5,10] (in(O1, B) & !in(R2, A)))",
 ])
-@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
 def test_other_formulas_of_the_supported_class(text, dtype):
     assert compare(load_scenario("relay"), [parse(text)], dtype, seed=3) <= TOLERANCE[dtype]
 
@@ -87,6 +91,10 @@ def test_other_formulas_of_the_supported_class(text, dtype):
 @pytest.mark.parametrize("text", ["F[0,10] G[0,5] in(O1, A)", "G[0,10] (in(R1, A) U[0,3] in(O1, B))",
                                   "F[0,5] !(F[0,2] in(O1, A))"])
 def test_nested_temporal_operators_are_a_typed_error(text):
+    import torch
+
+    from impact_env.transport.batched.monitor import BatchedMonitor
+
     sc = load_scenario("relay")
     with pytest.raises(STLUnsupportedError, match="nests"):
         BatchedMonitor([parse(text)], sc.region_map(), 0.1, [b.name for b in sc.bodies], 2, torch.device("cpu"),

@@ -6,15 +6,16 @@ import math
 
 import numpy as np
 import pytest
-import torch
 
-from impact_env.transport.batched import BatchedTransportWorld, episode
 from impact_env.transport.scenario import load_scenario, scenario_from_dict
 from tests.helpers import two_body_dict
 
 
 def test_starts_are_uniform_in_the_noise_disc_and_clear():
+    import torch
     from scipy import stats  # imported when the test runs, not while the suite is collected
+
+    from impact_env.transport.batched import BatchedTransportWorld
 
     sc = load_scenario("two_objects")
     noise = 0.3
@@ -41,6 +42,10 @@ def test_starts_are_uniform_in_the_noise_disc_and_clear():
 
 
 def test_starts_next_to_an_obstacle_are_redrawn():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     data = two_body_dict(object_pos=(4.0, 5.0))
     data["obstacles"] = [{"name": "block", "box": [4.25, 6.0, 3.0, 7.0]}]  # 5 cm from the object's disc
     sc = scenario_from_dict(data)
@@ -52,7 +57,10 @@ def test_starts_next_to_an_obstacle_are_redrawn():
 
 
 def test_thrust_noise_is_multiplicative_and_clipped_to_the_limits():
+    import torch
     from scipy import stats  # imported when the test runs, not while the suite is collected
+
+    from impact_env.transport.batched import episode
 
     limits = torch.tensor([2.8, 2.8, 0.2], dtype=torch.float64).reshape(3, 1, 1)
     n = 20000
@@ -73,7 +81,10 @@ def test_thrust_noise_is_multiplicative_and_clipped_to_the_limits():
 def test_post_impact_velocity_error_is_uniform_on_top_of_eq5():
     """Head-on robot-object impacts in 2000 envs: the object leaves with Eq. (5) plus a uniform draw per axis
     in [-noise, noise]; the robot's own velocity is Eq. (5) unchanged."""
+    import torch
     from scipy import stats  # imported when the test runs, not while the suite is collected
+
+    from impact_env.transport.batched import BatchedTransportWorld
 
     noise, e = 0.02, 0.5
     sc = scenario_from_dict(two_body_dict(e=e, robot_vel=(0.3, 0.0), control_period_s=0.01, substeps=1))
@@ -94,6 +105,10 @@ def test_post_impact_velocity_error_is_uniform_on_top_of_eq5():
 
 
 def test_wall_contacts_get_no_post_impact_error():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     sc = scenario_from_dict(two_body_dict(e=0.75, robot_pos=(2.0, 8.0), robot_vel=(0.0, 0.0), object_pos=(9.0, 5.0),
                                           object_vel=(0.4, 0.0), control_period_s=0.01, substeps=1))
     world = BatchedTransportWorld(sc, 16, dtype=torch.float64, impact_velocity_noise_mps=0.05)
@@ -109,6 +124,10 @@ def test_wall_contacts_get_no_post_impact_error():
 @pytest.mark.parametrize("noise", [0.0, 0.05])
 def test_noise_options_leave_a_noiseless_world_exact(noise):
     """Thrust noise 0 draws nothing: the world is the noiseless one, whatever the seed."""
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     a, b = (BatchedTransportWorld("corridor", 2, impact_velocity_noise_mps=noise) for _ in range(2))
     a.reset(seeds=[1, 2])
     b.reset(seeds=[3, 4])

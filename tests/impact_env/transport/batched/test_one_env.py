@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from impact_env.envs import TransportEnv
 from impact_env.errors import EnvConfigError
-from impact_env.transport.batched.one_env import BatchedOneEnv
 from tests.paths import DATA
 
 PLANS = DATA / "plans" / "bench"
@@ -26,6 +24,8 @@ def by_body(event: dict) -> dict:
 
 def fly_both(name: str, steps: int | None = None, seed: int = 0):
     """(pymunk events, batched events) per step of one full-thrust random episode."""
+    from impact_env.transport.batched.one_env import BatchedOneEnv
+
     ref, env = TransportEnv(name), BatchedOneEnv(name)
     ref.reset(seed=seed)
     env.reset(seed=seed)
@@ -74,6 +74,8 @@ def test_separation_velocity_carries_the_post_impact_error():
     """With post-impact velocity noise, a robot-object event's separation velocity of the object is the one it
     flies on (its velocity at the end of the step, when nothing else touched it), off the noiseless world's
     first one by at most the noise per axis."""
+    from impact_env.transport.batched.one_env import BatchedOneEnv
+
     noise = 0.05
     env, quiet = BatchedOneEnv("two_objects", impact_velocity_noise_mps=noise), BatchedOneEnv("two_objects")
     env.reset(seed=3)
@@ -109,6 +111,10 @@ def test_separation_velocity_carries_the_post_impact_error():
 
 
 def test_options_and_errors():
+    import torch
+
+    from impact_env.transport.batched.one_env import BatchedOneEnv
+
     with pytest.raises(EnvConfigError, match="compile"):
         BatchedOneEnv("corridor", compile=True)
     with pytest.raises(EnvConfigError, match="render_mode"):
@@ -129,6 +135,7 @@ def test_options_and_errors():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["throw_and_catch_exp", "corridor"])
 def test_the_expert_flies_the_one_env_view_as_the_pymunk_env(name):
+    from impact_env.transport.batched.one_env import BatchedOneEnv
     from planners.expert import Expert
     from planners.plan import Plan
 

@@ -7,9 +7,6 @@ import math
 
 import numpy as np
 import pytest
-import torch
-
-from impact_env.transport.batched import philox
 
 KAT = [  # (counter, key, output), philox4x32_10
     ((0, 0, 0, 0), (0, 0), (0x6627E8D5, 0xE169C58D, 0xBC57AC4C, 0x9B00DBD8)),
@@ -21,12 +18,20 @@ KAT = [  # (counter, key, output), philox4x32_10
 
 @pytest.mark.parametrize("counter,key,expected", KAT)
 def test_philox_matches_the_known_answers(counter, key, expected):
+    import torch
+
+    from impact_env.transport.batched import philox
+
     t = [torch.tensor([v], dtype=torch.int64) for v in counter + key]
     out = philox.philox4x32(tuple(t[:4]), tuple(t[4:]))
     assert tuple(int(w) for w in out) == expected
 
 
 def test_philox_broadcasts_and_each_lane_is_its_own_counter():
+    import torch
+
+    from impact_env.transport.batched import philox
+
     c = torch.arange(8, dtype=torch.int64)
     z = torch.zeros(8, dtype=torch.int64)
     batch = philox.philox4x32((c, z, z, z), (z + 7, z))
@@ -36,6 +41,10 @@ def test_philox_broadcasts_and_each_lane_is_its_own_counter():
 
 
 def test_uniforms_are_open_exact_in_float32_and_uniform():
+    import torch
+
+    from impact_env.transport.batched import philox
+
     words = torch.tensor([0, 1, 511, 512, 2 ** 32 - 1], dtype=torch.int64)
     u32 = philox.uniform_open(words, torch.float32)
     u64 = philox.uniform_open(words, torch.float64)
@@ -51,6 +60,10 @@ def test_uniforms_are_open_exact_in_float32_and_uniform():
 
 
 def test_normal_pairs_are_standard_normal():
+    import torch
+
+    from impact_env.transport.batched import philox
+
     c = torch.arange(20000, dtype=torch.int64)
     z = torch.zeros_like(c)
     w = philox.philox4x32((c, z, z, z), (z + 3, z))
@@ -63,6 +76,10 @@ def test_normal_pairs_are_standard_normal():
 
 
 def test_seed_key_splits_a_63_bit_seed():
+    import torch
+
+    from impact_env.transport.batched import philox
+
     seeds = torch.tensor([0, 1, 2 ** 32, 2 ** 63 - 1], dtype=torch.int64)
     k0, k1 = philox.seed_key(seeds)
     assert k0.tolist() == [0, 1, 0, 2 ** 32 - 1] and k1.tolist() == [0, 0, 1, 2 ** 31 - 1]

@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from impact_env.envs import TransportEnv
-from impact_env.transport.batched import BatchedTransportWorld
 from impact_env.transport.core import TransportCore
 from impact_env.transport.scenario import scenario_from_dict
 from tests.helpers import two_body_dict
@@ -26,6 +24,10 @@ def far_apart():
 
 
 def test_free_flight_equals_pymunk_to_1e9_m_over_an_episode():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     sc = far_apart()
     core = TransportCore(sc)
     core.reset(np.random.default_rng(0))
@@ -49,6 +51,10 @@ def test_free_flight_equals_pymunk_to_1e9_m_over_an_episode():
 def test_episode_with_impacts_follows_the_pymunk_env(name):
     """Random full-thrust actions for a whole episode: observations, rewards, impacts and fuel as the Gym env's.
     Contacts are resolved alike to rounding, so the trajectories agree to far better than the tolerances."""
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     mode = {"relay": "conjuncts", "obstacle_avoidance": "sparse"}.get(name, "dense")
     env = TransportEnv(name, reward_mode=mode, fuel_penalty=0.1)
     world = BatchedTransportWorld(name, 1, dtype=torch.float64, reward_mode=mode, fuel_penalty=0.1)

@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from impact_env.errors import EnvConfigError
-from impact_env.transport.batched import BatchedTransportWorld
 from tests.optional import requires
 
 # SB3 looked up, not imported, while the suite is collected (it brings tensorboard's stubs): the tests import it
@@ -44,6 +42,10 @@ def test_spaces_and_one_step():
 
 
 def test_seed_sets_the_next_reset_and_trajectories_repeat():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     venv = TransportSB3VecEnv(SCENARIO, 2, thrust_noise=0.05, initial_position_noise_m=0.05)
     actions = actions_for(venv, 1, 5)
     runs = []
@@ -58,6 +60,10 @@ def test_seed_sets_the_next_reset_and_trajectories_repeat():
 
 
 def test_an_ended_episode_resets_in_the_same_step_with_its_terminal_observation():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     venv = TransportSB3VecEnv(SCENARIO, 2, thrust_noise=0.05)
     world = BatchedTransportWorld(SCENARIO, 2, thrust_noise=0.05)
     venv.seed(3)
@@ -99,6 +105,7 @@ def test_images_are_the_chosen_envs():
 def test_ppo_learns_a_few_hundred_steps_through_vec_monitor_and_vec_normalize():
     """SB3's own use of a VecEnv: PPO's rollouts (with episode ends inside them), VecMonitor's episode records
     and VecNormalize's running statistics, for 4 x 256 env steps."""
+    import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 

@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
-
-from impact_env.transport.batched import BatchedTransportWorld
 
 NOISE = {"thrust_noise": 0.05, "initial_position_noise_m": 0.05, "impact_velocity_noise_mps": 0.02}
 
 
 def trajectory(num_envs: int, slot: int, seed: int, steps: int, name: str = "two_objects", **kwargs) -> list:
     """The observations and rewards of the env in ``slot``; the other envs get other seeds and actions."""
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     world = BatchedTransportWorld(name, num_envs, **NOISE, **kwargs)
     seeds = [1000 + i for i in range(num_envs)]
     seeds[slot] = seed
@@ -32,8 +33,11 @@ def trajectory(num_envs: int, slot: int, seed: int, steps: int, name: str = "two
     return out
 
 
-@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
 def test_slot_0_of_8_and_slot_5_of_64_give_the_same_trajectory(dtype):
+    import torch
+
+    dtype = getattr(torch, dtype)
     a = trajectory(8, 0, 42, 200, dtype=dtype)
     b = trajectory(64, 5, 42, 200, dtype=dtype)
     assert all(torch.equal(x, y) for x, y in zip(a, b))
@@ -41,12 +45,18 @@ def test_slot_0_of_8_and_slot_5_of_64_give_the_same_trajectory(dtype):
 
 
 def test_another_seed_gives_another_trajectory():
+    import torch
+
     a = trajectory(8, 0, 42, 20)
     b = trajectory(8, 0, 43, 20)
     assert not torch.equal(a[0], b[0])  # another start (initial-position noise)
 
 
 def test_the_next_episode_continues_the_stream_of_the_seed():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     world = BatchedTransportWorld("corridor", 2, **NOISE)
     first = world.reset(seeds=[7, 8])
     second = world.reset()
@@ -59,6 +69,8 @@ def test_the_next_episode_continues_the_stream_of_the_seed():
 
 
 def test_unseeded_envs_get_different_seeds():
+    from impact_env.transport.batched import BatchedTransportWorld
+
     world = BatchedTransportWorld("corridor", 16, initial_position_noise_m=0.05)
     obs = world.reset()
     assert len(set(world.seeds.tolist())) == 16
@@ -67,6 +79,8 @@ def test_unseeded_envs_get_different_seeds():
 
 @pytest.mark.slow
 def test_compiled_world_is_slot_independent_too():
+    import torch
+
     a = trajectory(8, 0, 42, 100, compile=True)
     b = trajectory(64, 5, 42, 100, compile=True)
     assert all(torch.equal(x, y) for x, y in zip(a, b))

@@ -2,28 +2,36 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import pytest
-import torch
 
-pytest.importorskip("torchrl")
+from tests.optional import requires
 
-from tensordict import TensorDict  # noqa: E402
-from torchrl.collectors import SyncDataCollector  # noqa: E402
-from torchrl.envs.utils import check_env_specs  # noqa: E402
+if TYPE_CHECKING:
+    import torch
 
-from impact_env.transport.batched import BatchedTransportWorld  # noqa: E402
-from impact_env.transport.batched.torchrl_env import GROUP, TransportTorchRLEnv  # noqa: E402
+    from impact_env.transport.batched.torchrl_env import TransportTorchRLEnv
+
+# torchrl looked up, not imported, while the suite is collected: the tests import it
+pytestmark = requires("torchrl")
 
 SCENARIO = "throw_and_catch_exp"  # 200 steps per episode
 
 
 def random_actions(env: TransportTorchRLEnv, seed: int) -> torch.Tensor:
+    import torch
+
     g = torch.Generator().manual_seed(seed)
     return torch.rand(env.world.num_envs, env.world.n_robots, 3, generator=g) * 2 - 1
 
 
 @pytest.mark.parametrize("scenario", [SCENARIO, "four_robots"])
 def test_check_env_specs(scenario):
+    from torchrl.envs.utils import check_env_specs
+
+    from impact_env.transport.batched.torchrl_env import GROUP, TransportTorchRLEnv
+
     env = TransportTorchRLEnv(scenario, 3)
     check_env_specs(env, seed=0)
     R = env.world.n_robots
@@ -34,6 +42,11 @@ def test_check_env_specs(scenario):
 
 
 def test_step_is_the_worlds_step_seen_by_every_robot():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+    from impact_env.transport.batched.torchrl_env import GROUP, TransportTorchRLEnv
+
     env = TransportTorchRLEnv(SCENARIO, 2, thrust_noise=0.05)
     world = BatchedTransportWorld(SCENARIO, 2, thrust_noise=0.05)
     env.set_seed(5)
@@ -52,6 +65,8 @@ def test_step_is_the_worlds_step_seen_by_every_robot():
 
 
 def test_rollout_through_the_horizon_resets_the_ended_envs():
+    from impact_env.transport.batched.torchrl_env import GROUP, TransportTorchRLEnv
+
     env = TransportTorchRLEnv(SCENARIO, 2)
     env.set_seed(0)
     td = env.rollout(205, break_when_any_done=False)
@@ -62,6 +77,11 @@ def test_rollout_through_the_horizon_resets_the_ended_envs():
 
 
 def test_reset_mask_resets_only_the_envs_it_names():
+    import torch
+    from tensordict import TensorDict
+
+    from impact_env.transport.batched.torchrl_env import GROUP, TransportTorchRLEnv
+
     env = TransportTorchRLEnv(SCENARIO, 3)
     env.set_seed(1)
     td = env.reset()
@@ -78,6 +98,10 @@ def test_reset_mask_resets_only_the_envs_it_names():
 
 
 def test_same_seed_same_rollout():
+    import torch
+
+    from impact_env.transport.batched.torchrl_env import TransportTorchRLEnv
+
     env = TransportTorchRLEnv(SCENARIO, 2, thrust_noise=0.05, initial_position_noise_m=0.05)
     rollouts = []
     for _ in range(2):
@@ -90,6 +114,11 @@ def test_same_seed_same_rollout():
 
 
 def test_a_collector_gathers_frames_across_episode_ends():
+    import torch
+    from torchrl.collectors import SyncDataCollector
+
+    from impact_env.transport.batched.torchrl_env import TransportTorchRLEnv
+
     env = TransportTorchRLEnv(SCENARIO, 4)
     collector = SyncDataCollector(env, policy=None, frames_per_batch=4 * 150, total_frames=4 * 300)
     batches = list(collector)

@@ -14,14 +14,11 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-import torch
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.wrappers.vector import RecordEpisodeStatistics, RecordVideo
 
 import impact_env
 from impact_env.errors import EnvConfigError
-from impact_env.transport.batched import BatchedTransportWorld
-from impact_env.transport.batched.vector_env import TransportVectorEnv
 
 SCENARIOS = Path(impact_env.__file__).parent / "transport" / "scenarios"
 ID = "impact_env/ThrowAndCatchExp-v0"  # the shortest shipped horizon (200 steps)
@@ -33,6 +30,8 @@ def actions_for(envs, seed: int, steps: int) -> np.ndarray:
 
 @pytest.mark.parametrize("env_id", [*impact_env.GYM_IDS, "impact_env/Transport-v0"])
 def test_make_vec_returns_the_batched_world_for_every_transport_id(env_id):
+    from impact_env.transport.batched.vector_env import TransportVectorEnv
+
     kwargs = {"scenario": str(SCENARIOS / "two_objects.toml")} if env_id.endswith("Transport-v0") else {}
     envs = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point", **kwargs)
     single = gym.make(env_id, **kwargs)
@@ -57,6 +56,8 @@ def test_make_vec_returns_the_batched_world_for_every_transport_id(env_id):
 
 
 def test_make_vec_picks_the_batched_world_and_sync_still_makes_pymunk_envs():
+    from impact_env.transport.batched.vector_env import TransportVectorEnv
+
     assert isinstance(gym.make_vec(ID, num_envs=2), TransportVectorEnv)  # Gymnasium prefers the vector entry point
     sync = gym.make_vec(ID, num_envs=2, vectorization_mode="sync")
     assert isinstance(sync, gym.vector.SyncVectorEnv) and not isinstance(sync, TransportVectorEnv)
@@ -77,6 +78,8 @@ def test_transport_v0_needs_a_scenario():
 
 
 def test_env_options_pass_through_and_are_checked():
+    from impact_env.transport.batched.vector_env import TransportVectorEnv
+
     envs = gym.make_vec(ID, num_envs=2, vectorization_mode="vector_entry_point", reward_mode="sparse",
                         thrust_noise=0.05)
     assert envs.world.reward_mode == "sparse" and envs.world.thrust_noise == 0.05
@@ -99,6 +102,8 @@ def run(envs, seed: int, actions: np.ndarray):
 
 
 def test_same_seed_same_trajectory_through_an_autoreset():
+    from impact_env.transport.batched.vector_env import TransportVectorEnv
+
     envs = TransportVectorEnv("throw_and_catch_exp", 2, max_episode_steps=6, thrust_noise=0.05,
                               initial_position_noise_m=0.05)
     actions = actions_for(envs, 0, 15)
@@ -116,6 +121,11 @@ def test_same_seed_same_trajectory_through_an_autoreset():
 def test_next_step_autoreset_matches_the_world_reset_by_hand():
     """Truncation at max_episode_steps; the next step returns the next episode's first observation with reward 0
     and no termination, ignores its action, and every later step is the world's, as if reset by hand."""
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+    from impact_env.transport.batched.vector_env import TransportVectorEnv
+
     steps, N = 5, 2
     kwargs = {"thrust_noise": 0.05, "initial_position_noise_m": 0.05}
     envs = TransportVectorEnv("throw_and_catch_exp", N, max_episode_steps=steps, **kwargs)
@@ -138,6 +148,8 @@ def test_next_step_autoreset_matches_the_world_reset_by_hand():
 
 
 def test_autoreset_step_ignores_the_action():
+    from impact_env.transport.batched.vector_env import TransportVectorEnv
+
     envs = TransportVectorEnv("throw_and_catch_exp", 2, max_episode_steps=2, thrust_noise=0.05)
     actions = actions_for(envs, 2, 3)
     out = []
@@ -163,6 +175,8 @@ def test_the_horizon_terminates_and_the_time_limit_truncates_together():
 
 
 def test_partial_reset_leaves_the_other_envs_on_their_trajectory():
+    from impact_env.transport.batched.vector_env import TransportVectorEnv
+
     kwargs = {"thrust_noise": 0.05, "initial_position_noise_m": 0.05}
     envs = TransportVectorEnv("two_objects", 3, **kwargs)
     ref = TransportVectorEnv("two_objects", 3, **kwargs)
@@ -181,6 +195,8 @@ def test_partial_reset_leaves_the_other_envs_on_their_trajectory():
 
 
 def test_an_autoreset_of_some_envs_leaves_the_others_on_their_trajectory():
+    from impact_env.transport.batched.vector_env import TransportVectorEnv
+
     kwargs = {"thrust_noise": 0.05, "impact_velocity_noise_mps": 0.05}
     envs = TransportVectorEnv("throw_and_catch_exp", 2, max_episode_steps=5, **kwargs)
     ref = TransportVectorEnv("throw_and_catch_exp", 2, **kwargs)
@@ -200,6 +216,8 @@ def test_an_autoreset_of_some_envs_leaves_the_others_on_their_trajectory():
 
 
 def test_record_episode_statistics_counts_whole_episodes():
+    from impact_env.transport.batched.vector_env import TransportVectorEnv
+
     envs = RecordEpisodeStatistics(TransportVectorEnv("throw_and_catch_exp", 3, max_episode_steps=4))
     envs.reset(seed=0)
     total = np.zeros(3)
@@ -212,6 +230,8 @@ def test_record_episode_statistics_counts_whole_episodes():
 
 
 def test_render_draws_the_envs_it_is_asked_for(tmp_path):
+    from impact_env.transport.batched.vector_env import TransportVectorEnv
+
     envs = TransportVectorEnv("two_objects", 4, render_mode="rgb_array", render_width_px=120)
     assert envs.render() is not None  # before reset: the start state
     envs.reset(seed=0)
@@ -229,6 +249,8 @@ def test_render_draws_the_envs_it_is_asked_for(tmp_path):
 
 
 def test_record_video_writes_a_video_of_the_first_env(tmp_path):
+    from impact_env.transport.batched.vector_env import TransportVectorEnv
+
     envs = RecordVideo(TransportVectorEnv("throw_and_catch_exp", 64, render_mode="rgb_array", render_width_px=96,
                                           max_episode_steps=5), str(tmp_path), record_first_only=True,
                        episode_trigger=lambda episode: episode == 0)

@@ -4,25 +4,33 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
-import torch
 
 from impact_env.envs import TransportEnv
 from impact_env.errors import ActionError, EnvConfigError, ImpactEnvError, STLUnsupportedError
 from impact_env.stl import conjuncts, robustness
-from impact_env.transport.batched import BatchedTransportWorld
 from impact_env.transport.core import TransportCore
 from impact_env.transport.scenario import load_scenario, scenario_from_dict
 from tests.helpers import two_body_dict
 
+if TYPE_CHECKING:
+    import torch
+
 
 def random_actions(world, seed: int) -> torch.Tensor:
+    import torch
+
     return torch.rand(world.num_envs, world.action_size, generator=torch.Generator().manual_seed(seed)) * 2 - 1
 
 
 def test_shapes_and_views():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     world = BatchedTransportWorld("two_objects", 5)
     obs = world.reset(seeds=3)
     B, R = world.n_bodies, world.n_robots
@@ -42,6 +50,10 @@ def test_shapes_and_views():
 
 
 def test_agent_observations_match_the_core():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     core = TransportCore("relay")
     core.reset(np.random.default_rng(0))
     world = BatchedTransportWorld("relay", 1, dtype=torch.float64)
@@ -57,6 +69,10 @@ def test_agent_observations_match_the_core():
 @pytest.mark.parametrize("mode", ["dense", "sparse", "conjuncts"])
 def test_rewards_sum_to_the_offline_robustness_of_the_trace(mode):
     """dense and sparse: to the task's robustness; conjuncts: to the mean of its conjuncts' (offline, numpy)."""
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     world = BatchedTransportWorld("ping_pong_stop", 4, dtype=torch.float64, reward_mode=mode)
     world.reset(seeds=0)
     trace = [world.body_state()[:, :, :2].numpy()]
@@ -80,6 +96,10 @@ def test_rewards_sum_to_the_offline_robustness_of_the_trace(mode):
 
 
 def test_fuel_penalty_is_subtracted_per_step():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     plain = BatchedTransportWorld("corridor", 3, dtype=torch.float64)
     taxed = BatchedTransportWorld("corridor", 3, dtype=torch.float64, fuel_penalty=0.5)
     plain.reset(seeds=1), taxed.reset(seeds=1)
@@ -92,6 +112,10 @@ def test_fuel_penalty_is_subtracted_per_step():
 
 
 def test_robustness_of_a_task_that_always_holds_is_clipped():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     data = two_body_dict()
     data["task"] = "F[0,2] true"
     sc = scenario_from_dict(data)
@@ -103,6 +127,10 @@ def test_robustness_of_a_task_that_always_holds_is_clipped():
 
 
 def test_bad_actions_and_states_are_typed_errors():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     world = BatchedTransportWorld("corridor", 4)
     with pytest.raises(ImpactEnvError, match="reset"):
         world.step(torch.zeros(4, 6))
@@ -121,18 +149,28 @@ def test_bad_actions_and_states_are_typed_errors():
 
 
 @pytest.mark.parametrize("kwargs,match", [
-    ({"num_envs": 0}, "num_envs"), ({"reward_mode": "shaped"}, "reward_mode"), ({"dtype": torch.float16}, "dtype"),
+    ({"num_envs": 0}, "num_envs"), ({"reward_mode": "shaped"}, "reward_mode"), ({"dtype": "float16"}, "dtype"),
     ({"contact_iterations": 0}, "contact_iterations"), ({"thrust_noise": -1.0}, "thrust_noise"),
     ({"restitution": 1.5}, "restitution"), ({"device": "nonsense"}, "device"),
     ({"initial_position_noise_m": 50.0}, "initial_position_noise_m"),
 ])
 def test_bad_options_are_typed_errors(kwargs, match):
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
+    if "dtype" in kwargs:  # named at collection, the torch dtype here
+        kwargs = {**kwargs, "dtype": getattr(torch, kwargs["dtype"])}
     args = {"num_envs": 2, **kwargs}
     with pytest.raises(EnvConfigError, match=match):
         BatchedTransportWorld("corridor", **args)
 
 
 def test_bad_seeds_and_masks_are_typed_errors():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     world = BatchedTransportWorld("corridor", 3)
     for seeds in ([1, 2], [-1, 0, 1], [0.5, 1, 2], [True, 1, 2]):
         with pytest.raises(EnvConfigError, match="seeds"):
@@ -142,6 +180,10 @@ def test_bad_seeds_and_masks_are_typed_errors():
 
 
 def test_the_horizon_ends_an_env_and_a_partial_reset_restarts_only_it():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     world = BatchedTransportWorld("throw_and_catch_exp", 3, dtype=torch.float64)
     world.reset(seeds=[5, 6, 7])
     for k in range(world.horizon_steps):
@@ -161,6 +203,10 @@ def test_the_horizon_ends_an_env_and_a_partial_reset_restarts_only_it():
 
 
 def test_rgb_frames_are_the_gym_envs_frames():
+    import torch
+
+    from impact_env.transport.batched import BatchedTransportWorld
+
     env = TransportEnv("corridor", render_mode="rgb_array", render_width_px=200)
     world = BatchedTransportWorld("corridor", 2, dtype=torch.float64)
     env.reset(seed=0)
@@ -184,12 +230,16 @@ def test_importing_the_package_does_not_import_torch():
 
 
 def test_scenario_objects_and_files_are_accepted():
+    from impact_env.transport.batched import BatchedTransportWorld
+
     sc = load_scenario("relay")
     world = BatchedTransportWorld(sc, 2)
     assert world.scenario is sc and world.horizon_steps == 600
 
 
 def test_a_task_outside_the_monitors_class_is_refused_when_the_world_is_built():
+    from impact_env.transport.batched import BatchedTransportWorld
+
     data = two_body_dict()
     data["task"] = "F[0,10] G[0,5] in(O1, goal)"
     sc = scenario_from_dict(data)
