@@ -12,7 +12,8 @@ A side switch is a hand-over of :mod:`planners.plan.handover`, and flyable on th
 is at least ``1 + margin`` times the least time getting round takes at the robot's thrust limit, with the
 offline planner's ``HandoverConfig.margin``. So the mission never refuses a re-plan that the planner's
 hand-over repair has passed, on the same model; what it adds is the test from the observed state once the
-robot is on its way round, and the expert's model of the pair (its identified restitution).
+robot is on its way round, and the expert's model of the pair (its identified restitution). A robot that hits
+another object in between makes no side switch (its velocity changes there, so the least time does not hold).
 """
 
 from __future__ import annotations

@@ -89,6 +89,10 @@ def test_a_side_switch_with_time_to_get_round_is_flyable(two_objects):
     # another robot's impact on O1 in between: R1's two impacts are not consecutive on O1
     [impact(5.0, "R1", "O1", (0.0, 0.0), (0.1, 0.0)), impact(9.0, "R2", "O1", (0.1, 0.0), (0.1, 0.1)),
      impact(15.0, "R1", "O1", (0.1, 0.1), (0.0, 0.0))],
+    # R1 hits O2 in between: its velocity changes there, so the least time of getting round O1 does not hold
+    # (not a hand-over for the planner either)
+    [impact(5.0, "R1", "O1", (0.0, 0.0), (0.1, 0.0)), impact(9.0, "R1", "O2", (0.0, 0.0), (0.1, 0.1)),
+     impact(15.0, "R1", "O1", (0.1, 0.0), (0.0, 0.0))],
     # a stop from the front, then a push back the way the object came: the same side
     [impact(8.0, "R1", "O1", (0.2, 0.0), (0.0, 0.0)), impact(14.0, "R1", "O1", (0.0, 0.0), (-0.2, 0.0))],
     # a perpendicular second change: the robot moves a quarter round the object, not to its other side
