@@ -167,11 +167,10 @@ def switches_text(scenario, plan, after_s: float) -> str:
     """The plan's side switches after ``after_s``: who must get round what, with the time it has and needs."""
     unflyable = {(sw.robot, sw.object, sw.t2_s) for sw in unflyable_side_switches(plan, scenario, after_s)}
     parts = []
-    for sw in side_switches(plan, after_s):
-        need = sw.time_to_get_round_s(scenario.body(sw.robot), scenario.body(sw.object))
+    for sw in side_switches(plan, scenario, after_s):
         parts.append(f"{sw.robot} must get round {sw.object} between its impacts at {sw.t1_s:.2f} and {sw.t2_s:.2f} "
-                     f"(it leaves at {sw.away_mps:+.3f} m/s; {sw.t2_s - max(sw.t1_s, after_s):.1f} s left, "
-                     f"{need:.1f} s needed{', NO TIME' if (sw.robot, sw.object, sw.t2_s) in unflyable else ''})")
+                     f"({sw.t2_s - max(sw.t1_s, after_s):.1f} s left, at least {sw.needed_s:.1f} s needed"
+                     f"{', NO TIME' if (sw.robot, sw.object, sw.t2_s) in unflyable else ''})")
     return "; ".join(parts) or "none"
 
 

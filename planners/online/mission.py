@@ -9,7 +9,8 @@ states as the local layer will fly it, without the impacts the robot provably ca
 :class:`MissionConfig`, (3) the offline planner re-plans the rest from the current state (a derived scenario
 with the task progressed to now; an impact-robust plan with the impact-robust planner) and the new plan is
 spliced after the executed part, unless it is no better than the prediction or the robots cannot fly it with
-a margin (next contacts, side switches: :mod:`planners.online.side_switch`). A stopped object drifting out
+a margin (next contacts; side switches, on the offline planner's own hand-over test and margin:
+:mod:`planners.online.side_switch`). A stopped object drifting out
 of a held goal is trimmed by a smaller re-plan (:mod:`planners.online.station_keeping`).
 
 The compute budget is a node count and the solver's threads are pinned (``MissionConfig.solver_options``), so
@@ -39,6 +40,7 @@ from impact_env.config_checks import (
 from impact_env.stl import progress, robustness, without_constants
 from impact_env.transport.scenario import Body, Scenario
 from planners.errors import PlannerError, PlanTimeoutError
+from planners.offline.config import HandoverConfig
 from planners.offline.solvers.base import SolverOptions
 from planners.offline.spatially_robust import PlannerConfig, plan_spatially_robust
 from planners.online.reachability import (
@@ -86,8 +88,8 @@ class MissionConfig:
     quiet_s: float = 1.0
     """No re-plan within this time of a pending planned impact (s): the local replanner owns it."""
     allow_side_switches: bool = False
-    """Accept a re-plan with a side switch the robot has no time for (:func:`unflyable_side_switches`); False:
-    keep the current plan."""
+    """Accept a re-plan with a side switch the robot has no time for (:func:`unflyable_side_switches`, with the
+    re-planning planner's ``HandoverConfig.margin``); False: keep the current plan."""
     predict_reachability: bool = True
     """The prediction drops a pending impact the robot provably cannot reach in time (step 1); False: every
     pending impact is predicted to deliver what the plan asks."""
@@ -97,9 +99,10 @@ class MissionConfig:
     reach_tolerance_mps: float = VELOCITY_TOLERANCE_MPS
     """How close to the contact's velocity (m/s, per axis) counts as making it."""
     flyability_margin: float = 0.8
-    """A re-plan is accepted only if every robot can fly its next segment with this share (in (0, 1]) of its
-    thrust, within its speed bound, and every side switch with this share of the time between its impacts
-    (:func:`planners.online.reachability.next_contacts`, :func:`unflyable_side_switches`)."""
+    """A re-plan is accepted only if every robot can reach its next contact with this share (in (0, 1]) of its
+    thrust, within its speed bound (:func:`planners.online.reachability.next_contacts`). Side switches are
+    tested on the offline planner's hand-over test with its margin instead (``PlannerConfig.handover``, the
+    default :class:`HandoverConfig` when that is None), so the two layers agree on them."""
     station_keeping: StationKeepingConfig | None = field(default_factory=StationKeepingConfig)
     """Trim a stopped object's drift during a held goal with a small re-plan of the nearest free robot
     (:mod:`planners.online.station_keeping`); None: off."""
@@ -185,6 +188,8 @@ class MissionPlanner:
         self.late_grace_s = float(late_grace_s)
         self.config = config or MissionConfig()
         self.planner_config = planner_config or PlannerConfig()
+        # the one margin of a hand-over: what the planner's repair leaves is what the mission accepts
+        self.handover_margin = (self.planner_config.handover or HandoverConfig()).margin
         self.dt = scenario.control_period_s
         self.formula = scenario.formula
         self.regions = scenario.region_map()
@@ -470,7 +475,8 @@ class MissionPlanner:
                   robots: set[str] | None = None) -> list[str]:
         """Why the robots (or only ``robots``) cannot fly ``plan`` from the observed states at ``t`` (empty: they
         can): a robot whose next contact is out of reach with ``flyability_margin`` of its thrust within its
-        speed bound, a side switch without the time or the thrust (unless ``allow_side_switches``)."""
+        speed bound, a side switch with less than ``1 + handover_margin`` times the least time it needs
+        (unless ``allow_side_switches``; :func:`unflyable_side_switches` with the expert's ``model``)."""
         cfg = self.config
         sc = self.scenario
         by_name = {name: states[index[name]] for name in self.names}
@@ -479,11 +485,12 @@ class MissionPlanner:
                 return sc.restitution, (sc.body(robot).mass_kg, sc.body(obj).mass_kg)
         reasons = []
         if cfg.allow_side_switches is False:
-            for sw in unflyable_side_switches(plan, sc, t, cfg.flyability_margin, by_name, model,
-                                              (cfg.reach_tolerance_m, cfg.reach_tolerance_mps)):
+            for sw in unflyable_side_switches(plan, sc, t, self.handover_margin, by_name, model):
                 if robots is None or sw.robot in robots:
+                    need = "can never get round" if math.isinf(sw.needed_s) else \
+                        f"needs {(1 + self.handover_margin) * sw.needed_s:.1f} s with the margin"
                     reasons.append(f"side switch {sw.robot} round {sw.object} between {sw.t1_s:.1f} and "
-                                   f"{sw.t2_s:.1f} s")
+                                   f"{sw.t2_s:.1f} s, {need}, has {sw.available_s:.1f} s")
         chosen = [r for r in sc.robots if robots is None or r.name in robots]
         for verdict in next_contacts(t, plan, chosen, sc.body, by_name, model, self.aim_final_position,
                                      cfg.flyability_margin, cfg.reach_tolerance_m, cfg.reach_tolerance_mps):

@@ -307,3 +307,23 @@ def test_planner_benchmark_names_a_cut_line(tmp_path):
     with pytest.raises(ResultsFileError, match="line 2 .*not a complete JSON object.*sed -i '2d'"):
         planner.main(["--planners", "sr", "--scenarios", "corridor", "--solvers", "highs", "--repeats", "1",
                       "--time-limit", "5", "--cache", str(cache)])
+
+
+def test_handover_agreement_names_an_unknown_scenario(capsys):
+    from benchmarks import handover_agreement
+
+    with pytest.raises(SystemExit) as info:
+        handover_agreement.main(["--scenarios", "two_objects,no_such_task"])
+    assert info.value.code == 2 and "--scenarios: no plan in" in capsys.readouterr().err
+
+
+def test_handover_agreement_table_counts_the_episodes_that_differ():
+    from benchmarks.handover_agreement import table
+
+    def cell(tree, rhos):
+        return {"tree": tree, "cell": "relay e 0.3", "result": [
+            {"seed": k, "success": r > 0, "robustness": r, "statuses": ["accepted"]} for k, r in enumerate(rhos)]}
+
+    text = table([cell("this checkout", [0.2, -0.1]), cell("old", [0.2, 0.3])], "old", ["relay"])
+    assert "| relay e 0.3 | this checkout | 1/2 | +0.050 | -0.100 | 2 | 0 | 1 |" in text
+    assert "| relay e 0.3 | old | 2/2 | +0.250 | +0.200 | 2 | 0 | 1 |" in text

@@ -25,13 +25,17 @@ from planners.online.bookkeeping import ImpactBook
 from planners.online.mission import MissionConfig, MissionPlanner
 from planners.online.side_switch import side_switches, unflyable_side_switches
 from planners.plan import Plan, PlannedImpact
+from planners.plan.handover import handovers
 from tests.paths import DATA
 
 CASE = DATA / "two_objects_replan_at_10s.json"
 
 
-def impact(t, robot, obj, before, after) -> PlannedImpact:
-    return PlannedImpact(t, robot, obj, (0.0, 0.0), before, after, (0.0, 0.0), (0.0, 0.0))
+def impact(t, robot, obj, before, after, e=0.6) -> PlannedImpact:
+    """A planned impact of equal masses (Eq. 5): the robot's velocities from the object's change."""
+    vo0, vo1 = np.asarray(before, float), np.asarray(after, float)
+    vr0 = vo0 + (vo1 - vo0) / ((1 + e) / 2)
+    return PlannedImpact(t, robot, obj, (0.0, 0.0), tuple(vo0), tuple(vo1), tuple(vr0), tuple(vo0 + vr0 - vo1))
 
 
 def impacts_plan(*impacts: PlannedImpact) -> Plan:
@@ -44,33 +48,37 @@ def two_objects():
 
 
 def test_a_push_then_a_stop_by_the_same_robot_is_a_side_switch(two_objects):
+    """A side switch is the offline planner's hand-over (planners.plan.handover), with its least time: from
+    behind O2 at 0.17 m/s to its front takes at least 9.63 s at full thrust, more than the 9 s there are."""
     plan = impacts_plan(impact(18.0, "R2", "O2", (-0.1, 0.0), (-0.17, 0.0)),
                         impact(27.0, "R2", "O2", (-0.17, 0.0), (0.0, 0.0)))
-    (sw,) = side_switches(plan)
+    (sw,) = side_switches(plan, two_objects)
     assert (sw.robot, sw.object, sw.t1_s, sw.t2_s) == ("R2", "O2", 18.0, 27.0)
-    assert sw.angle_rad == pytest.approx(np.pi) and sw.away_mps == pytest.approx(0.17)
-    # half a circle of radius 0.4 m at 0.3 - 0.17 m/s relative speed: 9.7 s, more than the 9 s it has
-    need = sw.time_to_get_round_s(two_objects.body("R2"), two_objects.body("O2"))
-    assert need == pytest.approx(np.pi * 0.4 / 0.13)
+    assert sw.angle_rad == pytest.approx(np.pi) and sw.needed_s == pytest.approx(9.63, abs=0.01)
+    assert side_switches(plan, two_objects) == handovers(plan, two_objects)
     assert unflyable_side_switches(plan, two_objects) == [sw]
-    assert side_switches(plan, after_s=27.0) == []  # the second impact is not after 27 s
-    assert side_switches(plan, after_s=26.9) == [sw]  # the first may be in the past
-    # from a re-plan at 20 s the robot has 7 s left, not 9
-    assert unflyable_side_switches(plan, two_objects, after_s=20.0) == [sw]
+    assert unflyable_side_switches(plan, two_objects, margin=0.0) == [sw]  # too short even without the margin
+    assert side_switches(plan, two_objects, after_s=27.0) == []  # the second impact is not after 27 s
+    assert side_switches(plan, two_objects, after_s=26.9) == [sw]  # the first may be in the past
+    # from a re-plan at 20 s without the observed states: the whole way round in the 7 s left
+    (late,) = unflyable_side_switches(plan, two_objects, after_s=20.0)
+    assert (late.from_s, late.available_s, late.needed_s) == (20.0, 7.0, sw.needed_s)
 
 
 def test_a_side_switch_with_time_to_get_round_is_flyable(two_objects):
     slow = impacts_plan(impact(8.0, "R2", "O2", (0.0, 0.0), (-0.13, 0.0)),
-                        impact(27.0, "R2", "O2", (-0.13, 0.0), (0.0, 0.0)))  # 7.4 s needed, 19 s there
-    # stopped from the front, then pushed on from behind: at rest, 4.2 s needed, 6 s there
+                        impact(27.0, "R2", "O2", (-0.13, 0.0), (0.0, 0.0)))  # 7.92 s needed, 19 s there
+    # stopped from the front, then pushed on from behind: 7.72 s needed (the robot must also get 0.8 m behind
+    # it and up to the push speed), 12 s there
     stopped = impacts_plan(impact(8.0, "R1", "O1", (0.2, 0.0), (0.0, 0.0)),
-                           impact(14.0, "R1", "O1", (0.0, 0.0), (0.2, 0.0)))
-    for plan in (slow, stopped):
-        assert len(side_switches(plan)) == 1 and unflyable_side_switches(plan, two_objects) == []
+                           impact(20.0, "R1", "O1", (0.0, 0.0), (0.2, 0.0)))
+    for plan, need in ((slow, 7.92), (stopped, 7.72)):
+        (sw,) = side_switches(plan, two_objects)
+        assert sw.needed_s == pytest.approx(need, abs=0.01) and unflyable_side_switches(plan, two_objects) == []
     too_fast = impacts_plan(impact(8.0, "R1", "O1", (0.0, 0.0), (0.3, 0.0)),
                             impact(60.0, "R1", "O1", (0.3, 0.0), (0.0, 0.0)))  # as fast as the robot
     (sw,) = unflyable_side_switches(too_fast, two_objects)
-    assert sw.time_to_get_round_s(two_objects.body("R1"), two_objects.body("O1")) == np.inf
+    assert sw.needed_s == np.inf
 
 
 @pytest.mark.parametrize("impacts", [
@@ -81,13 +89,17 @@ def test_a_side_switch_with_time_to_get_round_is_flyable(two_objects):
     # another robot's impact on O1 in between: R1's two impacts are not consecutive on O1
     [impact(5.0, "R1", "O1", (0.0, 0.0), (0.1, 0.0)), impact(9.0, "R2", "O1", (0.1, 0.0), (0.1, 0.1)),
      impact(15.0, "R1", "O1", (0.1, 0.1), (0.0, 0.0))],
+    # R1 hits O2 in between: its velocity changes there, so the least time of getting round O1 does not hold
+    # (not a hand-over for the planner either)
+    [impact(5.0, "R1", "O1", (0.0, 0.0), (0.1, 0.0)), impact(9.0, "R1", "O2", (0.0, 0.0), (0.1, 0.1)),
+     impact(15.0, "R1", "O1", (0.1, 0.0), (0.0, 0.0))],
     # a stop from the front, then a push back the way the object came: the same side
     [impact(8.0, "R1", "O1", (0.2, 0.0), (0.0, 0.0)), impact(14.0, "R1", "O1", (0.0, 0.0), (-0.2, 0.0))],
     # a perpendicular second change: the robot moves a quarter round the object, not to its other side
     [impact(5.0, "R1", "O1", (0.0, 0.0), (0.1, 0.0)), impact(15.0, "R1", "O1", (0.1, 0.0), (0.1, 0.1))],
 ])
-def test_no_side_switch(impacts):
-    assert side_switches(impacts_plan(*impacts)) == []
+def test_no_side_switch(impacts, two_objects):
+    assert side_switches(impacts_plan(*impacts), two_objects) == []
 
 
 def test_the_shipped_plans_side_switches_leave_time_to_get_round():
@@ -96,7 +108,7 @@ def test_the_shipped_plans_side_switches_leave_time_to_get_round():
     root = DATA / "plans" / "robustness"  # copies of results/robustness/plans/
     for name, count in (("relay", 1), ("obstacle_avoidance", 1), ("two_objects", 0)):
         plan = Plan.from_dict(json.loads((root / f"{name}.json").read_text()))
-        assert len(side_switches(plan)) == count
+        assert len(side_switches(plan, load_scenario(name))) == count
         assert unflyable_side_switches(plan, load_scenario(name)) == []
 
 
@@ -146,7 +158,7 @@ def test_the_point_mass_replan_has_side_switches_and_is_accepted_when_allowed(re
     scenario = load_scenario(case["scenario"])
     switches = unflyable_side_switches(spliced, scenario, case["time_s"])
     assert ("R2", "O2") in {(sw.robot, sw.object) for sw in switches}
-    assert side_switches(plan) == []  # the offline plan had none
+    assert side_switches(plan, scenario) == []  # the offline plan had none
 
 
 def test_a_replan_with_a_side_switch_keeps_the_current_plan(replans):
