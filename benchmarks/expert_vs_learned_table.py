@@ -100,6 +100,8 @@ def numbers(flown: list[dict], learned: list[dict], scenarios: list[str], reps: 
         overall.append({"controller": LEARNED.get(o["algorithm"], o["algorithm"]), "kind": "learned",
                         "scenarios": o["tasks"], "seeds": o["seeds"], "budget_env_steps": o["budget_env_steps"],
                         "wall_s_total": o["wall_s_total"], **{k: o[k] for k in ("iqm", "iqm_ci", "mean", "mean_ci")}})
+    overall += [{"controller": label, "kind": "missing"} for algorithm, label in LEARNED.items()
+                if algorithm not in {o["algorithm"] for o in report["overall"]}]
     order = ["expert", *LEARNED.values(), "random"]
     overall.sort(key=lambda o: order.index(o["controller"]) if o["controller"] in order else len(order))
     return {"scenarios": scenarios, "rows": rows, "overall": overall, "reps": reps}
@@ -142,12 +144,15 @@ def _row(r: dict[str, Any]) -> str:
 
 def markdown(numbers: dict[str, Any]) -> str:
     """``summary.md``: across scenarios, then per scenario (module docstring)."""
+    flown = sorted({r["episodes"] for r in numbers["rows"] if r["kind"] == "flown"})
+    evaluated = sorted({n for r in numbers["rows"] if r["kind"] == "learned" for n in r["eval_episodes"]})
     lines = ["On the pymunk env with 5 % thrust noise and objects starting within 5 cm, episodes seeded 1,000,000 "
-             "on, success = final STL robustness > 0. **expert, random**: one controller, success % with a 95 % "
-             "Wilson interval over its episodes, mean robustness with a 95 % bootstrap interval over them. "
-             "**SB3 PPO, MAPPO, IPPO**: trained on the batched world (`benchmarks.rl_at_scale`), one run a seed, "
-             "each evaluated on the first 50-100 of the same episodes; the interquartile mean (IQM) over seeds of "
-             "the runs' success rate and mean robustness, with a 95 % bootstrap interval over seeds (rliable, "
+             "on, success = final STL robustness > 0. **expert, random**: one controller on the first "
+             f"{_episodes(flown) if flown else 'N'} episodes, success % with a 95 % Wilson interval over them, "
+             "mean robustness with a 95 % bootstrap interval over them. **SB3 PPO, MAPPO, IPPO**: trained on the "
+             "batched world (`benchmarks.rl_at_scale`), one run a seed, each evaluated on the first "
+             f"{_episodes(evaluated) if evaluated else 'N'} of the same episodes; the interquartile mean (IQM) over "
+             "seeds of the runs' success rate and mean robustness, with a 95 % bootstrap interval over seeds (rliable, "
              f"{numbers['reps']} resamples). SB3 flies its deterministic policy, MAPPO and IPPO sampled actions. "
              "The wall clock is the training's, per run, on the shared 2-core machine. Made by "
              "`python -m benchmarks.expert_vs_learned --publish`.", ""]
@@ -156,7 +161,9 @@ def markdown(numbers: dict[str, Any]) -> str:
                   "| controller | scenarios | seeds | env-steps per run | training wall clock (all runs) | "
                   "IQM [95 % interval] | mean [95 % interval] |", "|---|---:|---|---:|---:|---:|---:|"]
         for o in numbers["overall"]:
-            if o["kind"] == "flown":
+            if o["kind"] == "missing":
+                lines.append(f"| {o['controller']} | 0 | - | - | - | no finished run | - |")
+            elif o["kind"] == "flown":
                 lines.append(f"| {o['controller']} | {len(o['scenarios'])} | - | - | - | - | "
                              f"{_interval(o['mean'], o['mean_ci'])} ({o['episodes']} episodes, Wilson) |")
             else:

@@ -101,7 +101,7 @@ def test_table_joins_flown_and_learned_rows():
     assert sb3["robustness"] == pytest.approx(-0.2) and sb3["budget_env_steps"] == [10_000_000]
     assert mappo_row["success"] == pytest.approx(0.6) and mappo_row["policy"] == ["sampled"]
     overall = {o["controller"]: o for o in numbers["overall"]}
-    assert list(overall) == ["expert", "SB3 PPO", "MAPPO", "random"]
+    assert list(overall) == ["expert", "SB3 PPO", "MAPPO", "IPPO", "random"] and overall["IPPO"]["kind"] == "missing"
     assert overall["expert"]["mean"] == 0.75 and overall["random"]["mean"] == 0.0
     assert overall["SB3 PPO"]["mean"] == pytest.approx(np.mean([0.0, 0.2, 0.4, 1.0]))
     assert overall["MAPPO"]["scenarios"] == ["corridor"]  # VMAS's task is not a shipped scenario
@@ -111,7 +111,8 @@ def test_table_joins_flown_and_learned_rows():
     assert ("| corridor | SB3 PPO | 30 [" in text and "| 4 seeds x 100 episodes, deterministic | 10M | "
             "25.0 (10.0-40.0) | 0,1,2,3 |" in text)
     assert "| corridor | MAPPO | 60 [60, 60] |" in text and "1 seed (fewer than 3) x 100 episodes, sampled" in text
-    assert "| relay | IPPO | no finished run |" in text
+    assert "| relay | IPPO | no finished run |" in text and "| IPPO | 0 | - | - | - | no finished run | - |" in text
+    assert "one controller on the first 2-4 episodes" in text and "evaluated on the first 100 of" in text
     assert "| random | 1 | - | - | - | - | 0 [0, 66] (2 episodes, Wilson) |" in text
 
 
