@@ -26,6 +26,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from benchmarks.expert_vs_learned_table import cell_key
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "expert_vs_learned"
 LEARNED = ROOT / "results" / "rl_at_scale" / "cells.jsonl"
@@ -33,11 +35,6 @@ COMMITTED_PLANS = ROOT / "results" / "robustness" / "plans"
 CONTROLLERS = ("expert", "random")
 FIRST_SEED = 1_000_000  # the learned runs' evaluation seeds (baselines.batched.sb3_ppo.EVAL_FIRST_SEED)
 NOISE = {"thrust_noise": 0.05, "initial_position_noise_m": 0.05}  # the learned runs' training and evaluation
-
-
-def cell_key(cell: dict) -> tuple[str, str]:
-    """A cell is named by (controller, scenario)."""
-    return (str(cell["controller"]), str(cell["scenario"]))
 
 
 def plan_file(scenario: str, out: Path) -> tuple[Path, str]:

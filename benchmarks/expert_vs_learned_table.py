@@ -24,6 +24,11 @@ import numpy as np
 
 from impact_env.results_store import CellStore, write_atomic
 
+
+def cell_key(cell: dict) -> tuple[str, str]:
+    """A cell of ``results/expert_vs_learned/cells.jsonl`` is named by (controller, scenario)."""
+    return (str(cell["controller"]), str(cell["scenario"]))
+
 LEARNED = {"sb3_ppo": "SB3 PPO", "mappo": "MAPPO", "ippo": "IPPO"}  # algorithm -> its label, in the table's order
 MIN_SEEDS = 3  # the issue's bar for a learned row
 Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
@@ -183,7 +188,6 @@ def markdown(numbers: dict[str, Any]) -> str:
 def write_summary(out: Path, learned: Path, reps: int = 2000) -> str:
     """``out``/summary.md and summary.json from ``out``/cells.jsonl and the learned cells at ``learned`` (either
     may be missing); returns the markdown."""
-    from benchmarks.expert_vs_learned import cell_key
     from benchmarks.rl_at_scale import SCENARIOS
     from benchmarks.rl_at_scale import cell_key as learned_key
 
