@@ -825,7 +825,7 @@ class TetherWorld:
                 into = -(vx * nx + vy * ny)
                 if into > 0.0:
                     vx, vy = vx + into * nx, vy + into * ny
-        return vx, vy
+        return float(vx), float(vy)  # numpy's scalars would carry into the winch work and the info
 
     def _check_tethers(self, active: list[_Tether]) -> None:
         """Release tethers inside their stop radius ("arrived") and those a wall has come across ("snagged").
