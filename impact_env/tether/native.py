@@ -15,9 +15,11 @@ a sample at import. ``tests/impact_env/tether/test_native_parity.py`` flies whol
 
 from __future__ import annotations
 
+import contextlib
 import math
 import random
 import sys
+from collections.abc import Iterator
 from typing import Any
 
 from impact_env.native import load
@@ -76,6 +78,18 @@ _ADDRESSES = _chipmunk_addresses()
 def available() -> bool:
     """True when the compiled loop is built and usable with this Python and pymunk."""
     return _ADDRESSES is not None
+
+
+@contextlib.contextmanager
+def disabled() -> Iterator[None]:
+    """Worlds built inside run the Python loop, as in a build without the compiled one (benchmarks and tests
+    compare the two). Not thread-safe: it switches the module's state."""
+    global _ADDRESSES
+    saved, _ADDRESSES = _ADDRESSES, None
+    try:
+        yield
+    finally:
+        _ADDRESSES = saved
 
 
 def kinematic_loop(space: Any, body: Any, dt_s: float, winch_N: float) -> Any:

@@ -6,7 +6,6 @@ IMPACT_ENV_PURE_PYTHON=1."""
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import math
 import os
@@ -26,12 +25,7 @@ from planners.tether.expert import TetherExpert
 pytestmark = pytest.mark.skipif(not native.available(), reason="the compiled tether loop is not built")
 
 
-@contextlib.contextmanager
-def python_loop():
-    """The compiled loop off, as in a build without it (worlds made inside run _step_kinematic_fast)."""
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(native, "_ADDRESSES", None)
-        yield
+python_loop = native.disabled
 
 
 def test_the_loops_hypot_is_pythons():
