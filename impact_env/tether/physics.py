@@ -9,8 +9,9 @@ centre to its anchor and either reels in or holds (its winch brakes). How a teth
 saturating winch tension), and its events (attached, released, arrived, snagged, blocked, and the faults) and
 the winch work are counted the same way in all three: :class:`TetherWorld` describes each. The substep loop
 calls chipmunk's C functions where pymunk exposes them (its Python properties cost more than the physics at this
-size), as the impact world does; both paths give bit-identical trajectories
-(``tests/impact_env/tether/test_fast_path.py``).
+size), as the impact world does, and at ``kinematic`` fidelity runs in C where that is built
+(:mod:`impact_env.tether.native`); every path gives bit-identical trajectories
+(``tests/impact_env/tether/test_fast_path.py``, ``test_native_parity.py``).
 """
 
 from __future__ import annotations
@@ -86,7 +87,8 @@ class TetherWorld:
         cache_checks: skip the exact line-of-sight and wall-contact tests while the cargo provably cannot have
             changed their outcome (see :meth:`_check_tethers`); the same trajectories, about twice as fast.
         winch_speeds_mps: each robot's own reel-in speed (a winch speed error); default ``pull_speed_mps`` for all.
-        fast: step through chipmunk's C functions (bit-identical to pymunk's properties, which ``False`` uses).
+        fast: step through chipmunk's C functions, and at ``kinematic`` through the compiled substep loop where
+            it is built (bit-identical to pymunk's properties, which ``False`` uses).
 
     Robots are numbered ``0 .. station.n_robots - 1``; their tethers are commanded with :meth:`attach`,
     :meth:`release`, :meth:`hold` and :meth:`reel`, which do not check the fleet's rules (``k``, distinct
