@@ -23,10 +23,10 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# The base install: what the simulator, planner and expert need. The editable install compiles the two C
+# The base install: what the simulator, planner and expert need. The editable install compiles the three C
 # helpers in place (setup.py; a change to their sources rebuilds them here).
 $(VENV)/.base-installed: $(BIN)/python setup.cfg pyproject.toml setup.py impact_env/transport/_substeps.c \
-		impact_env/stl/_cmonitor.c
+		impact_env/tether/_substeps.c impact_env/stl/_cmonitor.c
 	$(BIN)/pip install --quiet -e .
 	touch $@
 

@@ -30,7 +30,7 @@ for f in impact_env/transport/scenarios/corridor.toml impact_env/tether/stations
     grep -q "^$f\$" "$WORK/wheel.txt" || { echo "wheel lacks $f"; exit 1; }
 done
 # the compiled helpers (setup.py): built into the wheel, their C sources in the sdist
-for f in impact_env/transport/_substeps impact_env/stl/_cmonitor; do
+for f in impact_env/transport/_substeps impact_env/tether/_substeps impact_env/stl/_cmonitor; do
     grep -q "^$f\..*\.so\$" "$WORK/wheel.txt" || { echo "wheel lacks the compiled $f"; exit 1; }
     grep -q "/$f\.c\$" "$WORK/sdist.txt" || { echo "sdist lacks $f.c"; exit 1; }
 done

@@ -5,8 +5,9 @@ physics without line-of-sight checks, STL, observations or rules); each env row 
 way (two attaches, then keeps), and every loop starts a fresh world every 60 steps. The reference is that bare
 loop as ``benchmarks/env_throughput.py`` defined it at commit ``--reference`` (0378a64), run from that commit's
 own tree (``git archive``) in a child process between the rows of each repeat; the bare loop of this checkout
-is a row too. ``--clock cpu`` times with this process's CPU time instead of the wall clock (on a machine other
-jobs keep busy, the wall clock measures the scheduler). Usage:
+is a row too, and so is the kinematic env with its compiled substep loop off (:mod:`impact_env.tether.native`:
+the Python loop a build without a C compiler runs). ``--clock cpu`` times with this process's CPU time instead of
+the wall clock (on a machine other jobs keep busy, the wall clock measures the scheduler). Usage:
 
     python -m benchmarks.tether_throughput [--station L] [--steps 5000] [--repeats 3] [--reference 0378a64]
                                            [--clock wall|cpu]
@@ -29,6 +30,7 @@ import numpy as np
 import pymunk
 
 import impact_env  # noqa: F401  (registers the environments)
+from impact_env.tether import native
 from impact_env.tether.gym_env import TetherEnv
 from impact_env.tether.pettingzoo_env import TetherParallelEnv
 from impact_env.tether.station import load_station
@@ -101,6 +103,12 @@ def tether_gym(station, steps: int, fidelity: str) -> float:
     return steps / (time.perf_counter() - start)
 
 
+def tether_gym_python_loop(station, steps: int) -> float:
+    """tether_gym at kinematic fidelity with the compiled substep loop off (the Python loop it falls back to)."""
+    with native.disabled():
+        return tether_gym(station, steps, "kinematic")
+
+
 def tether_pettingzoo(station, steps: int, fidelity: str) -> float:
     env = TetherParallelEnv(station, fidelity=fidelity, max_active=2)
     a, b = _two_visible_anchors(station)
@@ -144,6 +152,8 @@ def tether_table(station, steps: int, repeats: int, ref: str, clock: str) -> dic
             ("bare pymunk loop at this commit", lambda: bare_tether_loop(station, steps)),
             *[(f"Tether Gymnasium env, {fid}, 2 tethers", lambda fid=fid: tether_gym(station, steps, fid))
               for fid in ("kinematic", "reel", "force")],
+            ("Tether Gymnasium env, kinematic, 2 tethers, Python loop (compiled loop off)",
+             lambda: tether_gym_python_loop(station, steps)),
             ("Tether PettingZoo env, reel, 2 tethers", lambda: tether_pettingzoo(station, steps, "reel"))]
     rates: dict[str, list[float]] = {label: [] for label, _ in rows}
     for _ in range(repeats):

@@ -1,11 +1,12 @@
 """The compiled helpers of the package: load one, or say in one line why the pure-Python path runs instead.
 
-Two small C extensions are built by ``pip install .`` (``setup.py``): ``impact_env.transport._substeps`` (the
-impact world's substep loop, action scaling and observation) and ``impact_env.stl._cmonitor`` (the online STL
-monitor of the shipped formula classes). Each is optional: without a C compiler and Python's headers the
-install still succeeds, the helper is missing, and the modules that use it run their pure-Python code, which
-gives the same numbers bit for bit (``tests/impact_env/transport/test_native_parity.py`` checks both paths
-against each other).
+Three small C extensions are built by ``pip install .`` (``setup.py``): ``impact_env.transport._substeps`` (the
+impact world's substep loop, action scaling and observation), ``impact_env.tether._substeps`` (the tether
+world's kinematic substep loop) and ``impact_env.stl._cmonitor`` (the online STL monitor of the shipped formula
+classes). Each is optional: without a C compiler and Python's headers the install still succeeds, the helper is
+missing, and the modules that use it run their pure-Python code, which gives the same numbers bit for bit
+(``tests/impact_env/transport/test_native_parity.py`` and ``tests/impact_env/tether/test_native_parity.py``
+check both paths against each other).
 Setting ``IMPACT_ENV_PURE_PYTHON=1`` before the import selects the Python paths on purpose (no note then).
 """
 

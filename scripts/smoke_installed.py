@@ -44,6 +44,13 @@ def main() -> int:
     tether = gym.make("impact_env/TetherL-v1", fidelity="reel")
     tether.reset(seed=0)
     tether.step(np.zeros(tether.action_space.shape, dtype=np.int64))
+    from impact_env.tether import native as tether_native
+
+    assert tether_native.available(), "the compiled kinematic loop (impact_env.tether._substeps) was not built"
+    tether = gym.make("impact_env/TetherL-v1", fidelity="kinematic")
+    tether.reset(seed=0)
+    assert tether.unwrapped.core.world._kinematic_loop is not None
+    tether.step(np.zeros(tether.action_space.shape, dtype=np.int64))
 
     from planners.expert import Expert
 

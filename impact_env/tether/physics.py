@@ -9,8 +9,9 @@ centre to its anchor and either reels in or holds (its winch brakes). How a teth
 saturating winch tension), and its events (attached, released, arrived, snagged, blocked, and the faults) and
 the winch work are counted the same way in all three: :class:`TetherWorld` describes each. The substep loop
 calls chipmunk's C functions where pymunk exposes them (its Python properties cost more than the physics at this
-size), as the impact world does; both paths give bit-identical trajectories
-(``tests/impact_env/tether/test_fast_path.py``).
+size), as the impact world does, and at ``kinematic`` fidelity runs in C where that is built
+(:mod:`impact_env.tether.native`); every path gives bit-identical trajectories
+(``tests/impact_env/tether/test_fast_path.py``, ``test_native_parity.py``).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import numpy as np
 import pymunk
 
 from impact_env.errors import TetherError
+from impact_env.tether import native
 from impact_env.tether.sight import distance_to_rays, shadow_rays
 from impact_env.tether.station import Station
 
@@ -85,7 +87,8 @@ class TetherWorld:
         cache_checks: skip the exact line-of-sight and wall-contact tests while the cargo provably cannot have
             changed their outcome (see :meth:`_check_tethers`); the same trajectories, about twice as fast.
         winch_speeds_mps: each robot's own reel-in speed (a winch speed error); default ``pull_speed_mps`` for all.
-        fast: step through chipmunk's C functions (bit-identical to pymunk's properties, which ``False`` uses).
+        fast: step through chipmunk's C functions, and at ``kinematic`` through the compiled substep loop where
+            it is built (bit-identical to pymunk's properties, which ``False`` uses).
 
     Robots are numbered ``0 .. station.n_robots - 1``; their tethers are commanded with :meth:`attach`,
     :meth:`release`, :meth:`hold` and :meth:`reel`, which do not check the fleet's rules (``k``, distinct
@@ -207,6 +210,10 @@ class TetherWorld:
         self._fast = _cp is not None and bool(fast)
         if self._fast:
             self._body_ptr, self._space_ptr = cargo._body, space._space
+        # the kinematic substeps in C where it is built (impact_env.tether.native), else _step_kinematic_fast
+        self._kinematic_loop = native.kinematic_loop(space, cargo, self.dt_s, self._winch_N) \
+            if self._fast and fidelity == "kinematic" else None
+        self._planned: list[_Tether] | None = None  # the active list the loop's plan was made from
 
     def restart(self, start_m: tuple[float, float] | None = None,
                 winch_speeds_mps: Sequence[float] | None = None) -> TetherWorld:
@@ -433,6 +440,8 @@ class TetherWorld:
                 self._step_reel_fast()
             elif self.fidelity == "force":
                 self._step_force_fast()
+            elif self._kinematic_loop is not None:
+                self._step_kinematic_native()
             else:
                 self._step_kinematic_fast()
         else:
@@ -572,7 +581,43 @@ class TetherWorld:
             x, y, vx0, vy0 = p.x, p.y, vx1, vy1
             self._after_substep_fast(active, x, y)
 
-    def _step_kinematic_fast(self) -> None:
+    def _step_kinematic_native(self) -> None:
+        """:meth:`_step_kinematic_fast` with its substeps in C (:mod:`impact_env.tether.native`). The loop runs
+        while nothing but arithmetic is needed; the substeps that need the wall test (or meet a cargo at an
+        anchor) run here in Python, as do the tether checks and attachments once due, with the same state."""
+        loop, dt, hypot = self._kinematic_loop, self.dt_s, math.hypot
+        end = self.n_substeps_done + self.substeps
+        while self.n_substeps_done < end:
+            active = self._active
+            if active is None:
+                active = self._active = [t for t in self._tethers if t is not None and t.pulling]
+                self._budget = -1.0
+            if self._planned is not active:  # every change of the tethers makes a new active list
+                reeling = [t for t in active if not t.held]
+                w = reeling[0].w if reeling else 0.0
+                same = all(t.w == w for t in reeling)
+                loop.set_plan([(t.ax, t.ay) for t in reeling], w, None if same else [t.w for t in reeling],
+                              [(t.ax, t.ay, t.length) for t in active if t.held], bool(active))
+                self._planned = active
+            (cx, cy), (sx, sy) = self._checked_at, self._wall_seen_at
+            n, self.winch_work_J, stop = loop.run(end - self.n_substeps_done, self.n_substeps_done,
+                                                  self.winch_work_J, cx, cy, self._budget, sx, sy,
+                                                  self._wall_margin if self._cache else -math.inf,
+                                                  self._next_ready)
+            self.n_substeps_done = n
+            if stop == 1:  # a substep that needs the wall test: Python takes it (and its checks)
+                self._step_kinematic_fast(1)
+            elif stop == 2:  # the tether checks or attachments are due after the substep just taken
+                p = _cp.cpBodyGetPosition(self._body_ptr)
+                x, y = p.x, p.y
+                if active:
+                    cx, cy = self._checked_at
+                    if not hypot(x - cx, y - cy) < self._budget:
+                        self._check_tethers(active)
+                if self._next_ready <= n * dt + 1e-9:
+                    self._activate_ready()
+
+    def _step_kinematic_fast(self, substeps: int | None = None) -> None:
         cp, body, space, dt, hypot = _cp, self._body_ptr, self._space_ptr, self.dt_s, math.hypot
         get_pos, set_vel, step = cp.cpBodyGetPosition, cp.cpBodySetVelocity, cp.cpSpaceStep
         winch, cache = self._winch_N, self._cache
@@ -580,7 +625,7 @@ class TetherWorld:
         total = self.winch_work_J
         n = self.n_substeps_done
         plan = None  # what the pulling tethers make of Eq. (5), rebuilt when they change
-        for _ in range(self.substeps):
+        for _ in range(self.substeps if substeps is None else substeps):
             active = self._active
             if active is None or plan is None or plan[0] is not active:
                 if active is None:
@@ -782,7 +827,7 @@ class TetherWorld:
                 into = -(vx * nx + vy * ny)
                 if into > 0.0:
                     vx, vy = vx + into * nx, vy + into * ny
-        return vx, vy
+        return float(vx), float(vy)  # numpy's scalars would carry into the winch work and the info
 
     def _check_tethers(self, active: list[_Tether]) -> None:
         """Release tethers inside their stop radius ("arrived") and those a wall has come across ("snagged").
