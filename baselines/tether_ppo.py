@@ -62,6 +62,7 @@ def fly(job: tuple[str, str, int, int, str, dict]) -> dict[str, Any]:
     for k in range(episodes):
         res = run_episode(env, agent, seed=1_000_000 + 1000 * seed + k)
         info = res.final_info
+        assert info is not None  # run_episode ran at least one step
         out.append({"seed": 1_000_000 + 1000 * seed + k, "success": bool(res.success), "robustness": res.robustness,
                     "time_to_goal_s": info["time_to_goal_s"], "time_at_rest_in_goal_s": info["time_at_rest_in_goal_s"],
                     "final_speed_mps": info["speed_mps"], "winch_work_J": info["winch_work_J"],
@@ -154,9 +155,9 @@ def main(argv: list[str] | None = None) -> None:
             trained = {(k.split("/s")[0], int(k.split("/s")[1])): v for k, v in runs_done.items()}
         if args.phase in ("fly", "all"):
             store = CellStore(out / "cells.jsonl", key=_cell_key)
-            jobs = [(st, c, seed, args.episodes, args.runs, options) for st in stations for c in ("expert", "ppo")
-                    for seed in seeds if (st, c, seed) not in store]
-            for cell in engine.map(fly, jobs):
+            fly_jobs = [(st, c, seed, args.episodes, args.runs, options) for st in stations for c in ("expert", "ppo")
+                        for seed in seeds if (st, c, seed) not in store]
+            for cell in engine.map(fly, fly_jobs):
                 store.put(cell)
                 print(f"{cell['station']} {cell['controller']} seed {cell['seed']}: "
                       f"{100 * cell['success_rate']:.0f} %", flush=True)

@@ -51,6 +51,7 @@ def hypot_sample(n: int = 4000, seed: int = 0) -> list[tuple[float, float]]:
 
 
 def _hypot_agrees() -> bool:
+    assert _substeps is not None  # checked by the caller
     return all(_substeps.hypot(x, y) == math.hypot(x, y) for x, y in hypot_sample())
 
 
@@ -101,4 +102,5 @@ def kinematic_loop(space: Any, body: Any, dt_s: float, winch_N: float) -> Any:
         body_address = int(_ffi.cast("uintptr_t", body._body))
     except AttributeError:  # pragma: no cover - pymunk internals moved: the Python path
         return None
+    assert _substeps is not None  # _ADDRESSES is None without it
     return _substeps.KinematicLoop(_ADDRESSES, space_address, body_address, dt_s, winch_N, space)

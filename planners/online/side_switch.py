@@ -85,6 +85,8 @@ def _needed_from_state_s(sw: SideSwitch, scenario: Scenario, states: dict[str, n
     r_state, o_state = np.asarray(states[sw.robot], float), np.asarray(states[sw.object], float)
     v_obj = o_state[3:5]
     second = sw.second
+    if second is None:  # a hand-over made without its impacts: nothing observed to test it from
+        return sw.needed_s
     change = np.subtract(second.object_velocity_after, v_obj)  # what the local layer will ask of the contact
     size = float(np.linalg.norm(change))
     if size <= 1e-6:
