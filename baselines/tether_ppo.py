@@ -143,8 +143,9 @@ def main(argv: list[str] | None = None) -> None:
     trained: dict[tuple, dict] = {}
     with open_engine(engine_config(args)) as engine:
         if args.phase in ("train", "all"):
-            jobs = [(st, seed, args.timesteps, args.chunk, args.runs, options) for st in stations for seed in seeds]
-            for job, meta in zip(jobs, engine.map(_train_job, jobs)):
+            train_jobs = [(st, seed, args.timesteps, args.chunk, args.runs, options)
+                          for st in stations for seed in seeds]
+            for job, meta in zip(train_jobs, engine.map(_train_job, train_jobs)):
                 trained[(job[0], job[1])] = meta
                 print(f"trained {job[0]} seed {job[1]}: {meta['timesteps_trained']:,} steps, "
                       f"{meta['wall_time_s']:.0f} s", flush=True)
@@ -154,9 +155,9 @@ def main(argv: list[str] | None = None) -> None:
             trained = {(k.split("/s")[0], int(k.split("/s")[1])): v for k, v in runs_done.items()}
         if args.phase in ("fly", "all"):
             store = CellStore(out / "cells.jsonl", key=_cell_key)
-            jobs = [(st, c, seed, args.episodes, args.runs, options) for st in stations for c in ("expert", "ppo")
-                    for seed in seeds if (st, c, seed) not in store]
-            for cell in engine.map(fly, jobs):
+            fly_jobs = [(st, c, seed, args.episodes, args.runs, options) for st in stations for c in ("expert", "ppo")
+                        for seed in seeds if (st, c, seed) not in store]
+            for cell in engine.map(fly, fly_jobs):
                 store.put(cell)
                 print(f"{cell['station']} {cell['controller']} seed {cell['seed']}: "
                       f"{100 * cell['success_rate']:.0f} %", flush=True)

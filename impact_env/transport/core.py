@@ -43,11 +43,11 @@ def speed_bounds(scenario: Scenario, duration_s: float) -> tuple[float, float]:
     bodies = scenario.bodies
     e0 = sum(0.5 * b.mass_kg * (b.velocity_mps[0] ** 2 + b.velocity_mps[1] ** 2)
              + 0.5 * b.inertia_kgm2 * b.angular_velocity_radps ** 2 for b in bodies)
-    growth = sum(math.hypot(*r.thrust_limit_N) / math.sqrt(2.0 * r.mass_kg) for r in scenario.robots)
+    growth = sum(math.hypot(*r.wrench_limits[:2]) / math.sqrt(2.0 * r.mass_kg) for r in scenario.robots)
     energy = (math.sqrt(e0) + duration_s * growth) ** 2
     v_max = math.sqrt(2.0 * energy / min(b.mass_kg for b in bodies))
-    w_max = max(abs(b.angular_velocity_radps) + (duration_s * b.torque_limit_Nm / b.inertia_kgm2 if b.is_robot else 0.0)
-                for b in bodies)
+    w_max = max(abs(b.angular_velocity_radps)
+                + (duration_s * b.wrench_limits[2] / b.inertia_kgm2 if b.is_robot else 0.0) for b in bodies)
     return min(v_max, _FLOAT32_LIMIT), min(max(w_max, 1.0), _FLOAT32_LIMIT)
 
 
@@ -150,7 +150,7 @@ class TransportCore:
         self.robustness_limit_m = robustness_limit(sc)
         n = self.n_robots * ACTION_PER_ROBOT
         self._action_shapes = ((n,), (self.n_robots, ACTION_PER_ROBOT))
-        self.wrench_limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in sc.robots], dtype=float)
+        self.wrench_limits = np.array([r.wrench_limits for r in sc.robots], dtype=float)
         self._limits_py = [tuple(float(x) for x in row) for row in self.wrench_limits]
 
         xmin, xmax, ymin, ymax = sc.world_box

@@ -217,7 +217,7 @@ class World:
         space.on_collision(None, None, begin=_on_begin, post_solve=_on_post_solve, separate=_on_separate, data=self)
         self.wrench = np.zeros((len(self.robots), 3))  # body-frame (Fx, Fy, torque) per robot, N and N m
         # the robots' (Fx, Fy, torque) limits: what the compiled loop's set_action scales a normalised action by
-        self.wrench_limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in scenario.robots], dtype=float)
+        self.wrench_limits = np.array([r.wrench_limits for r in scenario.robots], dtype=float)
         self._fast = None
         if _cp is not None and fast:
             try:

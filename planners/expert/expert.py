@@ -168,12 +168,12 @@ class Expert:
         keep_off_rows = 1 + (len(self.robots) if cfg.safe_segments else 0)
         self.mpc_config = mpc_config or MPCConfig(dt_s=self.dt, keep_off_rows=keep_off_rows)
         self.mpcs = {r.name: FreeflyerMPC(r, self.mpc_config, heading_ref=r.heading_rad) for r in self.robots}
-        self.limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in self.robots])
+        self.limits = np.array([r.wrench_limits for r in self.robots])
         self.book = ImpactBook(plan.impacts, tolerance_s=0.5 * self.grid_dt)
         self.identifier = ImpactIdentifier(sc.restitution, {b.name: b.mass_kg for b in sc.bodies},
                                            frozenset(self._robot_names), frozenset(self._object_names),
                                            cfg.identification or IdentificationConfig(),
-                                           {r.name: float(np.hypot(*r.thrust_limit_N)) / r.mass_kg
+                                           {r.name: float(np.hypot(*r.wrench_limits[:2])) / r.mass_kg
                                             for r in self.robots})
         strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
         if plan.planner == "ir" and isinstance(strategy, PlanContact):
@@ -193,7 +193,7 @@ class Expert:
         self._node_offsets = self.dt * np.arange(self.mpc_config.horizon + 1)
         self._segment_reach = {r.name: float(np.hypot(*(r.velocity_bound_mps or (1.0, 1.0))))
                                * self.grid_dt * (cfg.replan_intervals + 1) for r in self.robots}
-        self._a_max = {r.name: float(np.hypot(*r.thrust_limit_N)) / r.mass_kg for r in self.robots}
+        self._a_max = {r.name: float(np.hypot(*r.wrench_limits[:2])) / r.mass_kg for r in self.robots}
 
     # ------------------------------------------------------------------------------------------ API
     def reset(self, env: Any = None, seed: int | None = None) -> None:

@@ -125,7 +125,7 @@ def build_ir_model(scenario: Scenario, config: IRPlannerConfig) -> IRModel:
 
 
 def _acceleration_scale(robots: list[RobotCopies]) -> float:
-    return max(max(r.spec.thrust_limit_N) / r.spec.mass_kg for r in robots)
+    return max(max(r.spec.wrench_limits[:2]) / r.spec.mass_kg for r in robots)
 
 
 def staged_model(built: IRModel) -> StagedModel:

@@ -96,7 +96,7 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
 
 def _acceleration_scale(robots: list[RobotTrajectory]) -> float:
     """The largest acceleration any robot's full thrust gives (m/s^2): normalises acceleration costs."""
-    return max(max(r.spec.thrust_limit_N) / r.spec.mass_kg for r in robots)
+    return max(max(r.spec.wrench_limits[:2]) / r.spec.mass_kg for r in robots)
 
 
 def staged_model(built: BuiltModel) -> StagedModel:

@@ -66,7 +66,7 @@ class FreeflyerMPC:
         self.config = cfg = config if config is not None else MPCConfig()
         self.heading_ref = float(heading_ref)
         self.horizon = cfg.horizon
-        self.limits = np.array([*robot.thrust_limit_N, robot.torque_limit_Nm], dtype=float)
+        self.limits = np.array(robot.wrench_limits, dtype=float)
         self.bounds = cfg.thrust_fraction * self.limits
         self.failures = self.fallbacks = self.solves = 0
         self._build(robot, cfg)

@@ -137,7 +137,8 @@ class ReferenceSelector:
     def acceleration_bound(self, robot: Body) -> tuple[float, float]:
         """Per-axis acceleration a replanned segment may ask for: ``thrust_fraction`` of the thrust limit
         (heading held, so body axes are world axes), the rest is the MPC's margin for disturbances."""
-        return tuple(self.thrust_fraction * f / robot.mass_kg for f in robot.thrust_limit_N)
+        fx, fy, _ = robot.wrench_limits
+        return self.thrust_fraction * fx / robot.mass_kg, self.thrust_fraction * fy / robot.mass_kg
 
     def set_plan(self, plan: Plan) -> None:
         self.plan = plan

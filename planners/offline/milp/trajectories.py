@@ -157,7 +157,7 @@ def add_kinematics(model: Model, robots: list[RobotTrajectory], objects: list[Ob
     for r in robots:
         spec = r.spec
         vb = velocity_bound(spec)
-        a_max = [thrust_fraction * f / spec.mass_kg for f in spec.thrust_limit_N]
+        a_max = [thrust_fraction * f / spec.mass_kg for f in spec.wrench_limits[:2]]
         for k in range(r.grid.intervals):
             for p in r.velocity_points(k):
                 for axis in range(2):
