@@ -102,7 +102,7 @@ class RobotTrajectory:
 
     def velocity_points(self, k: int) -> list[Point]:
         d, dt = self.degree, self.grid.dt_s
-        return [tuple(c * (d / dt) for c in _sub(self.cp[k][i + 1], self.cp[k][i])) for i in range(d)]
+        return [(v[0] * (d / dt), v[1] * (d / dt)) for v in (_sub(self.cp[k][i + 1], self.cp[k][i]) for i in range(d))]
 
     def acceleration_points(self, k: int) -> list[Point]:
         d, dt = self.degree, self.grid.dt_s
