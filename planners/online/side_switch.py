@@ -19,7 +19,7 @@ from impact_env.transport.scenario import Body, Scenario
 from planners.online.impact_model import required_contact
 from planners.online.reachability import box_reachable, robot_acceleration_bound
 from planners.online.segment_qp import DEGREE
-from planners.plan import Plan
+from planners.plan import Plan, PlannedImpact
 
 
 @dataclass
@@ -55,7 +55,8 @@ class SideSwitch:
 def side_switches(plan: Plan, after_s: float = -math.inf) -> list[SideSwitch]:
     """The plan's :class:`SideSwitch` es whose second impact is later than ``after_s`` (the first may be
     earlier)."""
-    out, last = [], {}
+    out: list[SideSwitch] = []
+    last: dict[str, PlannedImpact] = {}
     for imp in sorted(plan.impacts, key=lambda i: i.time_s):
         change = np.subtract(imp.object_velocity_after, imp.object_velocity_before)
         prev = last.get(imp.object)
