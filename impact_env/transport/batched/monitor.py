@@ -44,7 +44,7 @@ from impact_env.stl.formula import (
     interval_steps,
 )
 from impact_env.stl.robustness import check_regions
-from impact_env.transport.batched.physics import TensorOptions
+from impact_env.transport.batched.physics import TensorKwargs
 
 # (window accumulators [W, N], until running minima [U, N], until bests [U, N])
 MonitorState = tuple[torch.Tensor, torch.Tensor, torch.Tensor]
@@ -206,7 +206,7 @@ class BatchedMonitor:
         self.preds = comp.preds
         self.polygons = [regions[name] for _, name in comp.preds]
         self.windows, self.untils = comp.windows, comp.untils
-        opts = TensorOptions(device=device, dtype=dtype)
+        opts = TensorKwargs(device=device, dtype=dtype)
         col = (len(self.windows), 1)
         self._a = torch.tensor([w.a for w in self.windows], device=device).reshape(col)
         self._b = torch.tensor([w.b for w in self.windows], device=device).reshape(col)

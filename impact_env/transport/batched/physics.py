@@ -44,7 +44,7 @@ WALL_NORMALS = ((0.0, -1.0), (0.0, 1.0), (-1.0, 0.0), (1.0, 0.0))  # from a body
 WALL_AXIS_SIGN = ((1, -1.0), (1, 1.0), (0, -1.0), (0, 1.0))
 
 
-class TensorOptions(TypedDict):
+class TensorKwargs(TypedDict):
     """The ``device`` and ``dtype`` keywords every tensor of a batch is made with (``torch.zeros(n, **opts)``)."""
 
     device: torch.device
@@ -118,7 +118,7 @@ class ReferenceKernel:
         self.iterations = iterations
         self.layout = RowLayout(scene.n_bodies, len(scene.pairs), scene.n_static)
         B = scene.n_bodies
-        opts = TensorOptions(device=device, dtype=dtype)
+        opts = TensorKwargs(device=device, dtype=dtype)
         self.inv_mass = torch.tensor(scene.inv_mass, **opts).reshape(B, 1)
         self.static_nmass = 1.0 / self.inv_mass  # chipmunk's 1 / (1/m + 0) against a static shape
         self.radius = torch.tensor(scene.radius_m, **opts).reshape(B, 1)

@@ -34,7 +34,7 @@ from impact_env.stl import conjuncts
 from impact_env.transport.batched import episode
 from impact_env.transport.batched.fused import FusedKernel
 from impact_env.transport.batched.monitor import BatchedMonitor, MonitorState
-from impact_env.transport.batched.physics import ReferenceKernel, TensorOptions, headings, world_forces
+from impact_env.transport.batched.physics import ReferenceKernel, TensorKwargs, headings, world_forces
 from impact_env.transport.batched.scene import build_scene
 from impact_env.transport.batched.starts import draw_object_starts
 from impact_env.transport.core import ACTION_PER_ROBOT, OBS_PER_BODY, TransportCore
@@ -138,7 +138,7 @@ class BatchedTransportWorld:
         self.scene = build_scene(self.scenario, restitution)
         self.reference = ReferenceKernel(self.scene, self.device, dtype, contact_iterations)
         self.layout = self.reference.layout
-        opts = TensorOptions(device=self.device, dtype=dtype)
+        opts = TensorKwargs(device=self.device, dtype=dtype)
         N, B, R = num_envs, self.n_bodies, self.n_robots
         formulas = [self.scenario.formula]
         if reward_mode == "conjuncts":
@@ -161,7 +161,7 @@ class BatchedTransportWorld:
         self._init_omg = torch.tensor(self.scene.angular_velocity_radps, **opts).reshape(B, 1)
         self.rows = init.expand(lay.n_rows, N).clone()
         self.ang, self.omg = self._init_ang.expand(B, N).clone(), self._init_omg.expand(B, N).clone()
-        int64 = TensorOptions(device=self.device, dtype=torch.int64)
+        int64 = TensorKwargs(device=self.device, dtype=torch.int64)
         self.step_count = torch.zeros(N, **int64)
         self.seeds = torch.zeros(N, **int64)
         self.episodes = torch.zeros(N, **int64)
