@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
+from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization, set_obs_statistics
 from baselines.record import dataset_id, datasets_path, use_datasets_path
 from baselines.run_meta import scenario_fingerprint
 from impact_env.config_checks import check_flag, check_integer, check_number, check_text, fail
@@ -120,9 +120,8 @@ def behaviour_clone(config: BCConfig) -> Path:
                              f"{expected.observation_space.shape}, {expected.action_space.shape}")
 
     venv = VecNormalize(DummyVecEnv([lambda: TransportEnv(scenario)]), norm_reward=False)
-    venv.obs_rms.mean = obs.mean(axis=0).astype(np.float64)
-    venv.obs_rms.var = np.maximum(obs.var(axis=0), MIN_OBS_STD ** 2).astype(np.float64)
-    venv.obs_rms.count = float(len(obs))
+    set_obs_statistics(venv, obs.mean(axis=0).astype(np.float64),
+                       np.maximum(obs.var(axis=0), MIN_OBS_STD ** 2).astype(np.float64), float(len(obs)))
     model = PPO("MlpPolicy", venv, seed=config.seed, device="cpu",
                 policy_kwargs={"net_arch": list(config.net_arch), "log_std_init": -0.5})
     policy = model.policy
@@ -136,14 +135,17 @@ def behaviour_clone(config: BCConfig) -> Path:
     val = tensors(np.concatenate([o for o, _ in val_eps]), np.concatenate([a for _, a in val_eps])) if val_eps else None
     rng = np.random.default_rng(config.seed)
     start = time.perf_counter()
-    history, best = [], (float("inf"), None, 0)  # (validation error, weights, epoch): early stopping
+    history: list[dict[str, Any]] = []
+    best: tuple[float, dict[str, Any] | None, int] = (float("inf"), None, 0)  # (validation error, weights, epoch)
     for epoch in range(1, config.epochs + 1):
         order = torch.as_tensor(rng.permutation(len(obs_t)))
         total = 0.0
         for k in range(0, len(order), config.batch_size):
             idx = order[k:k + config.batch_size]
             _, log_prob, entropy = policy.evaluate_actions(obs_t[idx], act_t[idx])
-            loss = -log_prob.mean() - config.ent_weight * entropy.mean()
+            # SB3's PPO: without a closed-form entropy (not the case of a Gaussian policy), -log_prob estimates it
+            entropy_mean = entropy.mean() if entropy is not None else (-log_prob).mean()
+            loss = -log_prob.mean() - config.ent_weight * entropy_mean
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()

@@ -24,6 +24,7 @@ first seed's trajectories side by side) and the expert's ``plans/``. The publish
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import statistics
 from dataclasses import dataclass
@@ -37,7 +38,7 @@ from impact_env.results_store import atomic_path, write_atomic
 from impact_env.sweep import EngineConfig, local_path, open_engine
 from impact_env.transport.scenario import load_scenario
 
-_CACHE: dict[tuple[str, str], Any] = {}
+_CACHE: dict[tuple[str, str, Any], Any] = {}  # (scenario, controller, its files' digest): the controller
 
 
 @dataclass(frozen=True)
@@ -119,6 +120,8 @@ def _controller(scenario_name: str, scenario: Any, spec: ControllerSpec, files: 
     if key not in _CACHE:
         path = None if files is None else local_path(files)
         if spec.kind == "sb3":
+            if path is None:
+                raise ImpactEnvError(f"controller {spec.label!r} needs its model folder")
             _CACHE[key] = make_controller(str(Path(path) / "model.zip"), scenario,
                                           trust_pickle=True if spec.trust_pickle else None)
         elif spec.kind == "rllib":
@@ -141,19 +144,19 @@ def _episode(job: tuple[str, ControllerSpec, int, Any, dict[str, Any], bool]) ->
     from impact_env.transport.gym_env import TransportEnv
 
     scenario_name, spec, seed, files, env_options, first = job
-    station = tether.is_station(scenario_name)
-    if station:
+    if tether.is_station(scenario_name):
         from impact_env.tether.station import load_station
 
-        scenario = load_station(scenario_name)
-        env_options = tether.env_options(env_options, scenario_name)
+        station = load_station(scenario_name)
+        controller = _controller(scenario_name, station, spec, files)
+        res = run_episode(tether.make_env(station, **tether.env_options(env_options, scenario_name)), controller,
+                          seed=seed)
+        hits = 0
     else:
         scenario = load_scenario(scenario_name)
-        env_options = _impact_options(env_options)
-    controller = _controller(scenario_name, scenario, spec, files)
-    env = tether.make_env(scenario, **env_options) if station else TransportEnv(scenario, **env_options)
-    res = run_episode(env, controller, seed=seed)
-    hits = 0 if station else len(robot_object_impacts(scenario, res.impacts))
+        controller = _controller(scenario_name, scenario, spec, files)
+        res = run_episode(TransportEnv(scenario, **_impact_options(env_options)), controller, seed=seed)
+        hits = len(robot_object_impacts(scenario, res.impacts))
     return {"scenario": scenario_name, "controller": spec.label, "seed": seed, "success": res.success,
             "robustness": res.robustness, "fuel_Ns": res.fuel_Ns, "impacts": hits,
             "controller_ms": float(np.mean(res.controller_ms)), "positions": res.positions if first else None}
@@ -298,15 +301,16 @@ def _figure(results, summary, scenarios, controllers, path: Path) -> None:
             from impact_env.tether.plotting import draw_station
             from impact_env.tether.station import load_station
 
-            scenario, draw = load_station(s), draw_station
+            draw = functools.partial(draw_station, load_station(s))
             names, colours = ["cargo"], [OBJECT_TRACE_COLOURS[0]]  # a station's trace is the cargo's path
         else:
-            scenario, draw = load_scenario(s), draw_scenario
+            scenario = load_scenario(s)
+            draw = functools.partial(draw_scenario, scenario)
             names = [body.name for body in scenario.bodies]
             colours = trace_colours(scenario)  # the colours of every other figure: robots blues, objects oranges
         for k, c in enumerate(labels):
             ax = axes[i][k + 1]
-            draw(scenario, ax)
+            draw(ax)
             ax.get_legend() and ax.get_legend().remove()
             traj = next(r["positions"] for r in results if r["scenario"] == s and r["controller"] == c
                         and r["positions"] is not None)

@@ -23,7 +23,7 @@ ZOO_ONLY = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_
 def load(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
     """The entry for ``env_id`` in ``baselines/hyperparams/<algo>.yml`` (or ``path``), parsed."""
     text = (Path(path).read_text() if path else
-            resources.files("baselines").joinpath("hyperparams", f"{algo}.yml").read_text())
+            (resources.files("baselines") / "hyperparams" / f"{algo}.yml").read_text())
     try:
         table = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -45,11 +45,12 @@ def parse_policy_kwargs(text: str) -> dict[str, Any]:
         node = ast.parse(text, mode="eval").body
     except SyntaxError as exc:
         raise HyperparameterError(f"policy_kwargs {text!r} is not an expression: {exc}") from None
-    is_dict_call = isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict"
-    if not is_dict_call or node.args:
+    if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict") or node.args:
         raise HyperparameterError(f"policy_kwargs must look like dict(key=value, ...), got {text!r}")
-    out = {}
+    out: dict[str, Any] = {}
     for kw in node.keywords:
+        if kw.arg is None:
+            raise HyperparameterError(f"policy_kwargs must look like dict(key=value, ...), got {text!r}")
         src = ast.unparse(kw.value)
         if src in ACTIVATIONS:
             import torch.nn as nn

@@ -153,6 +153,16 @@ def read_normalization(path: Path, obs_size: int | None = None) -> Normalization
                          norm_obs)
 
 
+def set_obs_statistics(vec: Any, mean: np.ndarray, var: np.ndarray, count: float) -> None:
+    """Write the observation statistics (mean, var, count) of a VecNormalize over a Box observation space."""
+    from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+    rms = vec.obs_rms
+    if not isinstance(rms, RunningMeanStd):  # a dict of them: a Dict observation space, which no env here has
+        raise ModelFileError(f"observation statistics are for one Box observation space, got {type(rms).__name__}")
+    rms.mean, rms.var, rms.count = mean, var, count
+
+
 def load_vec_normalize(path: Path | str, venv: Any, training: bool = False) -> Any:
     """A stable-baselines3 ``VecNormalize`` around ``venv`` with the statistics of a ``vecnormalize.json``: what
     ``VecNormalize.load(path, venv)`` gives for SB3's pickle, from the plain JSON a run folder keeps.
@@ -190,7 +200,7 @@ def load_vec_normalize(path: Path | str, venv: Any, training: bool = False) -> A
     vec = VecNormalize(venv, training=training, norm_obs=stats.norm_obs,
                        norm_reward=norm_reward and training, clip_obs=stats.clip_obs,
                        clip_reward=clip_reward, gamma=gamma, epsilon=stats.epsilon)
-    vec.obs_rms.mean, vec.obs_rms.var, vec.obs_rms.count = stats.mean.copy(), stats.var.copy(), stats.count
+    set_obs_statistics(vec, stats.mean.copy(), stats.var.copy(), stats.count)
     vec.ret_rms.mean, vec.ret_rms.var, vec.ret_rms.count = np.float64(ret_mean), np.float64(ret_var), ret_count
     return vec
 
@@ -412,7 +422,8 @@ def safe_replacements(path: Path, data: dict[str, Any], algo: str, observation_s
     """SB3 ``custom_objects`` for every pickled entry of the zip; UntrustedFileError for one it cannot rebuild."""
     from stable_baselines3 import PPO, SAC
 
-    cls = {"ppo": PPO, "sac": SAC}[algo]
+    classes: dict[str, type[PPO] | type[SAC]] = {"ppo": PPO, "sac": SAC}
+    cls = classes[algo]
     out: dict[str, Any] = {}
     for key in pickled_entries(data):
         if key == "policy_class":
@@ -501,7 +512,8 @@ def load_model(path: Path, algo: str | None, observation_space: Any, action_spac
     data = read_zip_data(path)
     algo = infer_algo(path, data, algo)
     check_rl_zoo3(path, data, trust_pickle)
-    cls = {"ppo": PPO, "sac": SAC}[algo]
+    classes: dict[str, type[PPO] | type[SAC]] = {"ppo": PPO, "sac": SAC}
+    cls = classes[algo]
     if trust_pickle:
         warn_trusted(path)
         custom = None

@@ -11,6 +11,7 @@ the options (reward mode, fuel penalty, noise, restitution).
 
 from __future__ import annotations
 
+from collections.abc import Hashable
 from typing import Any
 
 ENV_NAME = "impact_env_transport_parallel"
@@ -50,12 +51,12 @@ def register() -> str:
     return ENV_NAME
 
 
-def agent_to_policy(agent_id: str, episode: Any = None, **_: Any) -> str:
+def agent_to_policy(agent_id: Hashable, episode: Any = None, **_: Any) -> str:
     """Independent policies: each robot its own policy, named after it (RLlib's ``policy_mapping_fn``)."""
-    return agent_id
+    return str(agent_id)
 
 
-def shared_policy(agent_id: str, episode: Any = None, **_: Any) -> str:
+def shared_policy(agent_id: Hashable, episode: Any = None, **_: Any) -> str:
     """Parameter sharing: every robot acts with the one policy ``shared``."""
     return "shared"
 

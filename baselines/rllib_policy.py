@@ -51,7 +51,8 @@ def export_policy(algo: Any, folder: Path, scenario: Any, agent_policies: dict[s
     folder.mkdir(parents=True, exist_ok=True)
     for policy_id in sorted(set(agent_policies.values())):
         state = algo.get_module(policy_id).get_state(inference_only=True)
-        np.savez(folder / f"{policy_id}.npz", **{k: np.asarray(v) for k, v in state.items()})
+        # numpy's stub lets **arrays fill savez's allow_pickle: bool; no parameter of a module is named so
+        np.savez(folder / f"{policy_id}.npz", **{k: np.asarray(v) for k, v in state.items()})  # type: ignore[arg-type]
     filters = _filter_statistics(algo, list(agent_policies)) if observation_filter else None
     meta = {"format": FORMAT, "scenario": scenario.name, "scenario_fingerprint": scenario_fingerprint(scenario),
             "env_options": dict(env_options), "agent_policies": agent_policies,

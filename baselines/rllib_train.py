@@ -286,6 +286,7 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
             f"{config.env_runners} env runner(s) x {config.envs_per_runner} env(s), batch "
             f"{settings['train_batch_size_per_learner']} env steps, up to {timesteps} env steps"
             + (f" or {config.max_minutes:g} min" if config.max_minutes else ""), flush=True)
+        best = max((float(np.mean(r)) for r in evals["results"]), default=-np.inf)  # the best evaluation so far
 
         def save(folder: Path) -> None:
             if folder.exists():
@@ -301,7 +302,8 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
             rho, lengths = _evaluate(scenario, folder, eval_options, config.eval_episodes, config.seed)
             for key, value in (("timesteps", steps), ("results", rho), ("ep_lengths", lengths)):
                 evals[key].append(value)
-            np.savez(run_dir / "eval" / "evaluations.npz", **{k: np.asarray(v) for k, v in evals.items()})
+            # numpy's stub lets **arrays fill savez's allow_pickle: bool, which these keys never name
+            np.savez(run_dir / "eval" / "evaluations.npz", **{k: np.asarray(v) for k, v in evals.items()})  # type: ignore[arg-type]
             if np.mean(rho) > best:
                 best = float(np.mean(rho))
                 if (run_dir / "best").exists():
@@ -343,7 +345,6 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
                     next_checkpoint += config.checkpoint_freq
             return line
 
-        best = max((float(np.mean(r)) for r in evals["results"]), default=-np.inf)
         deadline = None if config.max_minutes is None else start + 60.0 * config.max_minutes
         iteration = 0
         interrupted = False
@@ -360,6 +361,7 @@ def train_rllib(config: RLlibTrainConfig) -> Path:
         if not evals["timesteps"] or evals["timesteps"][-1] != steps:  # always one evaluation at the end
             say(f"  final{evaluate(steps)[1:]}", flush=True)
         save(final)
+        meta: dict[str, Any]
         meta = {"engine": "rllib", "algo": "ppo", "policies": config.policies, "agent_policies": agent_policies,
                 "scenario": scenario.name, "env_id": env_id, "timesteps": timesteps, "timesteps_trained": steps,
                 "max_minutes": config.max_minutes, "env_runners": config.env_runners,

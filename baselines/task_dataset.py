@@ -88,9 +88,9 @@ def split_tasks(names: list[str], share: float, split_seed: int = 0) -> tuple[li
     if len(names) >= 2 and share > 0:
         keys = {n: hashlib.sha256(f"{split_seed}/{n}".encode()).digest() for n in names}
         if not held:
-            held = [min(names, key=keys.get)]
+            held = [min(names, key=keys.__getitem__)]
         elif len(held) == len(names):
-            held.remove(max(names, key=keys.get))
+            held.remove(max(names, key=keys.__getitem__))
     return [n for n in names if n not in held], held
 
 
@@ -102,7 +102,8 @@ def _episodes(family: str, tasks: list, config: DatasetConfig, first_id: int = 0
     from impact_env.transport.task_observation import TaskObservation
     from planners.expert import Expert
 
-    buffers, summaries = [], []
+    buffers: list[EpisodeBuffer] = []
+    summaries: list[dict] = []
     for scenario, plan, verdict in tasks:
         env = TransportEnv(scenario, **(config.env_options or {}))
         pad = TaskObservation(scenario, FAMILY_LIMITS[family])
@@ -163,7 +164,8 @@ def build_dataset(family: str, tasks_dir: str | Path, config: DatasetConfig | No
                              "need at least 2 (filter more seeds: impact-env filter --seeds A:B)")
     train_names, held_names = split_tasks([t[0].name for t in kept], config.heldout_share, config.split_seed)
     obs_space, act_space = TaskObservation(kept[0][0], FAMILY_LIMITS[family]).spaces()
-    datasets, summary = [], {}
+    datasets: list[Any] = []  # minari's datasets
+    summary: dict[str, Any] = {}
     for dataset_id, names in zip(dataset_ids(family), (train_names, held_names)):
         if not names:
             datasets.append(None)

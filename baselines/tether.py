@@ -10,9 +10,12 @@ noise, fuel penalty, restitution, post-impact velocity noise) do not apply; the 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from impact_env.errors import ImpactEnvError
+
+if TYPE_CHECKING:
+    from impact_env.tether.station import Station
 
 DEFAULT_ENV_ID = "impact_env/TetherL-v1"
 IMPACT_ONLY = {"thrust_noise": 0.0, "fuel_penalty": 0.0, "restitution": None, "impact_velocity_noise_mps": 0.0}
@@ -44,7 +47,7 @@ def env_options(options: dict[str, Any], name: str) -> dict[str, Any]:
     return out
 
 
-def make_env(name: str, **options: Any):
+def make_env(name: str | Station, **options: Any):
     from impact_env.tether.gym_env import TetherEnv
 
     return TetherEnv(name, **options)

@@ -144,8 +144,9 @@ def main(argv: list[str] | None = None) -> None:
     trained: dict[tuple, dict] = {}
     with open_engine(engine_config(args)) as engine:
         if args.phase in ("train", "all"):
-            jobs = [(st, seed, args.timesteps, args.chunk, args.runs, options) for st in stations for seed in seeds]
-            for job, meta in zip(jobs, engine.map(_train_job, jobs)):
+            train_jobs = [(st, seed, args.timesteps, args.chunk, args.runs, options)
+                          for st in stations for seed in seeds]
+            for job, meta in zip(train_jobs, engine.map(_train_job, train_jobs)):
                 trained[(job[0], job[1])] = meta
                 print(f"trained {job[0]} seed {job[1]}: {meta['timesteps_trained']:,} steps, "
                       f"{meta['wall_time_s']:.0f} s", flush=True)

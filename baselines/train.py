@@ -165,23 +165,27 @@ def train(config: TrainConfig) -> Path:
     from impact_env.transport.gym_env import TransportEnv
 
     station = tether.is_station(config.scenario)
+    env_cls: type  # TetherEnv or TransportEnv
     if station:  # a tether station: TetherEnv (MultiDiscrete commands), see baselines/tether.py
         from impact_env.tether.gym_env import TetherEnv
         from impact_env.tether.station import load_station
 
         if config.algo != "ppo" or config.multiagent:
             raise ImpactEnvError("tether stations train with ppo on the central env (their actions are discrete)")
-        scenario, env_cls = load_station(config.scenario), TetherEnv
+        world = load_station(config.scenario)
+        scenario_name, env_cls, n_robots = world.name, TetherEnv, world.n_robots
+        robots = objects = frozenset[str]()  # the tether world has no impacts to count
         config = dataclasses.replace(config, env_options=tether.env_options(config.env_options, config.scenario))
     else:
-        scenario, env_cls = load_scenario(config.scenario), TransportEnv
-    n_robots = scenario.n_robots if station else len(scenario.robots)
+        sc = load_scenario(config.scenario)
+        scenario_name, env_cls, n_robots = sc.name, TransportEnv, len(sc.robots)
+        robots, objects = frozenset(r.name for r in sc.robots), frozenset(o.name for o in sc.objects)
     env_id = env_id_for(config.scenario)
     entry = hyperparams.load(config.algo, env_id, config.hyperparams_file)
     n_envs = config.n_envs or int(entry.get("n_envs", 1))
     timesteps = int(config.timesteps or entry["n_timesteps"])
     run_dir = run_dir_for(config)
-    previous = _previous_run(run_dir, config, scenario.name) if config.resume else None
+    previous = _previous_run(run_dir, config, scenario_name) if config.resume else None
     if not config.resume and (run_dir / "model.zip").is_file():
         print(f"note: {run_dir} holds a model already; it is overwritten (pass --resume to continue it)", flush=True)
     env_kwargs = {"station" if station else "scenario": config.scenario, **config.env_options}
@@ -221,14 +225,13 @@ def train(config: TrainConfig) -> Path:
     eval_freq = config.eval_freq or default_eval_freq(total)
     print(f"run folder: {run_dir}  (model.zip, train.json, eval/, checkpoints/; TensorBoard: tensorboard --logdir "
           f"{run_dir / 'tb'})", flush=True)
-    print(f"training {config.algo.upper()} on {scenario.name}: {total:,} steps"
+    print(f"training {config.algo.upper()} on {scenario_name}: {total:,} steps"
           + (f" (from {done:,}, resumed)" if done else "")
           + (f" ({timesteps - done:,} requested, rounded up to whole rollouts of {entry.get('n_steps', 2048)} steps "
              f"x {n_envs} envs)" if config.algo == "ppo" and total - done != timesteps - done else "")
           + f", {n_envs} env(s), evaluation every {eval_freq:,} steps", flush=True)
 
-    count = cb.robot_object_impacts(frozenset() if station else frozenset(r.name for r in scenario.robots),
-                                    frozenset() if station else frozenset(o.name for o in scenario.objects))
+    count = cb.robot_object_impacts(robots, objects)
     callbacks = [CheckpointCallback(max(1, config.checkpoint_freq // n_envs), str(run_dir / "checkpoints"),
                                     save_vecnormalize=True), cb.task_metrics_callback(count)]
     if not config.multiagent:
@@ -250,7 +253,7 @@ def train(config: TrainConfig) -> Path:
                     reset_num_timesteps=previous is None)
     except KeyboardInterrupt:
         interrupted = True
-    _save(model, venv, run_dir, config, scenario.name, env_id, timesteps, n_envs, interrupted,
+    _save(model, venv, run_dir, config, scenario_name, env_id, timesteps, n_envs, interrupted,
           time.perf_counter() - start + (previous or {}).get("wall_time_s", 0.0))
     for env in (venv, eval_env):
         try:
@@ -297,14 +300,14 @@ def _restore(model: Any, venv: Any, run_dir: Path, meta: dict[str, Any]) -> int:
     normalisation statistics and step count into a freshly built model; returns the steps already trained."""
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from baselines.model_files import read_normalization
+    from baselines.model_files import read_normalization, set_obs_statistics
 
     model.set_parameters(str(run_dir / "model.zip"), exact_match=True, device=model.device)
     done = int(meta.get("timesteps_trained", 0))
     model.num_timesteps = done
     if isinstance(venv, VecNormalize) and (run_dir / NORMALIZATION_FILE).is_file():
         stats = read_normalization(run_dir / NORMALIZATION_FILE)
-        venv.obs_rms.mean, venv.obs_rms.var, venv.obs_rms.count = stats.mean.copy(), stats.var.copy(), stats.count
+        set_obs_statistics(venv, stats.mean.copy(), stats.var.copy(), stats.count)
         raw = json.loads((run_dir / NORMALIZATION_FILE).read_text()).get("ret_rms", {})
         if raw:
             venv.ret_rms.mean = np.asarray(raw["mean"], dtype=float)
@@ -354,9 +357,10 @@ def _SeedOnReset(venv):  # noqa: N802 - a class factory, so that importing this 
     from stable_baselines3.common.vec_env import VecEnvWrapper
 
     class SeedOnReset(VecEnvWrapper):
-        def __init__(self, inner) -> None:
+        def __init__(self, inner: Any) -> None:
             super().__init__(inner)
             self._seed: int | None = None
+            self._supersuit: Any = inner  # SuperSuit's SB3 wrapper: its .venv is the Gymnasium vector env
 
         def seed(self, seed: int | None = None):
             self._seed = seed
@@ -365,7 +369,7 @@ def _SeedOnReset(venv):  # noqa: N802 - a class factory, so that importing this 
         def reset(self):
             if self._seed is None:
                 return self.venv.reset()
-            obs, self.venv.reset_infos = self.venv.venv.reset(seed=self._seed)
+            obs, self._supersuit.reset_infos = self._supersuit.venv.reset(seed=self._seed)
             self._seed = None
             return obs
 

@@ -22,7 +22,7 @@ import argparse
 import json
 import re
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -181,16 +181,17 @@ def figure_suffixes() -> list[str]:
     return sorted(f".{kind}" for kind in FigureCanvasBase.get_supported_filetypes())
 
 
-def check_outputs(files: dict[str, str | None] = (), folders: dict[str, str | None] = ()) -> None:
+def check_outputs(files: Mapping[str, str | None] | None = None,
+                  folders: Mapping[str, str | None] | None = None) -> None:
     """Every output file and folder checked before any work (``{option: path}``; None: not asked for), so that
     an unwritable path is an :class:`~impact_env.errors.OutputPathError` naming it, at the start, not a
     traceback at the end that loses the results. A video must end in ``.mp4``; a ``--plot`` without a suffix
     is written as ``PATH.png``, and both paths are checked (``--plot /dev/full`` is refused, not turned into
     ``/dev/full.png``)."""
-    for option, path in dict(folders).items():
+    for option, path in dict(folders or {}).items():
         if path is not None:
             check_output_folder(path, option)
-    for option, path in dict(files).items():
+    for option, path in dict(files or {}).items():
         if path is None:
             continue
         if option == "--video" and Path(path).suffix.lower() != ".mp4":

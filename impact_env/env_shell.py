@@ -108,7 +108,7 @@ def clip_to_space(obs: np.ndarray, core: Any) -> np.ndarray:
     return np.maximum(obs, core.obs_low, out=obs)
 
 
-def with_horizon(env: gym.Env) -> gym.Env:
+def with_horizon(env: GymShell) -> gym.Env:
     """``env`` in Gymnasium's ``TimeLimit`` at its task's horizon (``env.horizon_steps``).
 
     The entry point of the ids whose scenario or station is a ``gym.make`` argument (``impact_env/Transport-v0``,
@@ -132,7 +132,7 @@ class _Rendered:
     render_width_px: int
     _renderer: Any = None
 
-    def _new_renderer(self) -> Any:  # the family's renderer of this env's scenario or station
+    def _new_renderer(self, render_mode: str) -> Any:  # the family's renderer of this env's scenario or station
         raise NotImplementedError
 
     def _frame(self) -> Any:  # what the renderer draws: the core's current state
@@ -140,7 +140,9 @@ class _Rendered:
 
     def _draw(self) -> Any:
         if self._renderer is None:
-            self._renderer = self._new_renderer()
+            if self.render_mode is None:  # render() returns None first; the 0.2 paths' render(env) come here
+                raise EnvConfigError("render_mode must be 'human' or 'rgb_array' to draw, got None")
+            self._renderer = self._new_renderer(self.render_mode)
         return self._renderer.render(self._frame())
 
     def close(self) -> None:

@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from impact_env.errors import ScenarioError
 
 MAX_COORDINATE_M = 1e6  # |x|, |y| of every vertex; beyond it squared edge lengths lose all precision
+# an edge of the scalar fast path: start (vx, vy), vector (ex, ey), outward normal (nx, ny), offset, squared length
+Edge = tuple[float, float, float, float, float, float, float, float]
 MIN_EXTENT_M = 1e-6  # width and height of a box; a thinner one has edges whose squared length underflows
 
 
@@ -41,19 +44,28 @@ class ConvexPolygon:
         object.__setattr__(self, "vertices", v)
         object.__setattr__(self, "normals", normals)
         object.__setattr__(self, "offsets", np.einsum("ij,ij->i", normals, v))
-        # axis-aligned boxes (most regions) get a closed-form scalar path
-        box = None
+
+    @cached_property
+    def _box(self) -> tuple[float, float, float, float] | None:
+        """(xmin, xmax, ymin, ymax) of an axis-aligned box (most regions: a closed-form scalar path), else None."""
+        v = self.vertices
         if len(v) == 4:
             xs, ys = sorted(set(np.round(v[:, 0], 15))), sorted(set(np.round(v[:, 1], 15)))
             if len(xs) == 2 and len(ys) == 2:
-                box = (float(xs[0]), float(xs[1]), float(ys[0]), float(ys[1]))
-        object.__setattr__(self, "_box", box)
-        # plain-float copies for the scalar fast path used once per control step
-        object.__setattr__(self, "_edges_py", [
-            (float(v[i, 0]), float(v[i, 1]), float(edges[i, 0]), float(edges[i, 1]),
-             float(normals[i, 0]), float(normals[i, 1]), float(self.offsets[i]), float(lengths[i]) ** 2)
-            for i in range(len(v))
-        ])
+                return (float(xs[0]), float(xs[1]), float(ys[0]), float(ys[1]))
+        return None
+
+    @cached_property
+    def _edges_py(self) -> list[Edge]:
+        """Plain-float copies for the scalar fast path used once per control step: per edge i -> i+1, its start
+        (vx, vy), its vector (ex, ey), its outward normal (nx, ny), its offset and its squared length."""
+        v = self.vertices
+        edges = np.roll(v, -1, axis=0) - v
+        lengths = np.hypot(edges[:, 0], edges[:, 1])
+        normals = self.normals
+        return [(float(v[i, 0]), float(v[i, 1]), float(edges[i, 0]), float(edges[i, 1]),
+                 float(normals[i, 0]), float(normals[i, 1]), float(self.offsets[i]), float(lengths[i]) ** 2)
+                for i in range(len(v))]
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, ConvexPolygon):
@@ -145,7 +157,7 @@ class ConvexPolygon:
 
     def signed_distance_xy(self, x: float, y: float) -> float:
         """Scalar version of :meth:`signed_distance`, a few microseconds, for per-step monitoring."""
-        box = self._box  # type: ignore[attr-defined]  # set in __post_init__ (frozen: object.__setattr__)
+        box = self._box
         if box is not None:
             dx = max(box[0] - x, x - box[1])  # > 0 outside in x
             dy = max(box[2] - y, y - box[3])
@@ -153,14 +165,14 @@ class ConvexPolygon:
                 return -(dx if dx > dy else dy)
             return -math.hypot(dx if dx > 0.0 else 0.0, dy if dy > 0.0 else 0.0)
         worst = -math.inf
-        for _, _, _, _, nx, ny, off, _ in self._edges_py:  # type: ignore[attr-defined]  # as _box
+        for _, _, _, _, nx, ny, off, _ in self._edges_py:
             d = nx * x + ny * y - off
             if d > worst:
                 worst = d
         if worst <= 0.0:
             return -worst
         best = math.inf
-        for vx, vy, ex, ey, _, _, _, ee in self._edges_py:  # type: ignore[attr-defined]  # as _box
+        for vx, vy, ex, ey, _, _, _, ee in self._edges_py:
             t = ((x - vx) * ex + (y - vy) * ey) / ee
             t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
             dx = x - vx - t * ex

@@ -30,7 +30,7 @@ class EpisodeResult:
     positions: np.ndarray | None = None
     frames: list[np.ndarray] | None = None
     extra: dict[str, Any] | None = None  # the controller's own report, if it has one
-    final_info: dict[str, Any] | None = None  # the environment's info after the last step
+    final_info: dict[str, Any] = field(default_factory=dict)  # the environment's info after the last step
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready dict (no arrays)."""

@@ -172,6 +172,7 @@ class Engine:
     config: EngineConfig
     placements: list[Placement] = field(default_factory=list)
     _pool: ProcessPoolExecutor | None = None
+    _pool_workers: int = 0  # the pool's processes
     _owns_ray: bool = False  # this engine called ray.init, so it calls ray.shutdown
 
     def map(self, fn: Callable[[Any], Any], jobs: Iterable[Any]) -> Iterator[Any]:
@@ -256,7 +257,7 @@ class Engine:
     def describe(self) -> str:
         """E.g. ``2 local worker processes`` or ``Ray: 4 CPUs on 2 nodes (the cluster at 'auto')``."""
         if self.config.name == "local":
-            return f"{self._pool._max_workers if self._pool else self.config.workers} local worker processes"
+            return f"{self._pool_workers if self._pool else self.config.workers} local worker processes"
         import ray
 
         nodes = sum(1 for n in ray.nodes() if n.get("Alive"))
@@ -330,6 +331,7 @@ def open_engine(config: EngineConfig | None = None, n_jobs: int | None = None) -
             workers = max(1, min(workers, n_jobs))
         engine._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                            initializer=_one_thread)
+        engine._pool_workers = workers
         return engine
     engine._owns_ray = connect_ray(config)
     return engine

@@ -29,7 +29,7 @@ import textwrap
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from impact_env.cli_options import (
     add_files,
@@ -47,6 +47,8 @@ from planners.errors import PlannerError, PlanTimeoutError
 from planners.offline.solvers import SOLVERS as SOLVER_NAMES
 
 if TYPE_CHECKING:
+    from impact_env.transport.scenario import Scenario
+    from planners.offline.config import PlannerConfig
     from planners.offline.solvers.base import Progress, SolverOptions
     from planners.plan import Plan
 
@@ -110,13 +112,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     register_filter(subparsers)  # impact-env filter: generated tasks kept if the MILP plans them
 
 
-def _cmd_plan(args: argparse.Namespace) -> int:
-    from impact_env.tether.station import is_station_file
-    from impact_env.transport.scenario import load_scenario
+def _planner(args: argparse.Namespace, common: dict[str, Any]) -> tuple[
+        PlannerConfig, Callable[[Scenario, Any], Any], Callable[[Scenario, Any], Plan]]:
+    """(config, build(scenario, config) -> model, plan(scenario, config) -> Plan) of ``--planner``."""
     from planners.offline.config import IRPlannerConfig, PlannerConfig
     from planners.offline.impact_robust import build_ir_model, plan_impact_robust
     from planners.offline.spatially_robust import build_model, plan_spatially_robust
 
+    if args.planner == "ir":
+        return IRPlannerConfig(copy_intervals=args.copy_intervals, **common), build_ir_model, plan_impact_robust
+    return PlannerConfig(**common), build_model, plan_spatially_robust
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    from impact_env.tether.station import is_station_file
+    from impact_env.transport.scenario import load_scenario
     if "," in args.scenario:
         return _plan_list(args)
     legacy_file_out(args, "--json", (".json",))
@@ -138,12 +148,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     budget = _budget(args, progress=None if args.quiet else progress_printer())
     common = dict(intervals=args.intervals, robot_degree=args.degree, smooth=args.smooth, solver=args.solver,
                   solver_options=budget, refine_nodes=args.refine_nodes)
-    if args.planner == "ir":
-        config = IRPlannerConfig(copy_intervals=args.copy_intervals, **common)
-        build, plan_fn = build_ir_model, plan_impact_robust
-    else:
-        config = PlannerConfig(**common)
-        build, plan_fn = build_model, plan_spatially_robust
+    config, build, plan_fn = _planner(args, common)
 
     say(f"plan {scenario.name}: {len(scenario.robots)} robot(s), {len(scenario.objects)} object(s), "
         f"e = {scenario.restitution:g}, tf = {scenario.tf_s:g} s")

@@ -114,7 +114,7 @@ def filter_scenario(scenario: Scenario, config: FilterConfig | None = None, fami
         reason = "solver_error"
     elapsed = time.perf_counter() - start
     rho = None if plan is None else float(plan.robustness)
-    if plan is not None and not rho > config.min_robustness_m:
+    if rho is not None and not rho > config.min_robustness_m:  # (rho: the plan's)
         reason = "low_robustness"
     kept = reason == "planned"
     verdict = TaskVerdict(
@@ -122,7 +122,7 @@ def filter_scenario(scenario: Scenario, config: FilterConfig | None = None, fami
         mip_gap=None if plan is None else float(plan.mip_gap),
         proved_optimal=plan is not None and budget == "nodes" and plan.mip_gap <= PROVED_GAP, budget=budget,
         plan_s=elapsed, impacts=0 if plan is None else len(plan.impacts), robots=len(scenario.robots),
-        objects=len(scenario.objects), plan_fingerprint=plan.fingerprint() if kept else None)
+        objects=len(scenario.objects), plan_fingerprint=plan.fingerprint() if kept and plan is not None else None)
     return verdict, plan if kept else None
 
 
@@ -143,8 +143,9 @@ def filter_tasks(family: str, seeds: Iterable[int], out: str | Path, config: Fil
     verdicts = []
     for seed in seeds:
         name = task_name(family, seed)
-        if name in store:
-            verdicts.append(TaskVerdict(**store.get(name)))
+        cell = store.get(name)
+        if cell is not None:
+            verdicts.append(TaskVerdict(**cell))
             continue
         text = generate_toml(family, seed)
         verdict, plan = filter_scenario(scenario_from_toml(text, source=name), config, family, seed)

@@ -29,7 +29,6 @@ import argparse
 import json
 import os
 import platform
-import sys
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -145,6 +144,7 @@ def _venv(cfg: Sb3PpoConfig):
 
 def _curve_callback(curve: Path, wall_before: float):
     from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.vec_env import VecNormalize
 
     class CurveLogger(BaseCallback):
         """One line of ``curve`` per rollout, from the episodes that ended in it."""
@@ -160,7 +160,10 @@ def _curve_callback(curve: Path, wall_before: float):
             return wall_before + time.perf_counter() - self.t0
 
         def _on_step(self) -> bool:
-            raw = self.training_env.get_original_reward()  # VecNormalize's: the world's reward of this step
+            env = self.training_env
+            if not isinstance(env, VecNormalize):
+                raise ImpactEnvError(f"the curve reads the world's reward from VecNormalize, got {type(env).__name__}")
+            raw = env.get_original_reward()  # the world's reward of this step
             self.reward_sum += float(raw.sum())
             self.reward_count += raw.size
             dones = self.locals["dones"]
@@ -246,8 +249,8 @@ def evaluate(model, obs_rms_venv, cfg: Sb3PpoConfig, episodes: int, first_seed: 
     world = BatchedTransportWorld(cfg.scenario, episodes, **cfg.world_options())
     obs = world.reset(seeds=first_seed).cpu().numpy()
     for _ in range(world.horizon_steps):
-        obs, _, _, _, info = world.step(torch.as_tensor(act(obs)))
-        obs = obs.cpu().numpy()
+        step_obs, _, _, _, info = world.step(torch.as_tensor(act(obs)))
+        obs = step_obs.cpu().numpy()
     batched = info["robustness"].double().numpy()
     envs = [TransportEnv(cfg.scenario, **cfg.world_options()) for _ in range(episodes)]
     obs = np.stack([env.reset(seed=first_seed + i)[0] for i, env in enumerate(envs)])
@@ -377,4 +380,4 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

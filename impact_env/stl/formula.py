@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from impact_env.errors import STLError
 
@@ -53,9 +53,13 @@ def _check_formula(x: object, where: str) -> None:
 class Formula:
     """Base class of STL formulas. Combine with ``&``, ``|``, ``~`` (not) and :meth:`until`."""
 
-    # every node also has ``children: tuple[Formula, ...]`` (a field of And/Or, a property elsewhere); it is not
-    # declared here because a base-class property would become the dataclass default of And.children
     _prec: ClassVar[int] = _ATOM
+
+    if TYPE_CHECKING:
+        # every node has ``children`` (a field of And/Or, a property elsewhere); it is declared for the type
+        # checker only, because a base-class property would become the dataclass default of And.children
+        @property
+        def children(self) -> tuple[Formula, ...]: ...
 
     @property
     def horizon_s(self) -> float:

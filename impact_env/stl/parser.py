@@ -61,7 +61,7 @@ def _tokenize(text: str) -> list[_Token]:
     append = tokens.append
     new = tuple.__new__  # a NamedTuple's own __new__ is Python code; this is the same tuple, 3x faster
     for m in _TOKEN.finditer(text):
-        kind = m.lastgroup
+        kind = m.lastgroup or "end"  # every match is one of the named groups
         if kind == "end":
             break
         word = m.group(kind)

@@ -115,7 +115,7 @@ class TetherEnv(GymShell):
     * v0: initial release (impact_env 0.2.0).
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
     version = 1
 
     def __init__(self, station: Station | str | None = None, fidelity: str = "kinematic", reward_mode: str = "dense",
@@ -134,8 +134,8 @@ class TetherEnv(GymShell):
         self.action_space = spaces.MultiDiscrete([self.core.n_commands] * self.core.n_robots)
         self.observation_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
 
-    def _new_renderer(self) -> TetherRenderer:
-        return TetherRenderer(self.station, self.render_mode, width_px=self.render_width_px,
+    def _new_renderer(self, render_mode: str) -> TetherRenderer:
+        return TetherRenderer(self.station, render_mode, width_px=self.render_width_px,
                               fps=self.metadata["render_fps"])
 
     def _frame(self) -> TetherFrame:

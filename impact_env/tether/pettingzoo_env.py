@@ -80,7 +80,7 @@ class TetherParallelEnv(ParallelShell):
     * v0: initial release (impact_env 0.2.0).
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10, "name": "tether_v1",
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 10, "name": "tether_v1",
                 "is_parallelizable": True}
     version = 1
 
@@ -135,8 +135,8 @@ class TetherParallelEnv(ParallelShell):
         core, agents = self.core, self.agents
         return {a: core.agent_observation(i) for i, a in enumerate(self.possible_agents) if a in agents}
 
-    def _new_renderer(self) -> TetherRenderer:
-        return TetherRenderer(self.station, self.render_mode, width_px=self.render_width_px,
+    def _new_renderer(self, render_mode: str) -> TetherRenderer:
+        return TetherRenderer(self.station, render_mode, width_px=self.render_width_px,
                               fps=self.metadata["render_fps"])
 
     def _frame(self) -> TetherFrame:

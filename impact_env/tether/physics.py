@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pymunk
@@ -61,6 +62,7 @@ class _Tether:
     __slots__ = ("anchor", "ax", "ay", "ready_s", "joint", "jptr", "pulling", "held", "w", "seen_at", "clearance",
                  "length")
     joint: pymunk.SlideJoint | None  # the reel fidelity's joint, from the moment the tether pulls
+    jptr: Any  # what the reel loop drives: the joint's chipmunk pointer on the fast path, else the joint (or None)
 
     def __init__(self, anchor: int, position: tuple[float, float], ready_s: float, w: float) -> None:
         self.anchor, self.ready_s, self.joint, self.jptr, self.pulling = anchor, ready_s, None, None, False
@@ -69,6 +71,13 @@ class _Tether:
         self.length = math.inf  # a held tether's length (m), set when the hold starts
         self.w = w  # this robot's reel-in speed (m/s)
         self.seen_at, self.clearance = (math.nan, math.nan), -1.0  # see TetherWorld._check_tethers
+
+    def slide_joint(self) -> pymunk.SlideJoint:
+        """The reel fidelity's joint of a pulling tether (the public-API path drives it through pymunk)."""
+        if self.joint is None:
+            raise TetherError(f"the tether to anchor {self.anchor} has no joint: only a pulling tether of the reel "
+                              "fidelity has one")
+        return self.joint
 
 
 def _count_contact(arbiter: pymunk.Arbiter, space: pymunk.Space, world: TetherWorld) -> None:
@@ -166,7 +175,7 @@ class TetherWorld:
         self._anchors = station.anchor_points
         self._wall_a, self._wall_e, self._wall_ee = station.wall_arrays
         self._notches = station.notches
-        self._notch_rays: dict[int, tuple | None] = {}
+        self._notch_rays: dict[int, list[tuple[float, float, float, float]] | None] = {}
         self._cache = bool(cache_checks)
         self._wall_seen_at, self._wall_margin = (math.nan, math.nan), -1.0
         self.failed_anchors: set[int] = set()
@@ -320,8 +329,9 @@ class TetherWorld:
             raise TetherError(f"robot must be in 0..{len(self._tethers) - 1}, got {robot}")
         if not 0 <= anchor < len(self._anchors):
             raise TetherError(f"anchor must be in 0..{len(self._anchors) - 1}, got {anchor}")
-        if self._tethers[robot] is not None:
-            raise TetherError(f"robot {robot} already holds anchor {self._tethers[robot].anchor}; release it first")
+        held = self._tethers[robot]
+        if held is not None:
+            raise TetherError(f"robot {robot} already holds anchor {held.anchor}; release it first")
         if robot in self.dropped_robots:
             raise TetherError(f"robot {robot} has dropped out")
         tether = _Tether(anchor, self._anchors[anchor], self.time_s + max(0.0, float(delay_s)),
@@ -376,7 +386,7 @@ class TetherWorld:
         stops (within the winch limit) a cargo moving away from the anchor but never pulls it back: a drum that
         is locked, not a spring."""
         self._set_max(t, length)
-        t.joint.max_bias = 0.0
+        t.slide_joint().max_bias = 0.0
 
     # ---------------------------------------------------------------------------------------- faults
     def fail_anchor(self, anchor: int) -> None:
@@ -586,6 +596,7 @@ class TetherWorld:
         while nothing but arithmetic is needed; the substeps that need the wall test (or meet a cargo at an
         anchor) run here in Python, as do the tether checks and attachments once due, with the same state."""
         loop, dt, hypot = self._kinematic_loop, self.dt_s, math.hypot
+        assert loop is not None  # the caller runs this only with the compiled loop
         end = self.n_substeps_done + self.substeps
         while self.n_substeps_done < end:
             active = self._active
@@ -727,7 +738,7 @@ class TetherWorld:
         if self._fast:
             _cp.cpSlideJointSetMax(t.jptr, length)
         else:
-            t.joint.max = length
+            t.slide_joint().max = length
 
     def _substep_kinematic(self, active: list[_Tether], x: float, y: float, vx0: float, vy0: float) -> None:
         dt = self.dt_s
@@ -774,7 +785,7 @@ class TetherWorld:
         mx, my = 0.5 * (vx0 + vx1), 0.5 * (vy0 + vy1)
         fast = self._fast
         for t, (ux, uy) in zip(active, units):
-            impulse = _cp.cpConstraintGetImpulse(t.jptr) if fast else t.joint.impulse
+            impulse = _cp.cpConstraintGetImpulse(t.jptr) if fast else t.slide_joint().impulse
             work = impulse * (ux * mx + uy * my)
             if work > 0.0:
                 self.winch_work_J += work
@@ -875,8 +886,9 @@ class TetherWorld:
     def _notch_clearance(self, x: float, y: float, anchor: int) -> float:
         """How far (m) the cargo may move from (x, y) before its tether to ``anchor`` could touch a notch: the
         distance to the rays from the notches away from the anchor (:mod:`impact_env.tether.sight`)."""
-        rays = self._notch_rays.get(anchor, ...)
-        if rays is ...:
+        if anchor in self._notch_rays:
+            rays = self._notch_rays[anchor]
+        else:
             rays = self._notch_rays[anchor] = shadow_rays(np.asarray(self._anchors[anchor]), self._notches)
         return distance_to_rays(x, y, rays)
 

@@ -73,9 +73,8 @@ def plot_tether_run(station: Station, positions: np.ndarray, events: Sequence[di
     handles.append(line)
     dt = station.control_period_s
     for kind, (marker, colour) in EVENT_MARKERS.items():
-        at = [p[min(len(p) - 1, int(round(e["time"] / dt)))] for e in events if e["kind"] == kind]
-        if at:
-            at = np.array(at)
+        at = np.array([p[min(len(p) - 1, int(round(e["time"] / dt)))] for e in events if e["kind"] == kind])
+        if len(at):
             handles.append(ax.scatter(at[:, 0], at[:, 1], marker=marker, color=colour, s=50, zorder=6, label=kind))
     ax.set_title(f"station {station.name}: robustness {robustness:+.3f} m")
     figures.legend_beside(ax, handles)

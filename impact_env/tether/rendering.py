@@ -47,8 +47,11 @@ class TetherFrame(Frame):
 def frame_of(core: TetherCore) -> TetherFrame:
     """The frame of a tether environment's current state."""
     world = core.world
-    tethers = [(world.tether_anchor(r), world.is_pulling(r)) for r in range(core.n_robots)
-               if world.tether_anchor(r) is not None]
+    tethers = []
+    for r in range(core.n_robots):
+        anchor = world.tether_anchor(r)
+        if anchor is not None:
+            tethers.append((anchor, world.is_pulling(r)))
     return TetherFrame(time_s=core.time_s, robustness=core.robustness, cargo_m=world.position_m, tethers=tethers,
                        line_of_sight=core.line_of_sight_mask().tolist(), label=core.fidelity)
 
@@ -89,11 +92,11 @@ class TetherRenderer(Canvas):
         pygame = self._pygame
         cargo = self.world_to_px(*frame.cargo_m)
         anchors = [self.world_to_px(*a.position_m) for a in self.station.anchors]
-        for anchor, visible in zip(anchors, frame.line_of_sight):
+        for anchor_px, visible in zip(anchors, frame.line_of_sight):
             if visible:
-                pygame.draw.line(canvas, FAN, cargo, anchor, 1)
-        for anchor, visible in zip(anchors, frame.line_of_sight):
-            pygame.draw.circle(canvas, ANCHOR_VISIBLE if visible else ANCHOR, anchor, 4 if visible else 3)
+                pygame.draw.line(canvas, FAN, cargo, anchor_px, 1)
+        for anchor_px, visible in zip(anchors, frame.line_of_sight):
+            pygame.draw.circle(canvas, ANCHOR_VISIBLE if visible else ANCHOR, anchor_px, 4 if visible else 3)
         for anchor, pulling in frame.tethers:
             pygame.draw.line(canvas, TETHER if pulling else TETHER_ATTACHING, cargo, anchors[anchor], 3)
         radius_px = max(2.0, self.station.cargo.radius_m * self.scale_px_per_m)

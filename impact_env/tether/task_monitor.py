@@ -144,9 +144,10 @@ def hold_shape(formula: Formula, dt: float) -> tuple[int, int, list[InRegion]] |
         h = interval_steps(inner.a_s, inner.b_s, dt)[1]
         inner = inner.child
     leaves = list(inner.children) if isinstance(inner, And) else [inner]
-    if not all(isinstance(leaf, InRegion) for leaf in leaves):
+    predicates = [leaf for leaf in leaves if isinstance(leaf, InRegion)]
+    if len(predicates) != len(leaves):
         return None
-    return interval_steps(formula.a_s, formula.b_s, dt)[1], h, leaves
+    return interval_steps(formula.a_s, formula.b_s, dt)[1], h, predicates
 
 
 def task_monitor(formula: Formula, regions: Mapping[str, ConvexPolygon], dt: float) -> HoldMonitor | OnlineMonitor:

@@ -28,7 +28,7 @@ def is_masked(action: object) -> bool:
     its data under the mask, so such actions take :func:`numbers_of`."""
     if isinstance(action, np.ma.MaskedArray):
         return True
-    return type(action) in (list, tuple) and any(isinstance(row, np.ma.MaskedArray) for row in action)
+    return (type(action) is list or type(action) is tuple) and any(isinstance(row, np.ma.MaskedArray) for row in action)
 
 
 def numbers_of(action: object, shapes: tuple[tuple[int, ...], ...], what: str, layout: str) -> list[float]:

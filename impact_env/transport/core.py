@@ -43,11 +43,11 @@ def speed_bounds(scenario: Scenario, duration_s: float) -> tuple[float, float]:
     bodies = scenario.bodies
     e0 = sum(0.5 * b.mass_kg * (b.velocity_mps[0] ** 2 + b.velocity_mps[1] ** 2)
              + 0.5 * b.inertia_kgm2 * b.angular_velocity_radps ** 2 for b in bodies)
-    growth = sum(math.hypot(*r.thrust_limit_N) / math.sqrt(2.0 * r.mass_kg) for r in scenario.robots)
+    growth = sum(math.hypot(*r.wrench_limits[:2]) / math.sqrt(2.0 * r.mass_kg) for r in scenario.robots)
     energy = (math.sqrt(e0) + duration_s * growth) ** 2
     v_max = math.sqrt(2.0 * energy / min(b.mass_kg for b in bodies))
-    w_max = max(abs(b.angular_velocity_radps) + (duration_s * b.torque_limit_Nm / b.inertia_kgm2 if b.is_robot else 0.0)
-                for b in bodies)
+    w_max = max(abs(b.angular_velocity_radps)
+                + (duration_s * b.wrench_limits[2] / b.inertia_kgm2 if b.is_robot else 0.0) for b in bodies)
     return min(v_max, _FLOAT32_LIMIT), min(max(w_max, 1.0), _FLOAT32_LIMIT)
 
 
@@ -150,8 +150,8 @@ class TransportCore:
         self.robustness_limit_m = robustness_limit(sc)
         n = self.n_robots * ACTION_PER_ROBOT
         self._action_shapes = ((n,), (self.n_robots, ACTION_PER_ROBOT))
-        self.wrench_limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in sc.robots], dtype=float)
-        self._limits_py = [tuple(float(x) for x in row) for row in self.wrench_limits]
+        self.wrench_limits = np.array([r.wrench_limits for r in sc.robots], dtype=float)
+        self._limits_py = [(float(fx), float(fy), float(tau)) for fx, fy, tau in self.wrench_limits]
 
         xmin, xmax, ymin, ymax = sc.world_box
         v_max, w_max = speed_bounds(sc, self.horizon_steps * self.dt_s)
@@ -189,7 +189,7 @@ class TransportCore:
     @property
     def last_wrenches(self) -> list[tuple[float, float, float]]:
         """Each robot's body-frame (Fx, Fy, torque) of the last step (N, N m)."""
-        return [tuple(row) for row in self._last_wrenches]
+        return [(fx, fy, tau) for fx, fy, tau in self._last_wrenches]
 
     @property
     def _state(self) -> list[tuple[float, ...]]:
@@ -255,14 +255,16 @@ class TransportCore:
             bad = [i for i, x in enumerate(values) if not math.isfinite(x)]
             raise ActionError(f"action contains NaN or infinite values at indices {bad}; actions must be finite "
                               "numbers in [-1, 1]")
-        wrenches = []
-        for i, limits in enumerate(self._limits_py):
-            row = values[3 * i: 3 * i + 3]
-            wrenches.append(tuple((1.0 if x > 1.0 else (-1.0 if x < -1.0 else x)) * lim for x, lim in zip(row, limits)))
+        wrenches: list[tuple[float, float, float]] = []
+        for i, (fx, fy, tau) in enumerate(self._limits_py):
+            x, y, t = values[3 * i: 3 * i + 3]
+            wrenches.append(((1.0 if x > 1.0 else (-1.0 if x < -1.0 else x)) * fx,
+                             (1.0 if y > 1.0 else (-1.0 if y < -1.0 else y)) * fy,
+                             (1.0 if t > 1.0 else (-1.0 if t < -1.0 else t)) * tau))
         if self.thrust_noise > 0:
             noisy = np.array(wrenches) * (1.0 + self.thrust_noise * self._rng.standard_normal((self.n_robots, 3)))
             np.clip(noisy, -self.wrench_limits, self.wrench_limits, out=noisy)
-            wrenches = [tuple(row) for row in noisy.tolist()]
+            wrenches = [(fx, fy, tau) for fx, fy, tau in noisy.tolist()]
         return wrenches
 
     def _set_wrenches(self, action: Any) -> list[list[float]]:
@@ -365,7 +367,7 @@ class TransportCore:
         return dict(zip(names, self.agent_observations()))
 
     def _observe(self, order) -> np.ndarray:
-        out = []
+        out: list[float] = []
         state = self.state.tolist()
         for i in order:
             x, y, vx, vy, th, om = state[i]

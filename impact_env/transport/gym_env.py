@@ -107,7 +107,7 @@ class TransportEnv(GymShell):
       overlapped a wall, an obstacle or a body are drawn again, and an infinite robustness is clipped.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
     def __init__(self, scenario: Scenario | str | None = None, reward_mode: str = "dense",
                  fuel_penalty: float = 0.0, restitution: float | None = None, thrust_noise: float = 0.0,
@@ -126,8 +126,8 @@ class TransportEnv(GymShell):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
         self.observation_space = spaces.Box(self.core.obs_low, self.core.obs_high, dtype=np.float32)
 
-    def _new_renderer(self) -> Renderer:
-        return Renderer(self.scenario, self.render_mode, width_px=self.render_width_px, fps=self.metadata["render_fps"])
+    def _new_renderer(self, render_mode: str) -> Renderer:
+        return Renderer(self.scenario, render_mode, width_px=self.render_width_px, fps=self.metadata["render_fps"])
 
     def _frame(self) -> RenderFrame:
         return frame_of(self.core)

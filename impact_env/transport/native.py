@@ -60,9 +60,10 @@ def _chipmunk_addresses() -> tuple[int, ...] | None:
 
 
 _ADDRESSES = _chipmunk_addresses()
+_loop_module = _substeps if _ADDRESSES is not None else None  # built, and matching this pymunk
 # the per-step kernels around the loop (None: the callers' Python paths); see _substeps.c for each
-Observer = _substeps.Observer if _ADDRESSES is not None else None
-parallel_outputs = _substeps.parallel_outputs if _ADDRESSES is not None else None
+Observer = _loop_module.Observer if _loop_module is not None else None
+parallel_outputs = _loop_module.parallel_outputs if _loop_module is not None else None
 
 
 def available() -> bool:
@@ -78,12 +79,12 @@ def substep_loop(space: Any, bodies: list[Any], n_robots: int, dt_s: float, sepa
     writes, scaled by ``limits``, the same shape); ``separated`` the World's list that the separate callback
     appends to (a non-empty list ends a ``run``).
     """
-    if _ADDRESSES is None:
+    if _ADDRESSES is None or _loop_module is None:
         return None
     try:
         space_address = int(_ffi.cast("uintptr_t", space._space))
         body_addresses = [int(_ffi.cast("uintptr_t", b._body)) for b in bodies]
     except AttributeError:  # pragma: no cover - pymunk internals moved: the Python path
         return None
-    return _substeps.SubstepLoop(_ADDRESSES, space_address, body_addresses, n_robots, dt_s, space, separated, wrench,
+    return _loop_module.SubstepLoop(_ADDRESSES, space_address, body_addresses, n_robots, dt_s, space, separated, wrench,
                                   limits)

@@ -88,7 +88,7 @@ class TransportParallelEnv(ParallelShell):
       observations unchanged.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10, "name": "transport_v0",
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 10, "name": "transport_v0",
                 "is_parallelizable": True}
 
     def __init__(self, scenario: Scenario | str | None = None, reward_mode: str = "dense",
@@ -144,8 +144,10 @@ class TransportParallelEnv(ParallelShell):
         self._cycles += 1
         truncated = not terminated and self.max_cycles is not None and self._cycles >= self.max_cycles
         agents = self.agents
-        if core._observer is not None and len(agents) == core.n_robots:  # every agent lives: they end together
-            obs, rewards, terminations, truncations, infos = native.parallel_outputs(
+        outputs = native.parallel_outputs  # built with the core's observer
+        if outputs is not None and core._observer is not None and len(agents) == core.n_robots:
+            # every agent lives: they end together
+            obs, rewards, terminations, truncations, infos = outputs(
                 core._observer, time_left(core), np.empty(self._observations_shape, np.float32), self._agent_tuple,
                 agents, reward, terminated, truncated, info)
         else:
@@ -160,8 +162,8 @@ class TransportParallelEnv(ParallelShell):
             self.render()
         return obs, rewards, terminations, truncations, infos
 
-    def _new_renderer(self) -> Renderer:
-        return Renderer(self.scenario, self.render_mode, width_px=self.render_width_px, fps=self.metadata["render_fps"])
+    def _new_renderer(self, render_mode: str) -> Renderer:
+        return Renderer(self.scenario, render_mode, width_px=self.render_width_px, fps=self.metadata["render_fps"])
 
     def _frame(self) -> RenderFrame:
         return frame_of(self.core)

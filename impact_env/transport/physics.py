@@ -97,17 +97,24 @@ class _Contact:
     vb_end: tuple[float, float]
 
 
+def _xy(v: pymunk.Vec2d) -> tuple[float, float]:
+    return v.x, v.y
+
+
 # Module-level callbacks (lambdas would stop a World from being pickled).
 def _on_begin(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:
     sa, sb = arbiter.shapes
+    body_a, body_b = sa.body, sb.body
+    if body_a is None or body_b is None:  # pymunk types a shape's body as optional; every shape here has one
+        return
     c = _Contact()
     c.time_s = world.time_s
     c.a, c.b = world._shape_names[sa], world._shape_names[sb]
-    c.body_a, c.body_b = sa.body, sb.body
-    c.va, c.vb = tuple(sa.body.velocity), tuple(sb.body.velocity)
+    c.body_a, c.body_b = body_a, body_b
+    c.va, c.vb = _xy(body_a.velocity), _xy(body_b.velocity)
     c.jx = c.jy = 0.0
-    rank = world._shape_rank
-    c.rank = tuple(sorted((rank[sa], rank[sb])))  # the pair's place in the fixed order of closing
+    ra, rb = world._shape_rank[sa], world._shape_rank[sb]
+    c.rank = (ra, rb) if ra <= rb else (rb, ra)  # the pair's place in the fixed order of closing
     world._open[(sa, sb)] = c
 
 
@@ -125,7 +132,7 @@ def _on_separate(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> 
     c = world._open.pop(arbiter.shapes, None)
     if c is not None:
         c.end_s = world.time_s
-        c.va_end, c.vb_end = tuple(c.body_a.velocity), tuple(c.body_b.velocity)
+        c.va_end, c.vb_end = _xy(c.body_a.velocity), _xy(c.body_b.velocity)
         world._separated.append(c)
 
 
@@ -134,8 +141,8 @@ def _close(c: _Contact, time_s: float, va_end: tuple[float, float] | None = None
     return ImpactEvent(
         time_s=c.time_s, a=c.a, b=c.b, impulse_Ns=math.hypot(c.jx, c.jy),
         a_velocity_before=c.va, b_velocity_before=c.vb,
-        a_velocity_after=tuple(c.body_a.velocity) if va_end is None else va_end,
-        b_velocity_after=tuple(c.body_b.velocity) if vb_end is None else vb_end,
+        a_velocity_after=_xy(c.body_a.velocity) if va_end is None else va_end,
+        b_velocity_after=_xy(c.body_b.velocity) if vb_end is None else vb_end,
         duration_s=time_s - c.time_s,
     )
 
@@ -217,8 +224,8 @@ class World:
         space.on_collision(None, None, begin=_on_begin, post_solve=_on_post_solve, separate=_on_separate, data=self)
         self.wrench = np.zeros((len(self.robots), 3))  # body-frame (Fx, Fy, torque) per robot, N and N m
         # the robots' (Fx, Fy, torque) limits: what the compiled loop's set_action scales a normalised action by
-        self.wrench_limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in scenario.robots], dtype=float)
-        self._fast = None
+        self.wrench_limits = np.array([r.wrench_limits for r in scenario.robots], dtype=float)
+        self._fast: tuple[Any, list[Any]] | None = None  # chipmunk's space and robot bodies (C pointers)
         if _cp is not None and fast:
             try:
                 self._fast = (space._space, [b._body for b in self.robots])
@@ -287,15 +294,15 @@ class World:
         if wrenches is not None:
             self.wrench[...] = wrenches
         if self._loop is not None:
-            return self._step_compiled()
-        wrenches = [tuple(w) for w in self.wrench.tolist()]
+            return self._step_compiled(self._loop)
+        held = [(fx, fy, tau) for fx, fy, tau in self.wrench.tolist()]
         if self._fast is not None:
-            return self._step_fast(wrenches)
+            return self._step_fast(self._fast, held)
         robots = self.robots
         space_step = self.space.step
         dt = self.dt_s
         for _ in range(self.substeps):
-            for body, (fx, fy, tau) in zip(robots, wrenches):
+            for body, (fx, fy, tau) in zip(robots, held):
                 c, s = math.cos(body.angle), math.sin(body.angle)
                 body.force = (c * fx - s * fy, s * fx + c * fy)
                 body.torque = tau
@@ -306,10 +313,10 @@ class World:
         closed, self._closed = self._closed, []
         return closed
 
-    def _step_compiled(self) -> list[ImpactEvent]:
-        """The substeps in C (:mod:`impact_env.transport.native`); each contact that ends is closed here, after
-        its substep and before the next, as on the other paths."""
-        loop, space = self._loop, self.space
+    def _step_compiled(self, loop: Any) -> list[ImpactEvent]:
+        """The substeps in C (``loop``: :mod:`impact_env.transport.native`'s); each contact that ends is closed
+        here, after its substep and before the next, as on the other paths."""
+        space = self.space
         left = self.substeps
         while left:
             space._locked = True  # as pymunk's own step(): callbacks may not add or remove shapes
@@ -322,8 +329,9 @@ class World:
         closed, self._closed = self._closed, []
         return closed
 
-    def _step_fast(self, wrenches: Sequence[tuple[float, float, float]]) -> list[ImpactEvent]:
-        space_ptr, body_ptrs = self._fast
+    def _step_fast(self, fast: tuple[Any, list[Any]],
+                   wrenches: Sequence[tuple[float, float, float]]) -> list[ImpactEvent]:
+        space_ptr, body_ptrs = fast
         cp, cos, sin = _cp, math.cos, math.sin
         dt = self.dt_s
         pairs = list(zip(body_ptrs, wrenches))
@@ -352,18 +360,17 @@ class World:
 
     def read_state(self) -> list[tuple[float, float, float, float, float, float]]:
         """Per body (x, y, vx, vy, heading, angular velocity) in SI units, scenario body order."""
+        out: list[tuple[float, float, float, float, float, float]] = []
         if self._loop is not None:
-            out = np.empty((len(self.bodies), 6))
-            self._loop.read_state(out)
-            return [tuple(row) for row in out.tolist()]
+            rows = np.empty((len(self.bodies), 6))
+            self._loop.read_state(rows)
+            return [(x, y, vx, vy, th, om) for x, y, vx, vy, th, om in rows.tolist()]
         if self._fast is not None:
             cp = _cp
-            out = []
             for ptr in self._all_ptrs:
                 p, v = cp.cpBodyGetPosition(ptr), cp.cpBodyGetVelocity(ptr)
                 out.append((p.x, p.y, v.x, v.y, cp.cpBodyGetAngle(ptr), cp.cpBodyGetAngularVelocity(ptr)))
             return out
-        out = []
         for b in self.bodies:
             p, v = b.position, b.velocity
             out.append((p.x, p.y, v.x, v.y, b.angle, b.angular_velocity))

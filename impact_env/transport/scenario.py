@@ -70,6 +70,14 @@ class Body:
     def is_robot(self) -> bool:
         return self.thrust_limit_N is not None
 
+    @property
+    def wrench_limits(self) -> tuple[float, float, float]:
+        """A robot's limits: (Fx (N), Fy (N), torque (N m)); ScenarioError for an object, which has none."""
+        if self.thrust_limit_N is None or self.torque_limit_Nm is None:
+            raise ScenarioError(f"body {self.name!r} is an object: it has no thrust_limit_N or torque_limit_Nm")
+        fx, fy = self.thrust_limit_N
+        return fx, fy, self.torque_limit_Nm
+
 
 @dataclass(frozen=True)
 class FinalBox:

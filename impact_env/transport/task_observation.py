@@ -144,7 +144,11 @@ class TaskConditioned(gym.Wrapper):
 
     def __init__(self, env: gym.Env, limits: FamilyLimits) -> None:
         super().__init__(env)
-        self.task_observation = TaskObservation(env.unwrapped.scenario, limits)
+        scenario = getattr(env.unwrapped, "scenario", None)
+        if not isinstance(scenario, Scenario):
+            raise EnvConfigError(f"TaskConditioned wraps a TransportEnv (an env with a Scenario), got "
+                                 f"{type(env.unwrapped).__name__}")
+        self.task_observation = TaskObservation(scenario, limits)
         self.observation_space, self.action_space = self.task_observation.spaces()
 
     def reset(self, **kwargs: Any):

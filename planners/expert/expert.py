@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import KW_ONLY, InitVar, dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,8 +39,12 @@ from planners.online.identification import IdentificationConfig, ImpactIdentifie
 from planners.online.keep_off import boundary_keep_off, object_keep_off, robot_keep_off, segment_limits
 from planners.online.mission import MissionConfig, MissionPlanner
 from planners.online.mpc import FreeflyerMPC, MPCConfig
+from planners.online.mpc_specs import AvoidSpec, HalfPlaneSpec
 from planners.online.reference import ContactStrategy, PlanContact, ReferenceSelector
 from planners.plan import Plan
+
+if TYPE_CHECKING:
+    from planners.tether.expert import TetherExpert
 
 
 @dataclass(frozen=True)
@@ -168,12 +172,12 @@ class Expert:
         keep_off_rows = 1 + (len(self.robots) if cfg.safe_segments else 0)
         self.mpc_config = mpc_config or MPCConfig(dt_s=self.dt, keep_off_rows=keep_off_rows)
         self.mpcs = {r.name: FreeflyerMPC(r, self.mpc_config, heading_ref=r.heading_rad) for r in self.robots}
-        self.limits = np.array([[*r.thrust_limit_N, r.torque_limit_Nm] for r in self.robots])
+        self.limits = np.array([r.wrench_limits for r in self.robots])
         self.book = ImpactBook(plan.impacts, tolerance_s=0.5 * self.grid_dt)
         self.identifier = ImpactIdentifier(sc.restitution, {b.name: b.mass_kg for b in sc.bodies},
                                            frozenset(self._robot_names), frozenset(self._object_names),
                                            cfg.identification or IdentificationConfig(),
-                                           {r.name: float(np.hypot(*r.thrust_limit_N)) / r.mass_kg
+                                           {r.name: float(np.hypot(*r.wrench_limits[:2])) / r.mass_kg
                                             for r in self.robots})
         strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
         if plan.planner == "ir" and isinstance(strategy, PlanContact):
@@ -188,12 +192,13 @@ class Expert:
         self.stats = ExpertStats()
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}
         self._cache: tuple[int, np.ndarray] | None = None
+        self._cache_obs: np.ndarray | None = None  # the observation the cached action is for
         # per-episode constants of every step: the horizon's node offsets (s); per robot, how far it can get
         # within a replanned segment (m, at its velocity bound) and its largest acceleration (m/s^2)
         self._node_offsets = self.dt * np.arange(self.mpc_config.horizon + 1)
         self._segment_reach = {r.name: float(np.hypot(*(r.velocity_bound_mps or (1.0, 1.0))))
                                * self.grid_dt * (cfg.replan_intervals + 1) for r in self.robots}
-        self._a_max = {r.name: float(np.hypot(*r.thrust_limit_N)) / r.mass_kg for r in self.robots}
+        self._a_max = {r.name: float(np.hypot(*r.wrench_limits[:2])) / r.mass_kg for r in self.robots}
 
     # ------------------------------------------------------------------------------------------ API
     def reset(self, env: Any = None, seed: int | None = None) -> None:
@@ -219,7 +224,9 @@ class Expert:
             raise ValueError(f"observation must have shape ({expected},) for scenario {self.scenario.name!r}, "
                              f"got {obs.shape}")
         step = round((1.0 - obs[-1]) * self.horizon_steps)
-        if self._cache is not None and self._cache[0] == step and np.array_equal(self._cache_obs, obs):
+        cached_obs = self._cache_obs
+        if (self._cache is not None and cached_obs is not None and self._cache[0] == step
+                and np.array_equal(cached_obs, obs)):
             return self._cache[1].copy()  # the same observation again (e.g. PettingZoo agents, then act)
         t = step * self.dt
         rows = obs[:-1].reshape(len(self.names), OBS_PER_BODY)
@@ -253,8 +260,10 @@ class Expert:
         central[order] = bodies
         step = round((1.0 - obs[-1]) * self.horizon_steps)
         if self._cache is None or self._cache[0] != step:
-            self.act(np.append(central.reshape(-1), obs[-1]), info)
-        return self._cache[1][ACTION_PER_ROBOT * idx: ACTION_PER_ROBOT * (idx + 1)]
+            action = self.act(np.append(central.reshape(-1), obs[-1]), info)  # computed, and cached as it is
+        else:
+            action = self._cache[1]
+        return action[ACTION_PER_ROBOT * idx: ACTION_PER_ROBOT * (idx + 1)]
 
     # ---------------------------------------------------------------------------------- internals
     def _set_plan(self, plan: Plan, done: set[int]) -> None:
@@ -311,8 +320,9 @@ class Expert:
         ref = self.selector.robot_reference(robot, self.scenario.body, t, state, nxt, past, times,
                                             self._object_prediction(states, t), self._model, limits)
         object_states = {o.name: states[self._index[o.name]][[0, 1, 3, 4]] for o in self.objects}
-        avoid = [object_keep_off(robot, self.objects, t, times, state[:2], object_states, self.plan.impacts,
-                                 ref.approaching, cfg.object_margin_m, cfg.contact_window_s)]
+        keep_off: list[AvoidSpec | HalfPlaneSpec | None] = [
+            object_keep_off(robot, self.objects, t, times, state[:2], object_states, self.plan.impacts,
+                            ref.approaching, cfg.object_margin_m, cfg.contact_window_s)]
         if cfg.safe_segments:
             a_max = self._a_max[name]
             speed = float(np.hypot(*state[3:5]))
@@ -323,11 +333,11 @@ class Expert:
                     d = centers - state[:2]
                     gap = float(np.hypot(d[:, 0], d[:, 1]).min())
                     if gap < 2 * reach + robot.radius_m + other.radius_m + cfg.robot_margin_m:
-                        avoid.append(robot_keep_off(robot, other, centers, cfg.robot_margin_m))
+                        keep_off.append(robot_keep_off(robot, other, centers, cfg.robot_margin_m))
             wall = boundary_keep_off(self.scenario, robot, state[:2], n + 1, reach, cfg.wall_margin_m)
             if wall is not None and not self._contact_beyond(wall, name, ref):
-                avoid.append(wall)
-        avoid = [a for a in avoid if a is not None]
+                keep_off.append(wall)
+        avoid = [a for a in keep_off if a is not None]
         result = self.mpcs[name].solve(state, ref.reference, impact=ref.impact_spec, avoid=avoid or None)
         self._predicted[name] = (step, result.predicted[:, 0:2])
         self.stats.mpc_ms.append(result.solve_ms)
@@ -417,7 +427,7 @@ class Expert:
                        result.robustness, path)
 
 
-def make_expert(scenario: Scenario, plan: str | None = None, **_: Any) -> Expert:
+def make_expert(scenario: Scenario, plan: str | None = None, **_: Any) -> Expert | TetherExpert:
     """Factory of the ``impact_env.controllers`` entry point: ``impact-env run SCENARIO --controller expert``.
 
     For a tether station it builds the tether expert (:mod:`planners.tether.expert`)."""

@@ -6,6 +6,8 @@ from typing import Any
 
 import gymnasium as gym
 
+from impact_env.errors import EnvConfigError
+from impact_env.transport.scenario import Scenario
 from planners.expert.expert import Expert
 
 
@@ -19,9 +21,13 @@ class ExpertActionInfo(gym.Wrapper):
 
     def __init__(self, env: gym.Env, expert: Expert | None = None) -> None:
         super().__init__(env)
-        self.expert = expert or Expert(env.unwrapped.scenario)
-        if self.expert.scenario.name != env.unwrapped.scenario.name:
-            raise ValueError(f"expert is for {self.expert.scenario.name!r}, env runs {env.unwrapped.scenario.name!r}")
+        scenario = getattr(env.unwrapped, "scenario", None)
+        if not isinstance(scenario, Scenario):
+            raise EnvConfigError(f"the expert labels a TransportEnv (an env with a Scenario), got "
+                                 f"{type(env.unwrapped).__name__}")
+        self.expert = expert or Expert(scenario)
+        if self.expert.scenario.name != scenario.name:
+            raise ValueError(f"expert is for {self.expert.scenario.name!r}, env runs {scenario.name!r}")
 
     def reset(self, **kwargs: Any):
         obs, info = self.env.reset(**kwargs)

@@ -50,8 +50,8 @@ def plan_job(job: tuple[str, str, dict[str, Any]]) -> dict[str, Any]:
             plan = plan_spatially_robust(load_scenario(name), PlannerConfig(**options))
         return {"scenario": name, "plan": plan.to_dict(), "wall_s": time.perf_counter() - start}
     except PlanTimeoutError as exc:
-        plan = None if exc.plan is None else exc.plan.to_dict()
-        return {"scenario": name, "plan": plan, "timed_out": True, "error": None if plan else str(exc),
+        best = None if exc.plan is None else exc.plan.to_dict()
+        return {"scenario": name, "plan": best, "timed_out": True, "error": None if best else str(exc),
                 "wall_s": time.perf_counter() - start}
     except PlannerError as exc:
         return {"scenario": name, "plan": None, "error": str(exc), "wall_s": time.perf_counter() - start}

@@ -4,6 +4,7 @@ clearance, and the checks of the options they share."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from impact_env.transport.scenario import Scenario
@@ -47,7 +48,8 @@ class EncodedTask:
     rho: LinExpr | None = None
 
 
-def encode_task(model: Model, encoder: STLEncoder, scenario: Scenario, rho: LinExpr | None = None,
+def encode_task(model: Model, encoder: STLEncoder, scenario: Scenario,
+                rho: LinExpr | Callable[[list[LinExpr]], LinExpr] | None = None,
                 min_robustness_m: float = 0.0) -> EncodedTask:
     """Encode each top-level conjunct of the task in its own group and require it satisfied (r_c >=
     ``min_robustness_m``, ``PlannerConfig.min_robustness_m``); with ``rho``, also rho <= r_c for every conjunct

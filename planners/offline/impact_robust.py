@@ -125,7 +125,7 @@ def build_ir_model(scenario: Scenario, config: IRPlannerConfig) -> IRModel:
 
 
 def _acceleration_scale(robots: list[RobotCopies]) -> float:
-    return max(max(r.spec.thrust_limit_N) / r.spec.mass_kg for r in robots)
+    return max(max(r.spec.wrench_limits[:2]) / r.spec.mass_kg for r in robots)
 
 
 def staged_model(built: IRModel) -> StagedModel:
@@ -186,7 +186,7 @@ def extract_ir_plan(scenario: Scenario, built: IRModel, x: np.ndarray, solver: s
         first, last = max(0, k - built.window), min(grid.intervals, k + built.window)
         copies.append(ImpactCopies(
             time_s=grid.knot(k), robot=rn, object=on, window_start_s=grid.knot(first), window_end_s=grid.knot(last),
-            signs=[tuple(s) for s in SIGNS],
+            signs=list(SIGNS),
             before=[np.array([[value(p, x) for p in c.points(j)] for j in range(first, k)]) for c in r.copies],
             after=[np.array([[value(p, x) for p in c.points(j)] for j in range(k, last)]) for c in r.copies]))
     funnels = {}
@@ -197,20 +197,21 @@ def extract_ir_plan(scenario: Scenario, built: IRModel, x: np.ndarray, solver: s
             name, grid.knot(0), grid.dt_s,
             position_halfwidth_m=np.array([[h.value(x) for h in hk] for hk in box.hp]),
             velocity_halfwidth_mps=np.array([[h.value(x) for h in hk] for hk in box.hv]),
-            final_box_m=tuple(position), final_box_mps=tuple(velocity))
+            final_box_m=position, final_box_mps=velocity)
     m = built.model
     stats = {"intervals": grid.intervals, "robot_degree": built.robots[0].degree, "binaries": m.n_binaries,
              "variables": m.n_vars, "rows": m.n_rows}
+    delta = float(built.delta.value(x))
     plan = Plan(scenario=scenario.name, planner="ir", robustness=0.0, bodies=bodies, impacts=impacts,
                 solver=solver, solve_time_s=solve_time_s, build_time_s=built.build_time_s, mip_gap=float(mip_gap),
-                stats=stats, delta_mps=float(built.delta.value(x)), funnels=funnels, copies=copies)
+                stats=stats, delta_mps=delta, funnels=funnels, copies=copies)
     # the MILP bounds half-widths from below only: record the exact propagated spread, except for the box
     # the copies were built for at each impact (position at the impact knot, velocity on the interval before)
     from planners.plan.funnels import feedback, propagate
 
     fb = feedback(plan, scenario)
     for name, funnel in funnels.items():
-        hp, hv = propagate(funnel, plan.delta_mps, fb[name])
+        hp, hv = propagate(funnel, delta, fb[name])
         at_impact = np.zeros(len(hp), dtype=bool)
         at_impact[list(fb[name])] = True
         funnel.position_halfwidth_m = np.where(at_impact[:, None], funnel.position_halfwidth_m,

@@ -20,6 +20,7 @@ from functools import partial
 import numpy as np
 
 from impact_env.transport.scenario import Scenario
+from planners.errors import PlannerError
 from planners.offline.common import DEFAULT_DEGREE, DEFAULT_INTERVALS, add_obstacle_clearance, check_common_options
 from planners.offline.common import encode_task as _encode_task
 from planners.offline.config import PlannerConfig
@@ -83,6 +84,8 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
         -encoder.bound, max(-encoder.bound, min(encoder.upper_bound(r) for r in encoded)), name="rho"),
         min_robustness_m=config.min_robustness_m)
     rho = task.rho
+    if rho is None:  # encode_task makes it from the callable
+        raise PlannerError("the task's robustness variable rho was not created")
 
     cost = acceleration_l1(model, robots)
     n_terms = sum(len(r.acceleration_points(k)) * 2 for r in robots for k in range(n))
@@ -96,7 +99,7 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
 
 def _acceleration_scale(robots: list[RobotTrajectory]) -> float:
     """The largest acceleration any robot's full thrust gives (m/s^2): normalises acceleration costs."""
-    return max(max(r.spec.thrust_limit_N) / r.spec.mass_kg for r in robots)
+    return max(max(r.spec.wrench_limits[:2]) / r.spec.mass_kg for r in robots)
 
 
 def staged_model(built: BuiltModel) -> StagedModel:

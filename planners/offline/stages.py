@@ -105,7 +105,7 @@ def solve_stages(staged: StagedModel, config: PlannerConfig, scenario_name: str,
     if result.status in (Status.ERROR, Status.UNBOUNDED):
         raise PlannerError(f"solver {config.solver} failed on {scenario_name!r}: {result.status.value} "
                            f"{result.message}")
-    if not result.has_solution:
+    if result.x is None:  # no solution
         if result.status == Status.NODE_LIMIT:
             raise PlanTimeoutError(f"no plan found within the node budget of {config.solver_options.node_limit} "
                                    f"nodes (try a larger --node-limit or fewer intervals)")
@@ -147,7 +147,7 @@ def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario
             solution = solve_stages(staged, config, scenario.name, warm_start=warm_start,
                                     progress=config.solver_options.progress)
         except InfeasiblePlanError as exc:
-            if not cut:
+            if not cut or handover is None:  # (something was cut: handover is set)
                 raise
             raise UnflyableHandoverError(
                 f"no plan of {scenario.name!r} satisfies the task without a hand-over its robot cannot fly (cut: "
@@ -189,6 +189,9 @@ def cut_handover(staged: StagedModel, handover: Handover) -> None:
     the robot or the object is hit in between (a row of group :data:`HANDOVER_GROUP`). The row cuts every plan
     with that pair of impacts, also one whose velocity changes make no side switch: a flyability test inside
     the MILP would need the product of the two changes."""
+    if staged.impacts is None or staged.grid_dt_s is None:
+        raise PlannerError("cut_handover needs a model with impact binaries and its grid (StagedModel.impacts and "
+                           "grid_dt_s): the spatially robust planner's")
     z, dt = staged.impacts.z, staged.grid_dt_s
     k1, k2 = round(handover.t1_s / dt), round(handover.t2_s / dt)
     row = z[(handover.robot, handover.object, k1)] + z[(handover.robot, handover.object, k2)]

@@ -61,6 +61,13 @@ def _replan_budget() -> SolverOptions:
     return SolverOptions(node_limit=200, time_limit_s=60.0, threads=1)
 
 
+def _time_limit(budget: SolverOptions) -> float:
+    """A re-plan's safety net (s): the budget's time limit, which MissionConfig requires."""
+    if budget.time_limit_s is None:
+        raise PlannerError("a re-plan needs a time limit: MissionConfig.solver_options.time_limit_s")
+    return budget.time_limit_s
+
+
 @dataclass(frozen=True)
 class MissionConfig:
     """When and how the mission is re-planned (see the module docstring).
@@ -252,7 +259,7 @@ class MissionPlanner:
         if model is not None and self.config.predict_reachability:
             self.verdicts = self.reachability(t, states, index, plan, done, model)
         lost = {id(v.impact) for v in self.verdicts if not v.reachable}
-        if self._sampler_plan is not plan:
+        if self._sampler is None or self._sampler_plan is not plan:
             self._sampler, self._sampler_plan = PlanSampler(plan), plan
         sampler = self._sampler
         horizon = self.formula.horizon_s
@@ -421,7 +428,7 @@ class MissionPlanner:
         # and the remainders stay the plans 0.2 made (the offline planners refuse such a task up front)
         config = dataclasses.replace(self.planner_config, intervals=intervals, robot_degree=self.degree,
                                      solver_options=budget, refine_nodes=cfg.refine_nodes,
-                                     refine_time_s=budget.time_limit_s, warm_start=warm,
+                                     refine_time_s=_time_limit(budget), warm_start=warm,
                                      diagnose_infeasibility=False, min_robustness_m=0.0)
         started = time.perf_counter()
         if plan.planner == "ir" and cfg.impact_robust_replans:
@@ -435,7 +442,7 @@ class MissionPlanner:
         try:
             remainder = plan_spatially_robust(scenario, config)
         except PlanTimeoutError:
-            if time.perf_counter() - started >= budget.time_limit_s * 0.99:
+            if time.perf_counter() - started >= _time_limit(budget) * 0.99:
                 self.timeouts += 1
                 return "kept: time limit (safety net)"
             return "kept: no plan within the node budget"
@@ -460,7 +467,7 @@ class MissionPlanner:
         try:
             remainder = plan_impact_robust(scenario, ir)
         except PlanTimeoutError:
-            if time.perf_counter() - started >= config.solver_options.time_limit_s * 0.99:
+            if time.perf_counter() - started >= _time_limit(config.solver_options) * 0.99:
                 return "time limit (safety net) of the impact-robust planner"
             return "the impact-robust planner found no plan within the node budget"
         except PlannerError as exc:

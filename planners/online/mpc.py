@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import replace
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -66,7 +67,7 @@ class FreeflyerMPC:
         self.config = cfg = config if config is not None else MPCConfig()
         self.heading_ref = float(heading_ref)
         self.horizon = cfg.horizon
-        self.limits = np.array([*robot.thrust_limit_N, robot.torque_limit_Nm], dtype=float)
+        self.limits = np.array(robot.wrench_limits, dtype=float)
         self.bounds = cfg.thrust_fraction * self.limits
         self.failures = self.fallbacks = self.solves = 0
         self._build(robot, cfg)
@@ -126,10 +127,11 @@ class FreeflyerMPC:
             ubg.extend(hi)
 
         inf = math.inf
-        xs = [par["x0"]] + [None] * n
-        us: list[ca.SX] = [None] * n
-        slacks: list[ca.SX] = [None] * (n + 1)
-        cost = 0
+        # every entry is set in the first loop below (x_0 is the parameter; no slacks at stage 0)
+        xs: list[ca.SX] = [par["x0"]] * (n + 1)
+        us: list[ca.SX] = [ca.SX()] * n
+        slacks: list[ca.SX] = [ca.SX()] * (n + 1)
+        cost: ca.SX | int = 0
         for k in range(n + 1):  # stage k: [x_k], [u_k], [slacks_k]
             if k > 0:
                 xs[k] = add_var("x", k, NX, [-inf] * NX, [inf] * NX)
@@ -161,7 +163,7 @@ class FreeflyerMPC:
                 # the small quadratic terms keep the slack block of the Hessian positive definite
                 cost += cfg.impact_penalty * (ca.sum1(s_imp) + 1e-3 * ca.sumsqr(s_imp))
                 cost += cfg.avoid_penalty * (ca.sum1(s_av) + ca.sumsqr(s_av))
-        self._nlp = {"x": ca.vertcat(*w), "p": P, "f": cost, "g": ca.vertcat(*g)}
+        self._nlp: dict[str, ca.SX] = {"x": ca.vertcat(*w), "p": P, "f": ca.SX(cost), "g": ca.vertcat(*g)}
         self._nw, self._ng = counts["w"], counts["g"]
         self._lbx, self._ubx = np.array(lbw), np.array(ubw)
         self._lbg, self._ubg = np.array(lbg), np.array(ubg)
@@ -205,6 +207,7 @@ class FreeflyerMPC:
             nlp = self._nlp
             lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", nlp["g"].shape[0])
             hess = ca.triu(lam_f * ca.hessian(nlp["f"], nlp["x"])[0])
+            opts: dict[str, Any]  # casadi's options: numbers, strings, functions and nested dicts
             opts = {"qpsol": "qrqp", "max_iter": cfg.sqp_max_iter, "tol_pr": 1e-6, "tol_du": 1e-4, "max_iter_ls": 0,
                     "hess_lag": ca.Function("nlp_hess_l", [nlp["x"], nlp["p"], lam_f, lam_g], [hess],
                                             ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
@@ -247,7 +250,8 @@ class FreeflyerMPC:
         unknown = sorted(set(weights) - set(_WEIGHTS))
         if unknown:
             raise MPCInputError(f"unknown weight(s) {unknown}; weights are {', '.join(_WEIGHTS)}")
-        self.config = replace(self.config, **weights)  # MPCConfig checks the values
+        changes: dict[str, Any] = dict(weights)
+        self.config = replace(self.config, **changes)  # MPCConfig checks the values
         self._write_weights()
 
     def _write_weights(self) -> None:
@@ -392,10 +396,11 @@ class _SolverCall:
             if arr.dtype != np.float64 or not arr.flags.c_contiguous or arr.size != solver.nnz_in(i):
                 raise MPCInputError(f"solver input {name!r} must be a contiguous float array of "
                                     f"{solver.nnz_in(i)} numbers")
-            self.buffer.set_arg(i, memoryview(arr))
+            # casadi's stub asks for the size in bytes as well: the binding takes it from the buffer
+            self.buffer.set_arg(i, arr.data)  # type: ignore[call-arg]
         self.out = {name: np.zeros(solver.nnz_out(i)) for i, name in enumerate(solver.name_out())}
         for i, name in enumerate(solver.name_out()):
-            self.buffer.set_res(i, memoryview(self.out[name]))
+            self.buffer.set_res(i, self.out[name].data)  # type: ignore[call-arg]  # as set_arg
 
     def __call__(self) -> dict:
         """Solve with the bound inputs; the results are in ``out``; returns the solver's stats."""

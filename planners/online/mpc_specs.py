@@ -145,7 +145,7 @@ class HalfPlaneSpec:
     """
 
     normals: np.ndarray
-    offsets: np.ndarray
+    offsets: np.ndarray | float
     active: np.ndarray
 
     def check(self, horizon: int) -> None:

@@ -162,6 +162,8 @@ def contact_reachable(t: float, impact: PlannedImpact, plan: Plan, robot: Body, 
         if verdict.reachable:
             return verdict
         first = first or verdict
+    if first is None:  # (there is always a first delay, 0)
+        raise ReplanInputError("internal: no delay of the contact was tried")
     return first
 
 

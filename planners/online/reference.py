@@ -137,7 +137,8 @@ class ReferenceSelector:
     def acceleration_bound(self, robot: Body) -> tuple[float, float]:
         """Per-axis acceleration a replanned segment may ask for: ``thrust_fraction`` of the thrust limit
         (heading held, so body axes are world axes), the rest is the MPC's margin for disturbances."""
-        return tuple(self.thrust_fraction * f / robot.mass_kg for f in robot.thrust_limit_N)
+        fx, fy, _ = robot.wrench_limits
+        return self.thrust_fraction * fx / robot.mass_kg, self.thrust_fraction * fy / robot.mass_kg
 
     def set_plan(self, plan: Plan) -> None:
         self.plan = plan
@@ -173,7 +174,7 @@ class ReferenceSelector:
             window_start = max([nxt.time_s - self.replan_intervals * self.grid_dt] + [p + self.dt for p in past_times])
         current = self.replanned.get(name)
         approaching = nxt is not None and t >= window_start - 1e-9
-        if approaching and nxt.time_s > t + 1e-9:
+        if approaching and nxt is not None and nxt.time_s > t + 1e-9:  # (approaching: nxt is not None)
             replanned = self._replan(robot, obj_of(nxt.object), t, state, nxt, object_state, model, limits)
             if replanned is not None:
                 self.replanned[name] = current = replanned
@@ -193,7 +194,7 @@ class ReferenceSelector:
         if self.disc_offset and nxt is not None and not approaching:
             self._offset_toward(reference, times, robot, obj_of(nxt.object), nxt, past_times, window_start)
         impact_spec = None
-        if approaching and current.pre.t1_s > t:
+        if approaching and current is not None and current.pre.t1_s > t:  # (approaching: current is not None)
             k = round((current.pre.t1_s - t) / self.dt)
             if 1 <= k <= len(times) - 1:
                 impact_spec = ImpactSpec(step=k, position=current.pre.control_points[-1],

@@ -16,6 +16,8 @@ infeasible. Why the bounds, with the measurements: ``docs/expert_design.md#repla
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from planners import bezier
@@ -101,7 +103,7 @@ def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
         if least is None:  # not even the velocity bound can be kept
             return segment
         acc = np.where(least > acc, least * (1.0 + RAISED_MARGIN) + FEASIBILITY_TOL, acc)
-    attempts = [(limits, acc)] if limits is not None else []
+    attempts: list[tuple[SegmentLimits | None, Any]] = [(limits, acc)] if limits is not None else []
     if acc is not None:
         attempts.append((None, acc))
     for lim, bound in attempts:

@@ -112,12 +112,12 @@ def _least_step(v0: float, v1: float, s: float, m: int, bound: float, step0: flo
     value0 = _upper_sum(v0, v1, m, bound, step0)
     if value0 >= s:
         return step0
-    kinks = set()
+    candidates: set[float] = set()
     for i in range(1, m):
-        kinks.update(((bound - v0) / i, (bound - v1) / (m - i)))
+        candidates.update(((bound - v0) / i, (bound - v1) / (m - i)))
         if 2 * i != m:
-            kinks.add((v1 - v0) / (2 * i - m))
-    kinks = sorted(k for k in kinks if step0 < k < math.inf)
+            candidates.add((v1 - v0) / (2 * i - m))
+    kinks = sorted(k for k in candidates if step0 < k < math.inf)
     lo, hi = 0, len(kinks)
     values: dict[int, float] = {}
     while lo < hi:  # the first kink at which sum u reaches s

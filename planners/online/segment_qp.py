@@ -154,10 +154,11 @@ class _SegmentQP:
             arrays = {name: np.zeros(solver.nnz_in(i)) for i, name in enumerate(solver.name_in())}
             arrays["h"][:] = self.hess.ravel(order="F")
             for i, name in enumerate(solver.name_in()):
-                buffer.set_arg(i, memoryview(arrays[name]))
+                # casadi's stub asks for the size in bytes as well: the binding takes it from the buffer
+                buffer.set_arg(i, arrays[name].data)  # type: ignore[call-arg]
             out = {name: np.zeros(solver.nnz_out(i)) for i, name in enumerate(solver.name_out())}
             for i, name in enumerate(solver.name_out()):
-                buffer.set_res(i, memoryview(out[name]))
+                buffer.set_res(i, out[name].data)  # type: ignore[call-arg]  # as set_arg
             arrays["x"] = out["x"]
             arrays["A"] = arrays["a"].reshape(self.hess.shape[0], self.rows).T  # (rows, nv) view, column-major
             # the buffer holds raw pointers: every bound array (the unused outputs too) must outlive it

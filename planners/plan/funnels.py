@@ -129,9 +129,9 @@ def check_impact_robust(plan: PlanLike, scenario: Scenario, tol: float) -> list[
                 for axis in range(2):
                     if spec.velocity_bound_mps is not None and v[axis] > spec.velocity_bound_mps[axis] + tol:
                         bad.append(f"{tag}: velocity {v[axis]:.4f} m/s exceeds the {'xy'[axis]} bound")
-                    if spec.mass_kg * acc[axis] > spec.thrust_limit_N[axis] * (1 + 1e-9) + tol:
+                    if spec.mass_kg * acc[axis] > spec.wrench_limits[axis] * (1 + 1e-9) + tol:
                         bad.append(f"{tag}: needs {spec.mass_kg * acc[axis]:.3f} N along {'xy'[axis]}, more than "
-                                   f"the {spec.thrust_limit_N[axis]} N thrust limit")
+                                   f"the {spec.wrench_limits[axis]} N thrust limit")
         t = copy_targets(c, plan, scenario)
         s = np.asarray(c.signs, dtype=float)
         cross = (s[:, 0] * s[:, 1]) @ t

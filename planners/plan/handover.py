@@ -198,7 +198,7 @@ def _limits(robot: Body, v_obj: np.ndarray, n: np.ndarray) -> tuple[float, float
     heading) and the range of the robot's velocity relative to the object (m/s, from the per-axis speed
     bound; unbounded without one)."""
     c, s = math.cos(robot.heading_rad), math.sin(robot.heading_rad)
-    fx, fy = robot.thrust_limit_N
+    fx, fy, _ = robot.wrench_limits
     accel = (fx * abs(n[0] * c + n[1] * s) + fy * abs(-n[0] * s + n[1] * c)) / robot.mass_kg
     if robot.velocity_bound_mps is None:
         return accel, -math.inf, math.inf

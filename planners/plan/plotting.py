@@ -107,7 +107,8 @@ def _hull(points: np.ndarray) -> np.ndarray:
     def cross(o, a, b):
         return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
-    lower, upper = [], []
+    lower: list[tuple[float, ...]] = []
+    upper: list[tuple[float, ...]] = []
     for p in pts:
         while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
             lower.pop()
@@ -290,10 +291,10 @@ def plot_execution(scenario: Scenario, plan: Plan, times_s: np.ndarray, position
     for imp in plan.impacts:
         for a in (ax_p, ax_v):
             a.axvline(imp.time_s, color=IMPACT_COLOUR, ls=":", lw=1.0)
-    for imp in impacts:
-        if {imp["a"], imp["b"]} <= set(names):
+    for event in impacts:
+        if {event["a"], event["b"]} <= set(names):
             for a in (ax_p, ax_v):
-                a.axvline(imp["time"], color="k", ls="-", lw=0.6, alpha=0.5)
+                a.axvline(event["time"], color="k", ls="-", lw=0.6, alpha=0.5)
     ax_p.set_ylabel("object position (m)")
     ax_p.legend(fontsize=7, ncol=2)
     ax_v.set_ylabel("object velocity (m/s)")

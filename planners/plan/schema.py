@@ -17,10 +17,11 @@ most :data:`MAX_STATS_DEPTH` deep, and every number finite (JSON's ``NaN`` and `
 
 from __future__ import annotations
 
+import enum
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Final, Literal
 
 import numpy as np
 
@@ -33,7 +34,11 @@ MAX_DEGREE = 8
 MAX_STATS_DEPTH = 8
 BODY_KINDS = ("robot", "object")
 
-INVALID = object()  # what a reader returns after appending a problem
+class _Invalid(enum.Enum):
+    INVALID = "INVALID"
+
+
+INVALID: Final = _Invalid.INVALID  # what a reader returns after appending a problem (its own type, so checks narrow)
 Reader = Callable[[Any, str, list[str]], Any]
 
 
@@ -43,7 +48,8 @@ class Field:
     default: Any = INVALID  # INVALID: the field is required
 
 
-def read(data: Any, fields: dict[str, Field], where: str, problems: list[str]) -> dict[str, Any] | object:
+def read(data: Any, fields: dict[str, Field], where: str,
+         problems: list[str]) -> dict[str, Any] | Literal[_Invalid.INVALID]:
     """Read one JSON object with the table ``fields``; INVALID (and ``problems`` appended) if any field is bad."""
     if not isinstance(data, dict):
         problems.append(f"{where or 'the plan'} must be a JSON object, got {type(data).__name__}")

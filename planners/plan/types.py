@@ -34,7 +34,7 @@ class Segment:
     def duration_s(self) -> float:
         return self.t1_s - self.t0_s
 
-    def _phase(self, t: np.ndarray) -> np.ndarray:
+    def _phase(self, t: np.ndarray | float) -> np.ndarray:
         return np.minimum(np.maximum((np.asarray(t, dtype=float) - self.t0_s) / self.duration_s, 0.0), 1.0)
 
     def position(self, t: np.ndarray | float) -> np.ndarray:
@@ -158,8 +158,13 @@ class ObjectFunnel:
     @classmethod
     def from_dict(cls, name: str, d: dict[str, Any]) -> ObjectFunnel:
         return cls(name, float(d["t0_s"]), float(d["dt_s"]), np.array(d["position_halfwidth_m"], dtype=float),
-                   np.array(d["velocity_halfwidth_mps"], dtype=float), tuple(map(float, d["final_box_m"])),
-                   tuple(map(float, d["final_box_mps"])))
+                   np.array(d["velocity_halfwidth_mps"], dtype=float), _pair(d["final_box_m"]),
+                   _pair(d["final_box_mps"]))
+
+
+def _pair(values: Any) -> tuple[float, float]:
+    x, y = values
+    return float(x), float(y)
 
 
 @dataclass
@@ -206,7 +211,7 @@ class ImpactCopies:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ImpactCopies:
         return cls(float(d["time_s"]), str(d["robot"]), str(d["object"]), float(d["window_start_s"]),
-                   float(d["window_end_s"]), [tuple(int(v) for v in s) for s in d["signs"]],
+                   float(d["window_end_s"]), [(int(sp), int(sv)) for sp, sv in d["signs"]],
                    [np.array(b, dtype=float) for b in d["before"]], [np.array(a, dtype=float) for a in d["after"]])
 
 

@@ -200,10 +200,10 @@ def build_automaton(tmap: ThesisMap, k: int | None = None) -> HybridAutomaton:
             guard = tuple(half_planes(tmap.regions[i].polygon)) + tuple(half_planes(tmap.regions[j].polygon))
         groups.append((names[i], names[j], guard))
         groups.append((names[j], names[i], guard))
-    for r in tmap.regions_containing(st.cargo.start_m):
-        groups.append((["init"], names[r], ()))
-    for r in tmap.goal_regions():
-        groups.append((names[r], ["final"], goal_rows))
+    for index in tmap.regions_containing(st.cargo.start_m):
+        groups.append((["init"], names[index], ()))
+    for index in tmap.goal_regions():
+        groups.append((names[index], ["final"], goal_rows))
     ha = HybridAutomaton(station=st.name, modes=modes, jump_groups=groups, initial="init", final="final",
                          start_m=(sx, sy), goal_box=st.goal_box, anchor_positions=st.anchor_positions.copy(),
                          pull_speed_mps=st.pull_speed_mps, k=k,

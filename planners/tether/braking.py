@@ -48,11 +48,11 @@ def brake_anchor(station: Station, point: np.ndarray, direction: np.ndarray, all
 def with_hold(plan: TetherPlan, station: Station, allowed: list[int] | None = None) -> TetherPlan:
     """``plan`` with the hold schedule of its last pull (its stop point and brake anchor)."""
     if not plan.pulls:
-        plan.hold = HoldSchedule(stop_m=tuple(plan.start_m), brake_anchor=None)
+        plan.hold = HoldSchedule(stop_m=(plan.start_m[0], plan.start_m[1]), brake_anchor=None)
         return plan
     last = plan.pulls[-1]
     motion = np.asarray(last.end_m) - np.asarray(last.start_m)
-    plan.hold = HoldSchedule(stop_m=tuple(last.end_m),
+    plan.hold = HoldSchedule(stop_m=(last.end_m[0], last.end_m[1]),
                              brake_anchor=brake_anchor(station, np.asarray(last.end_m), motion, allowed))
     return plan
 

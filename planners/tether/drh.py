@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
+from typing import Any
 
 from planners.errors import PlannerError
 from planners.tether.automaton import HalfPlane, HybridAutomaton, Mode
@@ -264,7 +265,7 @@ class _Parser:
             if number in modes:
                 raise PlannerError(f".drh: mode {number} is defined twice")
             modes[number] = {"invariants": invariants, "jumps": targets}
-        out = {"variables": variables, "modes": modes}
+        out: dict[str, Any] = {"variables": variables, "modes": modes}
         for key in ("init", "goal"):
             self.eat(key)
             self.eat(":")

@@ -146,7 +146,7 @@ class TetherExpert:
         full = np.concatenate([obs[:4], central.reshape(-1), obs[4 + self.n_robots * b:]])
         step = round((1.0 - obs[-1]) * self.horizon_steps)
         if self._cache is None or self._cache[0] != step:
-            self.act(full)
+            return int(self.act(full)[i])  # act caches what it returns
         return int(self._cache[1][i])
 
     def report(self) -> dict[str, Any]:
@@ -219,8 +219,8 @@ class TetherExpert:
         plan.stats = {**plan.stats, "targets": targets}
         return plan
 
-    def _target_level(self) -> int:
-        return int(self.plan.stats["targets"][self.index])
+    def _target_level(self, plan: TetherPlan) -> int:
+        return int(plan.stats["targets"][self.index])
 
     def _robots_free(self, held: list[int | None]) -> list[int]:
         return [r for r, h in enumerate(held) if h is None and r not in self.dropped]
@@ -235,7 +235,7 @@ class TetherExpert:
                 e["kind"] == "arrived" and e["anchor"] == self.plan.pulls[self.index].anchor for e in events):
             trouble = True  # released early, at the stop radius
         # braking at a switch (reel / force): hold the brake until the motion it opposes has stopped
-        if self.braking is not None:
+        if self.braking is not None and self.brake_direction is not None:  # (set together)
             robot = held.index(self.braking) if self.braking in held else None
             along = float(np.dot(v, self.brake_direction))
             speed = float(np.linalg.norm(v))
@@ -287,7 +287,7 @@ class TetherExpert:
             self._end = None
             return
         # closed loop: from where the cargo is, does this pull still land in its level? where should it end?
-        level = self._target_level()
+        level = self._target_level(self.plan)
         end = self._end
         if end is not None:  # keep the switch point while it is still ahead on the line to the anchor
             u = self.station.anchor_positions[a] - x

@@ -111,9 +111,8 @@ def shadow_pieces(anchor: np.ndarray, seeds: list[BaseGeometry], far_m: float) -
     if not idx_parts:
         return np.array([], dtype=object), np.zeros(0, dtype=int)
     coords = np.concatenate([V, F])[np.concatenate(idx_parts)]
-    ring_offsets = np.asarray(ring_offsets)
-    polys = shapely.from_ragged_array(shapely.GeometryType.POLYGON, coords,
-                                      (ring_offsets, np.arange(len(ring_offsets))))
+    offsets = np.asarray(ring_offsets)
+    polys = shapely.from_ragged_array(shapely.GeometryType.POLYGON, coords, (offsets, np.arange(len(offsets))))
     return polys, np.asarray(owners)
 
 

@@ -165,12 +165,12 @@ class TetherPlan:
         if not (x0 - tol_m <= here[0] <= x1 + tol_m and y0 - tol_m <= here[1] <= y1 + tol_m):
             bad.append(f"the plan ends at {list(here)}, outside the goal box {list(station.goal_box)}")
         if self.hold is not None:
-            bad += self._check_hold(station, here, tol_m)
+            bad += self._check_hold(station, self.hold, here, tol_m)
         if bad:
             raise TetherPlanCheckError(bad)
 
-    def _check_hold(self, station: Station, here: tuple[float, float], tol_m: float) -> list[str]:
-        hold, bad = self.hold, []
+    def _check_hold(self, station: Station, hold: HoldSchedule, here: tuple[float, float], tol_m: float) -> list[str]:
+        bad: list[str] = []
         if math.dist(hold.stop_m, here) > tol_m:
             bad.append(f"the hold's stop point {list(hold.stop_m)} is not where the last pull ends ({list(here)})")
         b = hold.brake_anchor
@@ -222,7 +222,7 @@ class TetherPlan:
                                         or not all(type(t) is int and t >= 0 for t in targets)):
                 problems.append(f"stats.targets must be a list of {len(fields['pulls'])} integers >= 0 (one level "
                                 f"per pull), got {brief(targets)}")
-        if problems:
+        if problems or fields is schema.INVALID:  # INVALID comes with its problems
             raise PlannerError("malformed tether plan:\n  " + "\n  ".join(problems))
         pulls = [Pull(p["anchor"], p["start_m"], p["end_m"]) for p in fields["pulls"]]
         hold = fields["hold"]

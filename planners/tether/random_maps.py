@@ -27,7 +27,7 @@ def orthogonal_polygon(rng: np.random.Generator, notches: int, cell_m: float = 3
         for _ in range(40 * (notches + 2)):
             count = (len(poly.exterior.coords) - 1 - 4) // 2
             if count == notches:
-                coords = [tuple(map(float, c)) for c in poly.exterior.coords[:-1]]
+                coords = [(float(x), float(y)) for x, y in poly.exterior.coords[:-1]]
                 return coords, sorted(cells)
             frontier = sorted({(i + di, j + dj) for i, j in cells for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))}
                               - cells)
@@ -66,4 +66,4 @@ def random_station(seed: int, notches: int, cell_m: float = 3.0, spacing_m: floa
         "robots": {"count": 3, "max_active": k, "pull_speed_mps": 0.1, "winch_force_limit_N": 1.0,
                    "stop_radius_m": 0.6, "switch_time_s": 5.0},
     }
-    return station_from_dict(data, source=data["name"])
+    return station_from_dict(data, source=name)

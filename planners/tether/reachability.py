@@ -81,6 +81,9 @@ class ReachabilityPlanner:
         self.stop_m = station.stop_radius_m + self.config.stop_margin_m
         self.anchor_ids = list(range(station.n_anchors)) if anchors is None else sorted(set(anchors))
         self._far = far_distance(station)
+        self.free: BaseGeometry
+        self.seen: dict[int, BaseGeometry]
+        self.cells: dict[int, RadialCells]
         if _parent is not None:  # the anchors' visibility and radial cells do not depend on the other anchors
             self.free = _parent.free
             self.seen = {a: _parent.seen[a] for a in self.anchor_ids}
@@ -89,7 +92,7 @@ class ReachabilityPlanner:
             self.free = clean(free_space_polygon(station, self.config.clearance_m))
             # the free space each anchor sees; its radial cells are cut the first time a level's frontier is in sight
             self.seen = {a: seen_free_space(station, a, self.free) for a in self.anchor_ids}
-            self.cells: dict[int, RadialCells] = {}
+            self.cells = {}
         self.usable = [a for a in self.anchor_ids if not self.seen[a].is_empty]
         if _parent is None:
             for a in self.usable:
@@ -240,7 +243,11 @@ class ReachabilityPlanner:
             pulls.append(Pull(anchor=anchor, start_m=(float(here[0]), float(here[1])),
                               end_m=(float(end[0]), float(end[1]))))
             here = end
-            n = self.level_of(here)
+            level = self.level_of(here)
+            if level is None:
+                raise PlannerError(f"internal: the pull to {here.round(6).tolist()} lands in no level (numerical "
+                                   "trouble at a region boundary)")
+            n = level
             targets.append(n)
         plan = TetherPlan(station=st.name, start_m=(float(x[0]), float(x[1])), goal_box=st.goal_box, pulls=pulls,
                           pull_speed_mps=st.pull_speed_mps, switch_time_s=st.switch_time_s, method="reachability",
@@ -279,16 +286,16 @@ class ReachabilityPlanner:
             if seg is None:
                 continue
             hit = shapely.LineString(seg).intersection(target)
-            pts = []
+            parts = []
             for g in shapely.get_parts(hit):
                 if g.geom_type == "LineString" and g.length > 0:
                     c = np.asarray(g.coords)
-                    pts.append(c[0] + np.linspace(0.0, 1.0, 21)[:, None] * (c[-1] - c[0]))
+                    parts.append(c[0] + np.linspace(0.0, 1.0, 21)[:, None] * (c[-1] - c[0]))
                 elif g.geom_type == "Point":
-                    pts.append(np.asarray(g.coords))
-            if not pts:
+                    parts.append(np.asarray(g.coords))
+            if not parts:
                 continue
-            pts = np.concatenate(pts)
+            pts = np.concatenate(parts)
             depth = shapely.distance(shapely.points(pts), boundary)
             depth = np.minimum(depth, shapely.distance(shapely.points(pts), self.free.boundary))
             length = np.linalg.norm(pts - here, axis=1)

@@ -113,10 +113,10 @@ class _Encoder:
         self.st = tmap.station
         self.stop_m = self.st.stop_radius_m + config.stop_margin_m
         self._vis: dict[int, object] = {}
-        self._tri: dict[tuple[int, int], list] = {}
+        self._tri: dict[tuple[int, int], list[list[tuple[float, float, float]]] | None] = {}
         self.stats = SmtStats()
 
-    def visible_triangles(self, region: int, anchor: int) -> list | None:
+    def visible_triangles(self, region: int, anchor: int) -> list[list[tuple[float, float, float]]] | None:
         """Triangles of the part of ``region`` that sees ``anchor``; None if the whole region sees it."""
         key = (region, anchor)
         if key not in self._tri:
@@ -219,7 +219,7 @@ def plan_smt(station: Station, config: SmtConfig | None = None, tmap: ThesisMap 
     start = np.asarray(station.cargo.start_m, float)
     sources = tmap.regions_containing(start)
     goals = tmap.goal_regions()
-    paths = []
+    paths: list[list[int]] = []
     for s in sources:
         for g in goals:
             try:

@@ -92,7 +92,10 @@ def refine_timing(station: Station, plan: TetherPlan, k: int, nodes: int = 20, w
         shapely.box(x0, y0, x1, y1)
 
     opti = ca.Opti()
-    durations, controls, states, cost = [], [], [], 0
+    durations: list[ca.MX] = []
+    controls: list[ca.MX] = []
+    states: list[ca.MX] = []
+    cost: ca.MX | int = 0
     start = np.asarray(plan.start_m, float)
     for j, (rect, anchors) in enumerate(zip(corridors, phase_anchors)):
         T = opti.variable()

@@ -52,10 +52,9 @@ def wrenches(actions: torch.Tensor, limits: torch.Tensor, thrust_noise: float, k
         z = _normals(key, step, episode, philox.STREAM_THRUST, dims, w.dtype).reshape(dims // 3, 3, n)
         w = w * (1.0 + thrust_noise * z.permute(1, 0, 2))
         w = torch.minimum(torch.maximum(w, -limits), limits)
-    fuel = None
-    for r in range(dims // 3):
-        f = torch.sqrt(w[0, r] * w[0, r] + w[1, r] * w[1, r])
-        fuel = f if fuel is None else fuel + f
+    fuel = torch.sqrt(w[0, 0] * w[0, 0] + w[1, 0] * w[1, 0])
+    for r in range(1, dims // 3):
+        fuel = fuel + torch.sqrt(w[0, r] * w[0, r] + w[1, r] * w[1, r])
     return w, dt_s * fuel
 
 

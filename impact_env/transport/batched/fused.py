@@ -52,15 +52,16 @@ class FusedKernel:
         fx, fy = list(force[0].unbind(0)), list(force[1].unbind(0))
         x = [x[b] + (vx[b] + bx[b]) * dt for b in range(B)]
         y = [y[b] + (vy[b] + by[b]) * dt for b in range(B)]
-        count = [None] * B  # contacts per body, for the redo flag
-        redo = None
+        count: list[torch.Tensor | None] = [None] * B  # contacts per body, for the redo flag
+        redo: torch.Tensor | None = None
 
         def flag(cond: torch.Tensor) -> None:
             nonlocal redo
             redo = cond if redo is None else redo | cond
 
         def touch(b: int, on: torch.Tensor) -> None:
-            count[b] = on.to(rows.dtype) if count[b] is None else count[b] + on.to(rows.dtype)
+            c = count[b]
+            count[b] = on.to(rows.dtype) if c is None else c + on.to(rows.dtype)
 
         pairs = []
         for p, (i, j) in enumerate(sc.pairs):
@@ -78,17 +79,19 @@ class FusedKernel:
             touch(i, on)
             touch(j, on)
             flag(on & ~ok)
-        statics = []  # per static shape: per body (nx, ny or None for a wall, tv, tb, on)
+        walls: list[list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]]] = []  # per wall: per body (tv, tb, on)
         xmin, xmax, ymin, ymax = sc.world_box
         for s in range(4):
-            group = []
+            wall = []
             for b in range(B):
                 dist, vn = ((y[b] - ymin, vy[b]), (ymax - y[b], -vy[b]), (x[b] - xmin, vx[b]), (xmax - x[b], -vx[b]))[s]
                 on = dist <= self.radius[b]
-                group.append((None, None, torch.where(on, -(vn * e), -_INF),
-                              torch.where(on, self._bias(dist - self.radius[b]), -_INF), on))
+                wall.append((torch.where(on, -(vn * e), -_INF),
+                             torch.where(on, self._bias(dist - self.radius[b]), -_INF), on))
                 touch(b, on)
-            statics.append(group)
+            walls.append(wall)
+        # per obstacle: per body (nx, ny, tv, tb, on)
+        obstacles: list[list[tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]]] = []
         for shape in sc.obstacles:
             group = []
             for b in range(B):
@@ -110,9 +113,10 @@ class FusedKernel:
                 group.append((nx, ny, torch.where(on, -(vn * e), -_INF),
                               torch.where(on, self._bias(dist - self.radius[b]), -_INF), on))
                 touch(b, on)
-            statics.append(group)
-        for b in range(B):
-            flag(count[b] >= 2.0)
+            obstacles.append(group)
+        for c in count:
+            if c is not None:  # every body has one (it is tested against the four walls)
+                flag(c >= 2.0)
         # thrust, then one pass of impulses; the bias velocities start at 0 (chipmunk resets them)
         for k in range(R):
             vx[k] = vx[k] + (fx[k] * minv[k]) * dt
@@ -128,26 +132,28 @@ class FusedKernel:
             vx[j], vy[j] = vx[j] + ix * minv[j], vy[j] + iy * minv[j]
             bx[i], by[i] = bx[i] - jx * minv[i], by[i] - jy * minv[i]
             bx[j], by[j] = bx[j] + jx * minv[j], by[j] + jy * minv[j]
-        for s, group in enumerate(statics):
+        for s, wall in enumerate(walls):
+            for b, (tv, tb, _) in enumerate(wall):
+                nm = self.static_nmass[b]
+                axis, sign = WALL_AXIS_SIGN[s]
+                V, W = (vx, bx) if axis == 0 else (vy, by)
+                dv = torch.clamp((tv - (V[b] if sign < 0 else -V[b])) * nm, min=0.0)
+                db = torch.clamp((tb - (W[b] if sign < 0 else -W[b])) * nm, min=0.0)
+                if sign < 0:
+                    V[b], W[b] = V[b] + dv * minv[b], W[b] + db * minv[b]
+                else:
+                    V[b], W[b] = V[b] - dv * minv[b], W[b] - db * minv[b]
+        for group in obstacles:
             for b, (nx, ny, tv, tb, _) in enumerate(group):
                 nm = self.static_nmass[b]
-                if s < 4:
-                    axis, sign = WALL_AXIS_SIGN[s]
-                    V, W = (vx, bx) if axis == 0 else (vy, by)
-                    dv = torch.clamp((tv - (V[b] if sign < 0 else -V[b])) * nm, min=0.0)
-                    db = torch.clamp((tb - (W[b] if sign < 0 else -W[b])) * nm, min=0.0)
-                    if sign < 0:
-                        V[b], W[b] = V[b] + dv * minv[b], W[b] + db * minv[b]
-                    else:
-                        V[b], W[b] = V[b] - dv * minv[b], W[b] - db * minv[b]
-                else:
-                    dv = torch.clamp((tv - -(vx[b] * nx + vy[b] * ny)) * nm, min=0.0)
-                    db = torch.clamp((tb - -(bx[b] * nx + by[b] * ny)) * nm, min=0.0)
-                    vx[b], vy[b] = vx[b] - (dv * nx) * minv[b], vy[b] - (dv * ny) * minv[b]
-                    bx[b], by[b] = bx[b] - (db * nx) * minv[b], by[b] - (db * ny) * minv[b]
+                dv = torch.clamp((tv - -(vx[b] * nx + vy[b] * ny)) * nm, min=0.0)
+                db = torch.clamp((tb - -(bx[b] * nx + by[b] * ny)) * nm, min=0.0)
+                vx[b], vy[b] = vx[b] - (dv * nx) * minv[b], vy[b] - (dv * ny) * minv[b]
+                bx[b], by[b] = bx[b] - (db * nx) * minv[b], by[b] - (db * ny) * minv[b]
         # contacts that ended: post-impact velocity errors and counts
         pair_on = [c[6].to(rows.dtype) for c in pairs]
-        static_on = [c[4].to(rows.dtype) for group in statics for c in group]
+        static_on = ([c[2].to(rows.dtype) for wall in walls for c in wall]
+                     + [c[4].to(rows.dtype) for group in obstacles for c in group])
         sep = [(old > new).to(rows.dtype) for old, new in zip(old_pair_on + old_static_on, pair_on + static_on)]
         if impact_noise is not None:
             for q, (p, obj) in enumerate(sc.robot_object_pairs):

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import torch
 
 from impact_env.errors import STLBindingError, STLUnsupportedError
-from impact_env.geometry import ConvexPolygon
+from impact_env.geometry import ConvexPolygon, Edge
 from impact_env.stl.formula import (
     Always,
     And,
@@ -44,7 +44,10 @@ from impact_env.stl.formula import (
     interval_steps,
 )
 from impact_env.stl.robustness import check_regions
+from impact_env.transport.batched.physics import TensorKwargs
 
+# (window accumulators [W, N], until running minima [U, N], until bests [U, N])
+MonitorState = tuple[torch.Tensor, torch.Tensor, torch.Tensor]
 _INF = float("inf")
 # an atemporal expression: ("pred", row, sign) | ("const", value) | ("min"|"max", children)
 _Expr = tuple
@@ -157,21 +160,24 @@ def _evaluate(e: _Expr, rows: Mapping[str, torch.Tensor], like: torch.Tensor) ->
 def signed_distance(polygon: ConvexPolygon, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
     """Signed distance (m, + inside) of points (x, y) to a convex polygon: the formulas of
     :meth:`ConvexPolygon.signed_distance_xy` (closed form for an axis-aligned box)."""
-    box = getattr(polygon, "_box", None)
+    box = polygon._box
     if box is not None:
         dx = torch.maximum(box[0] - x, x - box[1])
         dy = torch.maximum(box[2] - y, y - box[3])
         inside = (dx <= 0.0) & (dy <= 0.0)
         outside = torch.sqrt(torch.clamp(dx, min=0.0) ** 2 + torch.clamp(dy, min=0.0) ** 2)
         return torch.where(inside, -torch.maximum(dx, dy), -outside)
-    worst = best = None
-    for vx, vy, ex, ey, nx, ny, off, ee in polygon._edges_py:
-        d = nx * x + ny * y - off
-        worst = d if worst is None else torch.maximum(worst, d)
+    def line_and_segment(edge: Edge) -> tuple[torch.Tensor, torch.Tensor]:
+        # the distance to the edge's supporting line (< 0 inside) and the squared distance to the edge segment
+        vx, vy, ex, ey, nx, ny, off, ee = edge
         t = torch.clamp(((x - vx) * ex + (y - vy) * ey) / ee, 0.0, 1.0)
         dx, dy = x - vx - t * ex, y - vy - t * ey
-        d2 = dx * dx + dy * dy
-        best = d2 if best is None else torch.minimum(best, d2)
+        return nx * x + ny * y - off, dx * dx + dy * dy
+
+    worst, best = line_and_segment(polygon._edges_py[0])
+    for edge in polygon._edges_py[1:]:
+        d, d2 = line_and_segment(edge)
+        worst, best = torch.maximum(worst, d), torch.minimum(best, d2)
     return torch.where(worst <= 0.0, -worst, -torch.sqrt(best))
 
 
@@ -200,7 +206,7 @@ class BatchedMonitor:
         self.preds = comp.preds
         self.polygons = [regions[name] for _, name in comp.preds]
         self.windows, self.untils = comp.windows, comp.untils
-        opts = {"device": device, "dtype": dtype}
+        opts = TensorKwargs(device=device, dtype=dtype)
         col = (len(self.windows), 1)
         self._a = torch.tensor([w.a for w in self.windows], device=device).reshape(col)
         self._b = torch.tensor([w.b for w in self.windows], device=device).reshape(col)
@@ -211,19 +217,19 @@ class BatchedMonitor:
         self.best = torch.full((len(self.untils), num_envs), -_INF, **opts)
 
     @property
-    def state(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def state(self) -> MonitorState:
         """(window accumulators [W, N], until running minima [U, N], until bests [U, N])."""
         return self.acc, self.run, self.best
 
     @state.setter
-    def state(self, value: tuple[torch.Tensor, torch.Tensor, torch.Tensor]) -> None:
+    def state(self, value: MonitorState) -> None:
         self.acc, self.run, self.best = value
 
     def reset(self, mask: torch.Tensor | None = None) -> None:
         """Forget the samples of the envs in ``mask`` ([N] bool; all envs if None)."""
         self.state = self.reset_state(self.state, mask)
 
-    def reset_state(self, state: tuple[torch.Tensor, ...], mask: torch.Tensor | None) -> tuple[torch.Tensor, ...]:
+    def reset_state(self, state: MonitorState, mask: torch.Tensor | None) -> MonitorState:
         """``state`` with the envs of ``mask`` (all if None) back to "no sample yet"."""
         acc, run, best = state
         if mask is None:
@@ -244,8 +250,8 @@ class BatchedMonitor:
         self.state, values = self.update_state(self.state, pos, k, mask)
         return values
 
-    def update_state(self, state: tuple[torch.Tensor, ...], pos: torch.Tensor, k: torch.Tensor,
-                     mask: torch.Tensor | None = None) -> tuple[tuple[torch.Tensor, ...], torch.Tensor]:
+    def update_state(self, state: MonitorState, pos: torch.Tensor, k: torch.Tensor,
+                     mask: torch.Tensor | None = None) -> tuple[MonitorState, torch.Tensor]:
         """:meth:`update` as a pure function of the monitor state: returns (new state, values)."""
         acc, run, best = state
         d = self.predicates(pos)

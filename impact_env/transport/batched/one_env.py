@@ -182,7 +182,9 @@ class BatchedOneEnv(gym.Env):
         done = bool(terminated[0])
         return obs[0].cpu().numpy(), float(reward[0]), done, False, self._info(self.recorder.take(flush=done))
 
-    def render(self) -> np.ndarray | None:
+    # gymnasium's Env.render returns RenderFrame | list[RenderFrame] | None with RenderFrame a type variable bound
+    # to nothing, which no concrete return type matches; a frame here is a uint8 (H, W, 3) array
+    def render(self) -> np.ndarray | None:  # type: ignore[override]
         if self.render_mode is None:
             return None
         return self.world.render_rgb(0, self.render_width_px)

@@ -33,6 +33,7 @@ centre, ~1e-17 rad/s) is exactly 0 here.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypedDict
 
 import torch
 
@@ -41,6 +42,13 @@ from impact_env.transport.batched.scene import BoxShape, PolygonShape, Scene, pa
 _INF = float("inf")
 WALL_NORMALS = ((0.0, -1.0), (0.0, 1.0), (-1.0, 0.0), (1.0, 0.0))  # from a body into the wall: bottom, top, left, right
 WALL_AXIS_SIGN = ((1, -1.0), (1, 1.0), (0, -1.0), (0, 1.0))
+
+
+class TensorKwargs(TypedDict):
+    """The ``device`` and ``dtype`` keywords every tensor of a batch is made with (``torch.zeros(n, **opts)``)."""
+
+    device: torch.device
+    dtype: torch.dtype
 
 
 @dataclass(frozen=True)
@@ -110,7 +118,7 @@ class ReferenceKernel:
         self.iterations = iterations
         self.layout = RowLayout(scene.n_bodies, len(scene.pairs), scene.n_static)
         B = scene.n_bodies
-        opts = {"device": device, "dtype": dtype}
+        opts = TensorKwargs(device=device, dtype=dtype)
         self.inv_mass = torch.tensor(scene.inv_mass, **opts).reshape(B, 1)
         self.static_nmass = 1.0 / self.inv_mass  # chipmunk's 1 / (1/m + 0) against a static shape
         self.radius = torch.tensor(scene.radius_m, **opts).reshape(B, 1)
@@ -164,11 +172,15 @@ class ReferenceKernel:
             dx, dy = d[:, 0], d[:, 1]
             d2 = dx * dx + dy * dy
         else:
-            parts = [polygon_closest(o, pos[0], pos[1]) if isinstance(o, PolygonShape) else None for o in sc.obstacles]
-            if self.box_index.numel():
-                d = torch.minimum(torch.maximum(pos, self.box_lo), self.box_hi) - pos
-                for i, k in enumerate(self.box_index.tolist()):
-                    parts[k] = (d[i, 0], d[i, 1], d[i, 0] * d[i, 0] + d[i, 1] * d[i, 1])
+            d = torch.minimum(torch.maximum(pos, self.box_lo), self.box_hi) - pos  # [boxes, 2, B, N]
+            box_row = {k: i for i, k in enumerate(self.box_index.tolist())}
+            parts: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = []
+            for k, o in enumerate(sc.obstacles):
+                if isinstance(o, PolygonShape):
+                    parts.append(polygon_closest(o, pos[0], pos[1]))
+                else:
+                    i = box_row[k]
+                    parts.append((d[i, 0], d[i, 1], d[i, 0] * d[i, 0] + d[i, 1] * d[i, 1]))
             dx, dy, d2 = (torch.stack([p[m] for p in parts]) for m in range(3))
         outside = d2 > 0.0
         dist = torch.sqrt(d2)
@@ -354,41 +366,45 @@ class ReferenceKernel:
         return out, ended + torch.cat((sep_pairs, sep_static)).to(ended.dtype)
 
 
-def polygon_closest(shape: PolygonShape, x: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, ...]:
+def polygon_closest(shape: PolygonShape, x: torch.Tensor,
+                    y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(dx, dy, d2) from centres (x, y) to the closest boundary point of a convex polygon; d2 = 0 inside."""
-    best = None
     verts = shape.vertices
-    for k, (vx, vy) in enumerate(verts):
-        wx, wy = verts[(k + 1) % len(verts)]
+
+    def edge_closest(k: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        (vx, vy), (wx, wy) = verts[k], verts[(k + 1) % len(verts)]
         ex, ey = wx - vx, wy - vy
         t = torch.clamp(((x - vx) * ex + (y - vy) * ey) / (ex * ex + ey * ey), 0.0, 1.0)
         dx, dy = (vx + t * ex) - x, (vy + t * ey) - y
-        d2 = dx * dx + dy * dy
-        if best is None:
-            best = (dx, dy, d2)
-        else:
-            closer = d2 < best[2]
-            best = tuple(torch.where(closer, new, old) for new, old in zip((dx, dy, d2), best))
-    inside = None
-    for (nx, ny), off in zip(shape.normals, shape.offsets):
-        edge_in = nx * x + ny * y - off <= 0.0
-        inside = edge_in if inside is None else inside & edge_in
-    return best[0], best[1], torch.where(inside, 0.0, best[2])
+        return dx, dy, dx * dx + dy * dy
+
+    bx, by, bd2 = edge_closest(0)
+    for k in range(1, len(verts)):
+        dx, dy, d2 = edge_closest(k)
+        closer = d2 < bd2
+        bx, by, bd2 = torch.where(closer, dx, bx), torch.where(closer, dy, by), torch.where(closer, d2, bd2)
+    edges = list(zip(shape.normals, shape.offsets))
+    (nx, ny), off = edges[0]
+    inside = nx * x + ny * y - off <= 0.0
+    for (nx, ny), off in edges[1:]:
+        inside = inside & (nx * x + ny * y - off <= 0.0)
+    return bx, by, torch.where(inside, 0.0, bd2)
 
 
-def inside_normal(shape: BoxShape | PolygonShape, x: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, ...]:
+def inside_normal(shape: BoxShape | PolygonShape, x: torch.Tensor,
+                  y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """For centres inside the shape: the normal into the shape through its nearest face, and the depth (m)."""
+    faces: list[tuple[tuple[float, float], float]]
     if isinstance(shape, BoxShape):
-        faces = (((-1.0, 0.0), -shape.x0), ((1.0, 0.0), shape.x1), ((0.0, -1.0), -shape.y0), ((0.0, 1.0), shape.y1))
+        faces = [((-1.0, 0.0), -shape.x0), ((1.0, 0.0), shape.x1), ((0.0, -1.0), -shape.y0), ((0.0, 1.0), shape.y1)]
     else:
-        faces = tuple(zip(shape.normals, shape.offsets))
-    depth = nx = ny = None
-    for (fx, fy), off in faces:
-        d = off - (fx * x + fy * y)  # >= 0 inside
-        if depth is None:
-            depth, nx, ny = d, torch.full_like(x, -fx), torch.full_like(x, -fy)
-        else:
-            nearer = d < depth
-            depth = torch.where(nearer, d, depth)
-            nx, ny = torch.where(nearer, -fx, nx), torch.where(nearer, -fy, ny)
+        faces = list(zip(shape.normals, shape.offsets))
+    (fx, fy), off = faces[0]
+    depth = off - (fx * x + fy * y)  # >= 0 inside
+    nx, ny = torch.full_like(x, -fx), torch.full_like(x, -fy)
+    for (fx, fy), off in faces[1:]:
+        d = off - (fx * x + fy * y)
+        nearer = d < depth
+        depth = torch.where(nearer, d, depth)
+        nx, ny = torch.where(nearer, -fx, nx), torch.where(nearer, -fy, ny)
     return nx, ny, depth

@@ -43,7 +43,7 @@ class TransportSB3VecEnv(VecEnv):
         **world_options: :class:`~impact_env.transport.batched.BatchedTransportWorld`'s options.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, scenario: Scenario | str, num_envs: int, *, render_env_indices: Sequence[int] = (0,),
                  render_width_px: int = 600, **world_options: Any) -> None:

@@ -49,7 +49,7 @@ class PolygonShape:
 
 def obstacle_shape(name: str, polygon: ConvexPolygon) -> BoxShape | PolygonShape:
     """The kernel's description of an obstacle: a box when the polygon is an axis-aligned box."""
-    box = getattr(polygon, "_box", None)
+    box = polygon._box
     if box is not None:
         return BoxShape(name, *box)
     return PolygonShape(name, tuple(map(tuple, polygon.vertices.tolist())), tuple(map(tuple, polygon.normals.tolist())),
@@ -115,7 +115,7 @@ def build_scene(scenario: Scenario, restitution: float | None = None) -> Scene:
         names=tuple(b.name for b in bodies), n_robots=n_robots,
         mass_kg=tuple(b.mass_kg for b in bodies), inv_mass=tuple(1.0 / b.mass_kg for b in bodies),
         inv_inertia=tuple(1.0 / b.inertia_kgm2 for b in bodies), radius_m=tuple(b.radius_m for b in bodies),
-        wrench_limits=tuple((*r.thrust_limit_N, r.torque_limit_Nm) for r in scenario.robots),
+        wrench_limits=tuple(r.wrench_limits for r in scenario.robots),
         world_box=scenario.world_box,
         obstacles=tuple(obstacle_shape(o.name, o.polygon) for o in scenario.obstacles),
         pairs=pairs, robot_object_pairs=tuple(ro_pairs),

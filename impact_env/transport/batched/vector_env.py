@@ -53,7 +53,8 @@ class BatchFrames(Sequence[np.ndarray]):
     (RecordVideo reads all of them, or only the first with ``record_first_only=True``)."""
 
     def __init__(self, envs: TransportVectorEnv) -> None:
-        self._envs, self._world, self._frames = envs, envs.world, {}
+        self._envs, self._world = envs, envs.world
+        self._frames: dict[int, np.ndarray] = {}
         self._moves = envs._moves  # to refuse a frame read after the batch moved on
 
     def __len__(self) -> int:
@@ -172,12 +173,12 @@ class TransportVectorEnv(VectorEnv):
             m = torch.as_tensor(resetting, device=self.world.device)
             self.world.reset(mask=m)
             self._elapsed[resetting] = 0
-            obs, reward, terminated, _, info = self.world.step(a, active=~m)
+            obs, reward, ended, _, info = self.world.step(a, active=~m)
         else:
-            obs, reward, terminated, _, info = self.world.step(a)
+            obs, reward, ended, _, info = self.world.step(a)
         stepped = ~resetting
         self._elapsed[stepped] += 1
-        terminated = terminated.cpu().numpy()
+        terminated = ended.cpu().numpy()
         truncated = np.zeros(self.num_envs, dtype=bool)
         if self.max_episode_steps is not None:
             truncated = stepped & (self._elapsed >= self.max_episode_steps)
@@ -185,7 +186,9 @@ class TransportVectorEnv(VectorEnv):
         rewards = reward.detach().cpu().numpy().astype(np.float64)
         return obs.cpu().numpy(), rewards, terminated, truncated, self._infos(info, np.ones(self.num_envs, bool))
 
-    def render(self) -> BatchFrames | None:
+    # gymnasium's VectorEnv.render returns tuple[RenderFrame, ...] with RenderFrame a type variable bound to
+    # nothing, which no concrete return type matches; BatchFrames is a sequence of frames
+    def render(self) -> BatchFrames | None:  # type: ignore[override]
         """The envs' frames now (``render_mode="rgb_array"``): a sequence of ``num_envs`` uint8 (H, W, 3)
         arrays, each drawn when it is first read."""
         if self.render_mode is None:

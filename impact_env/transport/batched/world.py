@@ -33,8 +33,8 @@ from impact_env.errors import ActionError, EnvConfigError, ImpactEnvError
 from impact_env.stl import conjuncts
 from impact_env.transport.batched import episode
 from impact_env.transport.batched.fused import FusedKernel
-from impact_env.transport.batched.monitor import BatchedMonitor
-from impact_env.transport.batched.physics import ReferenceKernel, headings, world_forces
+from impact_env.transport.batched.monitor import BatchedMonitor, MonitorState
+from impact_env.transport.batched.physics import ReferenceKernel, TensorKwargs, headings, world_forces
 from impact_env.transport.batched.scene import build_scene
 from impact_env.transport.batched.starts import draw_object_starts
 from impact_env.transport.core import ACTION_PER_ROBOT, OBS_PER_BODY, TransportCore
@@ -138,7 +138,7 @@ class BatchedTransportWorld:
         self.scene = build_scene(self.scenario, restitution)
         self.reference = ReferenceKernel(self.scene, self.device, dtype, contact_iterations)
         self.layout = self.reference.layout
-        opts = {"device": self.device, "dtype": dtype}
+        opts = TensorKwargs(device=self.device, dtype=dtype)
         N, B, R = num_envs, self.n_bodies, self.n_robots
         formulas = [self.scenario.formula]
         if reward_mode == "conjuncts":
@@ -161,7 +161,7 @@ class BatchedTransportWorld:
         self._init_omg = torch.tensor(self.scene.angular_velocity_radps, **opts).reshape(B, 1)
         self.rows = init.expand(lay.n_rows, N).clone()
         self.ang, self.omg = self._init_ang.expand(B, N).clone(), self._init_omg.expand(B, N).clone()
-        int64 = {"device": self.device, "dtype": torch.int64}
+        int64 = TensorKwargs(device=self.device, dtype=torch.int64)
         self.step_count = torch.zeros(N, **int64)
         self.seeds = torch.zeros(N, **int64)
         self.episodes = torch.zeros(N, **int64)
@@ -285,7 +285,7 @@ class BatchedTransportWorld:
             if bool(active.all()):
                 active = None
         if active is not None:
-            return self._step_active(actions, active)
+            return self._step_active(actions, active, self._obs)
         a = self._check_actions(actions)
         args = (a, self.ang, self.omg, self._key[0], self._key[1], self.step_count, self.episodes)
         if self._fused_period is None:
@@ -323,13 +323,14 @@ class BatchedTransportWorld:
                 "time_s": self.step_count.to(self.dtype) * self.dt_s, "impacts": impacts}
         return obs, reward, terminated, torch.zeros_like(terminated), info
 
-    def _step_active(self, actions: Any, active: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    def _step_active(self, actions: Any, active: torch.Tensor, obs_before: torch.Tensor) -> tuple[
+            torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
         """:meth:`step` of the envs of ``active`` only: every env is stepped (the others with zero actions, from
-        a clock held below the horizon), then the others get their state back."""
+        a clock held below the horizon), then the others get their state back (``obs_before``: their observation)."""
         a = self._check_actions(actions)
         keep = ~active
         saved = (self.rows, self.ang, self.omg, self.last_wrenches, self.last_impact_step, self.step_count,
-                 self.fuel_Ns, self.robustness, self._potential, self.monitor.state, self._obs)
+                 self.fuel_Ns, self.robustness, self._potential, self.monitor.state)
         if bool(((self.step_count >= self.horizon_steps) & active).any()):
             envs = ((self.step_count >= self.horizon_steps) & active).nonzero().squeeze(1).tolist()
             raise ImpactEnvError(f"envs {envs[:10]}{' ...' if len(envs) > 10 else ''} reached the task's horizon "
@@ -345,8 +346,9 @@ class BatchedTransportWorld:
                                        saved[:5]))
         self.step_count, self.fuel_Ns, self.robustness, self._potential = (
             back(n, o) for n, o in zip((self.step_count, self.fuel_Ns, self.robustness, self._potential), saved[5:9]))
-        self.monitor.state = tuple(back(n, o) for n, o in zip(self.monitor.state, saved[9]))
-        self._obs = obs = back(obs, saved[10], env_last=False)
+        acc, run, best = (back(n, o) for n, o in zip(self.monitor.state, saved[9]))
+        self.monitor.state = (acc, run, best)
+        self._obs = obs = back(obs, obs_before, env_last=False)
         reward = torch.where(keep, 0.0, reward)
         terminated = terminated & active
         info = {"robustness": self.robustness, "is_success": self.robustness > 0.0, "fuel_Ns": self.fuel_Ns,
@@ -397,7 +399,7 @@ class BatchedTransportWorld:
         return w, fuel, force, ang, omg, noise, flags
 
     def _epilogue_impl(self, rows: torch.Tensor, ang: torch.Tensor, omg: torch.Tensor, k: torch.Tensor,
-                       monitor_state: tuple[torch.Tensor, ...], potential: torch.Tensor, fuel_total: torch.Tensor,
+                       monitor_state: MonitorState, potential: torch.Tensor, fuel_total: torch.Tensor,
                        fuel: torch.Tensor, ended: torch.Tensor, last_impact: torch.Tensor) -> tuple[Any, ...]:
         lay = self.layout
         B = self.n_bodies

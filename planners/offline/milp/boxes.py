@@ -107,7 +107,9 @@ class ObjectBox:
                 continue
             d_h = model.add_var(0.0, d_ub, name=f"{name}.delta_hit[{k}]")
             model.add([d_h <= self.delta, d_h <= hit * d_ub, d_h >= self.delta - miss * d_ub], group="impact reset")
-            gp_k, gv_k = [[None, None] for _ in range(GENERATORS)], [[None, None] for _ in range(GENERATORS)]
+            # every entry is set below, per axis
+            gp_k = [[LinExpr(), LinExpr()] for _ in range(GENERATORS)]
+            gv_k = [[LinExpr(), LinExpr()] for _ in range(GENERATORS)]
             for a in range(2):
                 h_spread = LinExpr()
                 q_p, q_v = [], []

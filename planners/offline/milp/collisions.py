@@ -11,8 +11,26 @@ body is simultaneous with interval k of another.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Protocol
+
+from impact_env.transport.scenario import Body
 from planners.offline.milp.model import LinExpr, Model
-from planners.offline.milp.trajectories import RobotTrajectory
+from planners.offline.milp.trajectories import Grid, Point, RobotTrajectory
+
+
+class Curve(Protocol):
+    """What separation reads of a robot: its spec, its grid and its control points on interval k (a
+    :class:`RobotTrajectory`, or the impact-robust planner's :class:`~planners.offline.milp.copies.RobotCopies`,
+    whose points are every copy's)."""
+
+    @property
+    def spec(self) -> Body: ...
+
+    @property
+    def grid(self) -> Grid: ...
+
+    def points(self, k: int) -> list[Point]: ...
 
 
 def _bounding_box(model: Model, robot, k: int, box) -> tuple[LinExpr, ...]:
@@ -54,7 +72,7 @@ class Separation:
             self.model.add(lhs + gap <= rhs + relax, group=group)
 
 
-def add_robot_separation(model: Model, robots: list[RobotTrajectory], world_box,
+def add_robot_separation(model: Model, robots: Sequence[Curve], world_box,
                          separation: Separation | None = None) -> Separation:
     separation = separation or Separation(model, world_box)
     n = robots[0].grid.intervals

@@ -184,7 +184,8 @@ class Model:
     def csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Row-wise sparse matrix (start, index, value) and row bounds (lo, hi) as numpy arrays."""
         start = np.zeros(self.n_rows + 1, dtype=np.int32)
-        index, value = [], []
+        index: list[int] = []
+        value: list[float] = []
         lo = np.empty(self.n_rows)
         hi = np.empty(self.n_rows)
         for r, (terms, rlo, rhi) in enumerate(self.rows):

@@ -14,7 +14,7 @@ gates known when the model is built; temporal operators nested inside temporal o
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -96,7 +96,7 @@ class STLEncoder:
             layer needs no solver (the solvers take its models).
     """
 
-    def __init__(self, model: Model, grid: Grid, points: Callable[[str, int], list[PointSet]],
+    def __init__(self, model: Model, grid: Grid, points: Callable[[str, int], Sequence[PointSet]],
                  boxes: dict[str, tuple[float, float, float, float]], regions: dict[str, ConvexPolygon],
                  bound_propagation: bool = True, reuse_clearance: bool = False, *,
                  lp_optimum: Callable[[Model], float | None]) -> None:
@@ -224,7 +224,7 @@ class STLEncoder:
         self._memo[key] = (f, r)
         return r
 
-    def _pts(self, body: str, k: int, first_point_only: bool) -> list[PointSet]:
+    def _pts(self, body: str, k: int, first_point_only: bool) -> Sequence[PointSet]:
         pts = self.points(body, k)
         return pts[:1] if first_point_only else pts
 
@@ -270,7 +270,7 @@ class STLEncoder:
                               self._pts(body, max(k, 0), first_point_only), r, self.group)
         return r
 
-    def _beyond_one_face(self, body: str, region: str, key_k: int, points: list[PointSet],
+    def _beyond_one_face(self, body: str, region: str, key_k: int, points: Sequence[PointSet],
                          lower: LinExpr | float, group: str) -> None:
         """Every point at least ``lower`` beyond the same face of the region, the face picked by binaries."""
         for face, w in self.face_choice(body, region, key_k, group):
@@ -296,6 +296,7 @@ class STLEncoder:
                       if np.max(corners @ poly.normals[f] - poly.offsets[f]) > 0.0]
             if not useful:
                 useful = list(range(len(poly.offsets)))
+            choice: list[tuple[int, LinExpr | None]]
             if len(useful) == 1:
                 choice = [(useful[0], None)]
             else:

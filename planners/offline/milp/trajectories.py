@@ -102,7 +102,7 @@ class RobotTrajectory:
 
     def velocity_points(self, k: int) -> list[Point]:
         d, dt = self.degree, self.grid.dt_s
-        return [tuple(c * (d / dt) for c in _sub(self.cp[k][i + 1], self.cp[k][i])) for i in range(d)]
+        return [(v[0] * (d / dt), v[1] * (d / dt)) for v in (_sub(self.cp[k][i + 1], self.cp[k][i]) for i in range(d))]
 
     def acceleration_points(self, k: int) -> list[Point]:
         d, dt = self.degree, self.grid.dt_s
@@ -157,7 +157,7 @@ def add_kinematics(model: Model, robots: list[RobotTrajectory], objects: list[Ob
     for r in robots:
         spec = r.spec
         vb = velocity_bound(spec)
-        a_max = [thrust_fraction * f / spec.mass_kg for f in spec.thrust_limit_N]
+        a_max = [thrust_fraction * f / spec.mass_kg for f in spec.wrench_limits[:2]]
         for k in range(r.grid.intervals):
             for p in r.velocity_points(k):
                 for axis in range(2):

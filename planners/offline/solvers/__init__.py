@@ -52,4 +52,4 @@ def lp_optimum(model: Model, solver: str = "highs") -> float | None:
     the STL encoder's bound propagation needs (:class:`planners.offline.milp.stl_encoding.STLEncoder`, which
     the planners give this function to)."""
     result = solve(model, solver)
-    return float(result.objective) if result.status == Status.OPTIMAL else None
+    return float(result.objective) if result.status == Status.OPTIMAL and result.objective is not None else None

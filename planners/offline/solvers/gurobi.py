@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 import gurobipy as gp
 import numpy as np
@@ -89,9 +90,8 @@ def _set_warm_start(model: Model, xs: list, x0: np.ndarray) -> None:
         xs[j].Start = float(round(v)) if model.integer[j] else v
 
 
-def _progress_callback(options: SolverOptions, errors: list[BaseException]):
+def _progress_callback(report: Callable[[Progress], None], errors: list[BaseException]):
     """A Gurobi callback reporting from the MIP callback, at most once per interval of run time."""
-    report = options.progress
     next_at = [_REPORT_INTERVAL_S]
 
     def callback(m: gp.Model, where: int) -> None:
@@ -137,7 +137,7 @@ def _solve(m: gp.Model, xs: list, model: Model, options: SolverOptions, t0: floa
         _set_warm_start(model, xs, options.warm_start)
     errors: list[BaseException] = []
     if options.progress is not None:
-        m.optimize(_progress_callback(options, errors))
+        m.optimize(_progress_callback(options.progress, errors))
     else:
         m.optimize()
     if errors:

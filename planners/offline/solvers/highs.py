@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 import highspy
 import numpy as np
@@ -119,13 +120,12 @@ def _set_warm_start(h: highspy.Highs, model: Model, x0: np.ndarray) -> None:
     h.setSolution(int(known.size), known.astype(np.int32), values)
 
 
-def _attach_progress(h: highspy.Highs, options: SolverOptions, errors: list[BaseException]) -> None:
+def _attach_progress(h: highspy.Highs, report: Callable[[Progress], None], errors: list[BaseException]) -> None:
     """Report progress from kCallbackMipInterrupt, at most once per interval of HiGHS's running time.
 
     The interrupt callback fires very often (every node and more), so the common path is one attribute
     read and one comparison. An exception in the user's callback stops the solve and is re-raised after it.
     """
-    report = options.progress
     next_at = [_REPORT_INTERVAL_S]
 
     def on_interrupt(event: highspy.HighsCallbackEvent) -> None:
@@ -174,7 +174,7 @@ def solve(model: Model, options: SolverOptions | None = None) -> SolveResult:
         _set_warm_start(h, model, options.warm_start)
     errors: list[BaseException] = []
     if options.progress is not None and is_mip:
-        _attach_progress(h, options, errors)
+        _attach_progress(h, options.progress, errors)
     h.run()
     if errors:
         raise errors[0]

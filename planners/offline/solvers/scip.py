@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pyscipopt
@@ -107,9 +108,9 @@ class _ProgressHandler(Eventhdlr):
 
     _EVENTS = (SCIP_EVENTTYPE.BESTSOLFOUND, SCIP_EVENTTYPE.NODESOLVED)
 
-    def __init__(self, options: SolverOptions) -> None:
+    def __init__(self, report: Callable[[Progress], None]) -> None:
         super().__init__()
-        self.report = options.progress
+        self.report = report
         self.next_at = _REPORT_INTERVAL_S
         self.errors: list[BaseException] = []
 
@@ -148,7 +149,7 @@ def solve(model: Model, options: SolverOptions | None = None) -> SolveResult:
         _set_warm_start(scip, model, xs, options.warm_start)
     handler = None
     if options.progress is not None:
-        handler = _ProgressHandler(options)
+        handler = _ProgressHandler(options.progress)
         scip.includeEventhdlr(handler, "progress", "reports progress about once a second")
     scip.optimize()
     if handler is not None and handler.errors:

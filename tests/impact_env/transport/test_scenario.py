@@ -96,6 +96,14 @@ def test_nonconvex_polygon_and_bad_segments():
         scenario_from_dict(data)
 
 
+def test_wrench_limits_are_a_robots_and_an_object_has_none():
+    sc = load_scenario("corridor")
+    robot = sc.body("R1")
+    assert robot.wrench_limits == (*robot.thrust_limit_N, robot.torque_limit_Nm)
+    with pytest.raises(ScenarioError, match="body 'O1' is an object: it has no thrust_limit_N"):
+        _ = sc.body("O1").wrench_limits
+
+
 def test_substep_check_suggests_a_number():
     data = two_body_dict(substeps=1)
     data["robots"][0]["velocity_bound_mps"] = [2.0, 2.0]
