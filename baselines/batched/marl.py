@@ -12,14 +12,10 @@ finished one is not run again. The hyperparameters are :class:`MarlConfig`'s, th
 algorithms (MAPPO: a central critic on the state; IPPO: a critic on each agent's observation; both share
 parameters between agents, BenchMARL's default).
 
-The final evaluation of an impact task flies the policy twice on the batched world and on the pymunk Gymnasium
-env, on the same number of seeded episodes with the training's noise, so the success rates of the two worlds
-can be compared: deterministic (TorchRL's deterministic sample of BenchMARL's TanhNormal, tanh of the
-Gaussian's mean) and sampled (actions drawn from the policy, torch seeded with the first episode's seed). Both
-are recorded because they differ: tanh of the mean is not the squashed distribution's mode, and a policy
-whose samples saturate the thrusters can fail when flown at tanh of its mean (docs/rl_at_scale.md has both
-scores of every run). A finished run whose ``result.json`` lacks the sampled half is evaluated again from its
-last checkpoint when it is run again. This module imports nothing of BenchMARL at import time (an
+The final evaluation of an impact task flies the policy deterministically and with sampled actions, on the
+batched world and on the pymunk Gymnasium env, the same seeded episodes with the training's noise (why both:
+``docs/rl_at_scale.md#evaluation-and-analysis``); a finished run without the sampled half is evaluated again
+from its last checkpoint when it is run again. This module imports nothing of BenchMARL at import time (an
 optional extra: :class:`MarlConfig` is importable and checked without it), and of ``impact_env`` only its config
 checks and errors, read from their files where ``impact_env`` cannot be imported, so it runs in a venv with VMAS
 (and no impact_env dependencies) for the external reference row.
