@@ -192,7 +192,7 @@ def markdown(numbers: dict[str, Any]) -> str:
               "the column beside), `eval episodes` seeded episodes per world (seeds "
               "1,000,000 on), with the training's noise (thrust 5 %, objects start within 5 cm). The wall clock is "
               "training only (the evaluation is not in it), on the shared 2-core machine, one torch thread a run, "
-              "two runs at a time."]
+              "one or two runs at a time (What ran says which)."]
     return "\n".join(lines) + "\n"
 
 
