@@ -36,3 +36,25 @@ def load(module: str, what: str) -> ModuleType | None:
                       "compiler and Python's headers for the fast path): same results, slower", RuntimeWarning,
                       stacklevel=3)
         return None
+
+
+def chipmunk_addresses(functions: dict[str, str]) -> tuple[int, ...] | None:
+    """The addresses of chipmunk's ``functions`` (name -> the C prototype a loop calls it with) in pymunk's cffi
+    module, for a C loop that calls chipmunk directly; None if pymunk has no cffi module, its ``cpVect`` or
+    ``cpFloat`` is not two doubles or a double, or a function is missing or has another type."""
+    try:
+        from pymunk._chipmunk import ffi, lib
+    except ImportError:  # pragma: no cover - a pymunk build without its cffi module
+        return None
+    try:
+        if ffi.sizeof("cpVect") != 16 or ffi.typeof("cpFloat").cname != "double":
+            return None
+        out = []
+        for name, prototype in functions.items():
+            pointer = ffi.addressof(lib, name)
+            if ffi.typeof(pointer).cname != prototype:
+                return None
+            out.append(int(ffi.cast("uintptr_t", pointer)))
+        return tuple(out)
+    except (AttributeError, TypeError, ffi.error):  # pragma: no cover - pymunk internals moved
+        return None

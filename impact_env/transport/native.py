@@ -19,15 +19,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from impact_env.native import load
+from impact_env.native import chipmunk_addresses, load
 
 _substeps = load("impact_env.transport._substeps", "the impact world's substep loop")
 
 try:
     from pymunk._chipmunk import ffi as _ffi
-    from pymunk._chipmunk import lib as _lib
 except ImportError:  # pragma: no cover - a pymunk build without its cffi module
-    _ffi = _lib = None
+    _ffi = None
 
 # name -> the prototype the C loop calls it with (cpFloat is double in pymunk's build); the order of _substeps.c
 CHIPMUNK_FUNCTIONS = {
@@ -45,18 +44,7 @@ def _chipmunk_addresses() -> tuple[int, ...] | None:
     """The addresses of CHIPMUNK_FUNCTIONS in pymunk's module, or None if one is missing or has another type."""
     if _ffi is None or _substeps is None:
         return None
-    try:
-        if _ffi.sizeof("cpVect") != 16 or _ffi.typeof("cpFloat").cname != "double":
-            return None
-        out = []
-        for name, prototype in CHIPMUNK_FUNCTIONS.items():
-            pointer = _ffi.addressof(_lib, name)
-            if _ffi.typeof(pointer).cname != prototype:
-                return None
-            out.append(int(_ffi.cast("uintptr_t", pointer)))
-        return tuple(out)
-    except (AttributeError, TypeError, _ffi.error):  # pragma: no cover - pymunk internals moved
-        return None
+    return chipmunk_addresses(CHIPMUNK_FUNCTIONS)
 
 
 _ADDRESSES = _chipmunk_addresses()
