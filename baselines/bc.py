@@ -26,7 +26,7 @@ import numpy as np
 from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization, set_obs_statistics
 from baselines.record import dataset_id, datasets_path, use_datasets_path
 from baselines.run_meta import scenario_fingerprint
-from impact_env.config_checks import check_flag, check_integer, check_number, check_text, fail
+from impact_env.config_checks import check_flag, check_integer, check_number, check_text, check_widths
 from impact_env.errors import ImpactEnvError
 from impact_env.results_store import atomic_path, check_output_folder, write_atomic
 from impact_env.transport.scenario import load_scenario
@@ -75,10 +75,7 @@ class BCConfig:
         check_text(self, "out", ImpactEnvError, none="<runs_dir>/bc_<scenario>_s<seed>")
         check_text(self, "runs_dir", ImpactEnvError)
         check_flag(self, "quiet", ImpactEnvError)
-        arch = self.net_arch
-        layers = isinstance(arch, (tuple, list)) and len(arch) > 0
-        if not (layers and all(isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in arch)):
-            fail("BCConfig.net_arch", arch, "a non-empty tuple of integers >= 1 (layer sizes)", ImpactEnvError)
+        check_widths(self, "net_arch", ImpactEnvError, lists=True)
 
 
 def load_demonstrations(scenario_name: str,

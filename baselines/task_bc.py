@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from impact_env.config_checks import check_integer, check_number, check_text, fail
+from impact_env.config_checks import check_integer, check_number, check_text, check_widths
 from impact_env.errors import ImpactEnvError
 
 __all__ = ["TaskBCConfig", "TaskBCPolicy", "train_task_bc"]
@@ -67,10 +67,7 @@ class TaskBCConfig:
         check_integer(self, "epochs", ImpactEnvError, low=1)
         check_integer(self, "batch_size", ImpactEnvError, low=1)
         check_number(self, "learning_rate", ImpactEnvError, low=0, low_open=True)
-        hidden = self.hidden
-        if not (isinstance(hidden, tuple) and hidden
-                and all(isinstance(h, int) and not isinstance(h, bool) and h >= 1 for h in hidden)):
-            fail("TaskBCConfig.hidden", hidden, "a non-empty tuple of integers >= 1 (layer widths)", ImpactEnvError)
+        check_widths(self, "hidden", ImpactEnvError)
         check_number(self, "observation_noise", ImpactEnvError, low=0)
         check_integer(self, "seed", ImpactEnvError, low=0)
         check_text(self, "out", ImpactEnvError)

@@ -140,6 +140,16 @@ def check_text(config: Any, name: str, error: type[Exception], *, none: str | No
         fail(_where(config, name), value, _allowed("a non-empty string", none), error)
 
 
+def check_widths(config: Any, name: str, error: type[Exception], *, lists: bool = False) -> None:
+    """``config.<name>`` is a non-empty tuple (or, with ``lists``, a list) of integers >= 1: a network's hidden
+    layer widths."""
+    value = getattr(config, name)
+    kinds = (tuple, list) if lists else tuple
+    if not (isinstance(value, kinds) and len(value) > 0
+            and all(isinstance(w, int) and not isinstance(w, bool) and w >= 1 for w in value)):
+        fail(_where(config, name), value, "a non-empty tuple of integers >= 1 (layer widths)", error)
+
+
 def check_instance(config: Any, name: str, error: type[Exception], kind: type | tuple[type, ...] | Callable, *,
                    what: str, none: str | None = None) -> None:
     """``config.<name>`` is an instance of ``kind`` (``what`` says it in words, e.g. ``"a SolverOptions"``), or

@@ -48,13 +48,21 @@ def _standalone(name: str):
 
 
 try:
-    from impact_env.config_checks import check_choice, check_instance, check_integer, check_number, check_text, fail
+    from impact_env.config_checks import (
+        check_choice,
+        check_instance,
+        check_integer,
+        check_number,
+        check_text,
+        check_widths,
+        fail,
+    )
     from impact_env.errors import ImpactEnvError
 except ImportError:  # a venv with VMAS and BenchMARL but not impact_env's dependencies (gymnasium, pymunk)
     _checks = _standalone("config_checks")
-    check_choice, check_instance, check_integer, check_number, check_text, fail = (
+    check_choice, check_instance, check_integer, check_number, check_text, check_widths, fail = (
         _checks.check_choice, _checks.check_instance, _checks.check_integer, _checks.check_number,
-        _checks.check_text, _checks.fail)
+        _checks.check_text, _checks.check_widths, _checks.fail)
     ImpactEnvError = _standalone("errors").ImpactEnvError  # type: ignore[misc]
 
 ALGORITHMS = ("mappo", "ippo")
@@ -116,10 +124,7 @@ class MarlConfig:
         check_number(self, "lmbda", ImpactEnvError, low=0, high=1)
         for name in ("entropy_coef", "thrust_noise", "initial_position_noise_m"):
             check_number(self, name, ImpactEnvError, low=0)
-        hidden = self.hidden
-        if not (isinstance(hidden, tuple) and hidden
-                and all(isinstance(h, int) and not isinstance(h, bool) and h >= 1 for h in hidden)):
-            fail("MarlConfig.hidden", hidden, "a non-empty tuple of integers >= 1 (layer widths)", ImpactEnvError)
+        check_widths(self, "hidden", ImpactEnvError)
         check_instance(self, "extra", ImpactEnvError, dict, what="a dict of task options")
         if self.frames_per_batch % self.num_envs:
             fail("MarlConfig.frames_per_batch", self.frames_per_batch, f"a multiple of num_envs ({self.num_envs})",

@@ -38,7 +38,15 @@ from typing import Any
 import numpy as np
 import torch
 
-from impact_env.config_checks import check_choice, check_flag, check_integer, check_number, check_text, fail
+from impact_env.config_checks import (
+    check_choice,
+    check_flag,
+    check_integer,
+    check_number,
+    check_text,
+    check_widths,
+    fail,
+)
 from impact_env.errors import ImpactEnvError
 from impact_env.results_store import atomic_path, write_atomic
 from impact_env.transport.core import REWARD_MODES
@@ -110,10 +118,7 @@ class Sb3PpoConfig:
             check_number(self, name, ImpactEnvError, low=0)
         check_choice(self, "reward_mode", ImpactEnvError, REWARD_MODES)
         check_flag(self, "compile", ImpactEnvError)
-        hidden = self.hidden
-        if not (isinstance(hidden, tuple) and hidden
-                and all(isinstance(h, int) and not isinstance(h, bool) and h >= 1 for h in hidden)):
-            fail("Sb3PpoConfig.hidden", hidden, "a non-empty tuple of integers >= 1 (layer widths)", ImpactEnvError)
+        check_widths(self, "hidden", ImpactEnvError)
         if (self.num_envs * self.n_steps) % self.batch_size:
             fail("Sb3PpoConfig.batch_size", self.batch_size, f"a divisor of num_envs x n_steps ({self.num_envs} x "
                  f"{self.n_steps} = {self.num_envs * self.n_steps})", ImpactEnvError)

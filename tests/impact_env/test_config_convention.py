@@ -228,3 +228,17 @@ def test_the_rule_in_words_and_the_value_cut_short():
     with pytest.raises(ValueError, match=r"^w must be None \(off\) or an integer >= 2, got 1$"):
         config_checks.check_value("w", 1, ValueError, low=2, integer=True, none="off")
     config_checks.check_value("w", None, ValueError, low=2, integer=True, none="off")
+
+
+@pytest.mark.parametrize("widths, lists, ok", [((64, 64), False, True), ((8,), False, True), ([64, 64], True, True),
+                                               ([64, 64], False, False), ((), False, False), ((64, 0), False, False),
+                                               ((64, True), False, False), ((64, 2.0), False, False),
+                                               ("64", True, False), (None, False, False)])
+def test_layer_widths(widths, lists, ok):
+    net = type("Net", (), {"hidden": widths})()
+    if ok:
+        config_checks.check_widths(net, "hidden", ValueError, lists=lists)
+    else:
+        rule = r"^Net\.hidden must be a non-empty tuple of integers >= 1 \(layer widths\)"
+        with pytest.raises(ValueError, match=rule):
+            config_checks.check_widths(net, "hidden", ValueError, lists=lists)
