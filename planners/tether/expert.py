@@ -35,7 +35,8 @@ from planners.tether.reachability import ReachabilityConfig, ReachabilityPlanner
 
 STOPPED_MPS = 0.01  # the cargo counts as at rest below this speed (for the switch brakes)
 MOVING_MPS = 0.03  # under inertia, a new pull starts only below this speed (else the expert brakes first)
-SETTLE_MPS = 0.001  # in the goal, a held tether is kept against any motion faster than this
+SETTLE_MPS = 0.001  # in the goal, a held tether is kept against any motion faster than this, and a slower one
+# that would carry the cargo out of the goal box before the episode ends
 TROUBLE = ("snagged", "blocked", "snapped", "anchor_failed", "refused", "dropped_out")
 
 
@@ -109,6 +110,7 @@ class TetherExpert:
         self.stats = ExpertStats()
         self._cache: tuple[int, np.ndarray] | None = None
         self._pending_plan = self.initial_plan
+        self._time_left_s = self.horizon_steps * self.dt  # until the episode ends (s), read from each observation
 
     def act(self, observation: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
         """One command per robot: 0 keep, 1 release, 2 + j attach to anchor j, the hold command."""
@@ -119,6 +121,7 @@ class TetherExpert:
             raise ValueError(f"observation must have shape ({expected},) for station {self.station.name!r}, "
                              f"got {obs.shape}")
         step = round((1.0 - obs[-1]) * self.horizon_steps)
+        self._time_left_s = max(0, self.horizon_steps - step) * self.dt
         x, v = obs[:2].copy(), obs[2:4].copy()
         held, pulling, holding, los = self._decode(obs)
         events = (info or {}).get("events", [])
@@ -379,12 +382,22 @@ class TetherExpert:
         allowed = [a for a in range(self.n_anchors) if a not in self.excluded]
         return brake_anchor(self.station, point, direction, allowed, sight=los)
 
+    def _drifts_out(self, x: np.ndarray, v: np.ndarray) -> bool:
+        """Whether the cargo, drifting on at ``v`` from ``x``, would leave the goal box before the episode ends: the
+        straight-line prediction of the impact expert's station keeping
+        (:func:`planners.online.station_keeping.drift_margin`); the box is convex, so its end point decides."""
+        x0, x1, y0, y1 = self.station.goal_box
+        ex, ey = x + v * self._time_left_s
+        return not (x0 <= ex <= x1 and y0 <= ey <= y1)
+
     def _in_goal(self, x: np.ndarray) -> bool:
         return self.planner.levels[0].distance(shapely.Point(*x)) < 1e-9
 
     def _stop_and_hold(self, x, v, held, pulling, holding, los, commands) -> None:
-        """In the goal: every tether held, and a held tether kept against any motion left until the cargo rests.
-        A cargo that came to rest outside the goal box (or was pushed out) is planned for again."""
+        """In the goal: every tether held, and a held tether kept against any motion left until the cargo rests,
+        and against a creep too slow to count (below :data:`SETTLE_MPS`) that would still carry it out of the box
+        before the episode ends. A cargo that came to rest outside the goal box (or was pushed out) is planned for
+        again."""
         speed = float(np.linalg.norm(v))
         x0, x1, y0, y1 = self.station.goal_box
         inside_box = x0 <= x[0] <= x1 and y0 <= x[1] <= y1
@@ -399,8 +412,10 @@ class TetherExpert:
                 commands[r] = self.hold  # attaching or reeling: hold it
             elif h is not None and self.hold is None and p and not self.drifts:
                 commands[r] = RELEASE  # version 0 without inertia: letting go stops the cargo
-        if not self.drifts or speed < SETTLE_MPS or self.hold is None:
+        if not self.drifts or self.hold is None or speed == 0.0:
             return
+        if speed < SETTLE_MPS and not self._drifts_out(x, v):
+            return  # a creep that stays in the box to the end
         vhat = v / speed
         pos = self.station.anchor_positions
         opposed = [h for h, p in zip(held, pulling) if h is not None and p
