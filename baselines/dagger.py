@@ -200,13 +200,16 @@ def _evaluate(config: DAggerConfig, scenario: Scenario, run_dir: Path) -> dict[s
     from impact_env.transport.gym_env import TransportEnv
 
     if config.eval_episodes == 0:
-        return {"eval_success": None, "eval_robustness_m": None}
+        return {"eval_success": None, "eval_robustness_m": None, "eval_ms_per_step": None, "eval": []}
     learner = SB3Controller(scenario, run_dir / "model.zip")
     env = TransportEnv(scenario, **(config.env_options or {}))
     results = [run_episode(env, learner, seed=EVAL_SEED0 + k) for k in range(config.eval_episodes)]
     env.close()
     return {"eval_success": float(np.mean([r.success for r in results])),
-            "eval_robustness_m": float(np.mean([r.robustness for r in results]))}
+            "eval_robustness_m": float(np.mean([r.robustness for r in results])),
+            "eval_ms_per_step": float(np.median(np.concatenate([r.controller_ms for r in results]))),
+            "eval": [{"seed": r.seed, "success": bool(r.success), "robustness_m": float(r.robustness)}
+                     for r in results]}
 
 
 def _start(config: DAggerConfig, run_dir: Path) -> list[dict[str, Any]]:
@@ -233,8 +236,8 @@ def dagger(config: DAggerConfig) -> Path:
     those labels took, MILP attempts and accepted re-plans, episodes that ran out of re-plans); every label's
     seconds and the median of the others (ms); the local re-aims; the success of its mixed episodes; the
     learner's error against the labels on them; then the fit's validation error, kept epoch and seconds; the
-    learner's success and robustness alone and the seconds that took; the env steps flown so far (all
-    labelled) and the wall clock of the collection and fits so far."""
+    learner's success, robustness and median ms per step alone, each evaluation episode, and the seconds that
+    took; the env steps flown so far (all labelled) and the wall clock of the collection and fits so far."""
     import torch
 
     scenario = load_scenario(config.scenario)
