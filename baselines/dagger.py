@@ -306,7 +306,8 @@ def _rounds(config: DAggerConfig, scenario: Scenario, run_dir: Path, rows: list[
         write_atomic(run_dir / "dagger.json", json.dumps({"settings": config.settings(), "rounds": rows}, indent=1))
         if not config.quiet:
             success = "-" if row["eval_success"] is None else f"{100 * row['eval_success']:.0f} %"
-            print(f"  validation error {row['val_mse']}, learner alone {success} of {config.eval_episodes}, "
+            val = "-" if row["val_mse"] is None else f"{row['val_mse']:.3g}"
+            print(f"  validation error {val}, learner alone {success} of {config.eval_episodes}, "
                   f"{elapsed:.0f} s so far", flush=True)
     env.close()
     return run_dir

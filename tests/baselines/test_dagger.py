@@ -154,3 +154,21 @@ def test_a_bad_config_is_a_typed_error_naming_the_field(field, value, message):
 
     with pytest.raises(ImpactEnvError, match=f"DAggerConfig.{message}"):
         DAggerConfig(**{"scenario": SCENARIO, field: value})
+
+
+def test_round_zero_can_be_a_recorded_dataset(tmp_path):
+    """`impact-env record`'s episodes are round 0 (the expert's actions as labels, nothing timed); round 1 then
+    labels the learner's episodes as usual."""
+    pytest.importorskip("minari")
+    from baselines.dagger import dagger, load_round
+
+    datasets = tmp_path / "datasets"
+    assert main(["record", SCENARIO, "--episodes", "2", "--out", str(datasets), "--plan",
+                 str(committed_plan("sr", SCENARIO)), "--thrust-noise", "0.05", "--initial-position-noise-m", "0.05",
+                 "--quiet"]) == 0
+    run = dagger(_config(rounds=1, dataset_dir=str(datasets), out=str(tmp_path / "run")))
+    rows = json.loads((run / "dagger.json").read_text())["rounds"]
+    assert [r["dataset_episodes"] for r in rows] == [2, 4] and rows[0]["label_s"] is None
+    assert rows[1]["label_s"] > 0 and rows[1]["expert_acted_share"] < 1
+    recorded = load_round(run, 0)
+    assert [e.steps for e in recorded] == [200, 200] and recorded[0].expert_acted.all()
