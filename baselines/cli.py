@@ -1,5 +1,6 @@
 """``impact-env train`` (baselines/train.py), ``bench`` (baselines/bench.py), ``record`` (baselines/record.py),
-``dataset`` (baselines/task_dataset.py), ``bc`` (baselines/bc.py), ``curves`` (baselines/curves.py)."""
+``dataset`` (baselines/task_dataset.py), ``bc`` (baselines/bc.py), ``dagger`` (baselines/dagger.py), ``curves``
+(baselines/curves.py)."""
 
 from __future__ import annotations
 
@@ -112,6 +113,35 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_quiet(p, "no line per epoch")
     p.set_defaults(func=_bc)
 
+    p = subparsers.add_parser("dagger", help="DAgger: the expert labels the states the learner visits (rounds of BC)",
+                              description="Round 0 clones the expert's own episodes (flown here, or --dataset); "
+                                          "each further round flies the mixed policy, has the expert label every "
+                                          "state visited (re-planning from it when it must: counted and timed), "
+                                          "and refits on everything. One line per round; --resume continues.")
+    p.add_argument("scenario", help="a shipped scenario name (impact-env scenarios) or a .toml file")
+    p.add_argument("--rounds", type=int, default=4, help="rounds after round 0 (default 4)")
+    p.add_argument("--initial-episodes", type=int, default=10, help="expert episodes of round 0 (default 10)")
+    p.add_argument("--dataset", default=None, metavar="DIR",
+                   help="round 0 from the Minari datasets folder `impact-env record --out` wrote instead")
+    p.add_argument("--episodes-per-round", type=int, default=5, help="labelled episodes per round (default 5)")
+    p.add_argument("--beta-decay", type=float, default=0.5,
+                   help="round i flies the expert's action with probability beta_decay**i (default 0.5)")
+    p.add_argument("--eval-episodes", type=int, default=10, help="episodes the learner flies alone after each fit")
+    p.add_argument("--plan", default=None, metavar="JSON", help="the expert's saved plan; planned with the MILP if "
+                                                                "omitted")
+    p.add_argument("--max-replans", type=int, default=3, help="mission re-plans the expert may run per episode")
+    p.add_argument("--epochs", type=int, default=30, help="passes over the data set in each fit")
+    p.add_argument("--batch-size", type=int, default=256, help="minibatch size")
+    p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate")
+    add_seed(p, "seed of the fits, the per-step choices and the training episodes")
+    add_out(p, "the run folder, with model.zip, vecnormalize.json, train.json, dagger.json, rounds/ (default: "
+               "<--runs-dir>/dagger_<scenario>_s<seed>)")
+    p.add_argument("--runs-dir", default="runs", help="parent of the default run folder")
+    p.add_argument("--resume", action="store_true", help="continue the run in the run folder after its last round")
+    add_transport_options(p, REWARD_MODES)
+    add_quiet(p, "no line per round")
+    p.set_defaults(func=_dagger)
+
     p = subparsers.add_parser("dataset", help="expert episodes on a family's kept generated tasks as Minari datasets "
                                               "(training and held-out)",
                               description="Fly the plans of the kept tasks in TASKS_DIR (impact-env filter --out) "
@@ -207,6 +237,21 @@ def _bc(args: argparse.Namespace) -> int:
                                        out=args.out, runs_dir=args.runs_dir, quiet=args.quiet))
     print(f"saved {run_dir / 'model.zip'}; fly it with: impact-env run {args.scenario} "
           f"--controller {run_dir / 'model.zip'}")
+    return 0
+
+
+def _dagger(args: argparse.Namespace) -> int:
+    from baselines.dagger import DAggerConfig, dagger
+
+    options = {k: v for k, v in transport_options(args).items() if v not in (None, 0.0, "dense")}
+    run_dir = dagger(DAggerConfig(
+        scenario=args.scenario, rounds=args.rounds, initial_episodes=args.initial_episodes, dataset_dir=args.dataset,
+        episodes_per_round=args.episodes_per_round, beta_decay=args.beta_decay, eval_episodes=args.eval_episodes,
+        plan=args.plan, max_replans=args.max_replans, env_options=options or None, epochs=args.epochs,
+        batch_size=args.batch_size, learning_rate=args.lr, seed=args.seed, out=args.out, runs_dir=args.runs_dir,
+        resume=args.resume, quiet=args.quiet))
+    print(f"saved {run_dir / 'model.zip'} (rounds in {run_dir / 'dagger.json'}); fly it with: impact-env run "
+          f"{args.scenario} --controller {run_dir / 'model.zip'}")
     return 0
 
 
