@@ -133,7 +133,10 @@ class Recorder:
         for m in measurements[self._seen:]:
             est = ex.identifier.estimate(m.robot, m.object)
             decision = ex.identifier.decisions.get((m.robot, m.object))
-            verdict = None if decision is None else (decision.in_use, decision.z, m.restitution,
+            # the significance test's decision has a z score; the bounded estimator's an interval
+            evidence = (f"z = {decision.z:.1f}" if hasattr(decision, "z")
+                        else f"allowed [{decision.low:.3f}, {decision.high:.3f}]") if decision is not None else ""
+            verdict = None if decision is None else (decision.in_use, evidence, m.restitution,
                                                      m.restitution_robot_side)
             self.record.estimates.append((m.time_s, m.robot, m.object, est.mean, est.std, verdict))
         self._seen = len(measurements)
@@ -267,7 +270,7 @@ def story(scenario, expert, record: EpisodeRecord, result, true_restitution: flo
                 _, r, o, mean, std, verdict = estimates.pop(0)
                 lines.append(f"          identified e({r}-{o}) = {mean:.3f} +- {std:.3f}" + (
                     "" if verdict is None else f" ({'in use' if verdict[0] else 'file value kept'}, "
-                                               f"z = {verdict[1]:.1f}; this impact read {verdict[2]:.3f} from "
+                                               f"{verdict[1]}; this impact read {verdict[2]:.3f} from "
                                                f"the object, {_reading(verdict[3])} from the robot)"))
         else:
             rec = item
@@ -286,6 +289,12 @@ def story(scenario, expert, record: EpisodeRecord, result, true_restitution: flo
             if rec.unreachable:
                 lines.append("          predicted unreachable (dropped from the prediction): "
                              + "; ".join(rec.unreachable))
+    station = expert.mission.station if expert.mission is not None else None
+    for trim in (station.records if station is not None else []):
+        lines.append(f"t={trim.time_s:6.2f} station keeping {trim.goal} by {trim.robot}: drift margin "
+                     f"{trim.drift_margin_m:+.3f} m -> {trim.status}"
+                     + (f" (trim rho {trim.new_robustness:+.3f}, {trim.impacts_added:+d} impacts)"
+                        if trim.new_robustness is not None else ""))
     if expert.mission is not None:
         m = expert.mission.report()
         lines.append(f"mission monitor: {m['checks']} checks, {m['unreachable']} of them found a pending impact "

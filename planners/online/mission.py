@@ -110,6 +110,13 @@ class MissionConfig:
     thrust, within its speed bound (:func:`planners.online.reachability.next_contacts`). Side switches are
     tested on the offline planner's hand-over test with its margin instead (``PlannerConfig.handover``, the
     default :class:`HandoverConfig` when that is None), so the two layers agree on them."""
+    observed_handover_margin: float | None = 0.25
+    """The margin of a side switch whose first impact is past, tested from the robot's observed state relative
+    to the object's (:func:`unflyable_side_switches`): nothing is left to predict but the way round, so less
+    than the planner's ``HandoverConfig.margin`` (0.5), which also covers where a planned first impact leaves
+    the robot. 0.25 is what flying at ``flyability_margin`` (80 %) of the thrust needs on the measured case (a
+    trim round the disc in 6.61 s at 80 %, 5.32 s least, docs/expert_design.md#flyability); None: the
+    planner's margin."""
     station_keeping: StationKeepingConfig | None = field(default_factory=StationKeepingConfig)
     """Trim a stopped object's drift during a held goal with a small re-plan of the nearest free robot
     (:mod:`planners.online.station_keeping`); None: off."""
@@ -146,6 +153,8 @@ class MissionConfig:
         for name in ("reach_tolerance_m", "reach_tolerance_mps"):
             check_number(self, name, PlannerError, low=0)
         check_number(self, "flyability_margin", PlannerError, low=0, low_open=True, high=1)
+        if self.observed_handover_margin is not None:
+            check_number(self, "observed_handover_margin", PlannerError, low=0)
         check_instance(self, "station_keeping", PlannerError, StationKeepingConfig, what="a StationKeepingConfig",
                        none="off")
         check_flag(self, "impact_robust_replans", PlannerError)
@@ -492,10 +501,12 @@ class MissionPlanner:
                 return sc.restitution, (sc.body(robot).mass_kg, sc.body(obj).mass_kg)
         reasons = []
         if cfg.allow_side_switches is False:
-            for sw in unflyable_side_switches(plan, sc, t, self.handover_margin, by_name, model):
+            observed = cfg.observed_handover_margin
+            for sw in unflyable_side_switches(plan, sc, t, self.handover_margin, by_name, model, observed):
                 if robots is None or sw.robot in robots:
+                    m = self.handover_margin if sw.t1_s >= t or observed is None else observed
                     need = "can never get round" if math.isinf(sw.needed_s) else \
-                        f"needs {(1 + self.handover_margin) * sw.needed_s:.1f} s with the margin"
+                        f"needs {(1 + m) * sw.needed_s:.1f} s with the margin"
                     reasons.append(f"side switch {sw.robot} round {sw.object} between {sw.t1_s:.1f} and "
                                    f"{sw.t2_s:.1f} s, {need}, has {sw.available_s:.1f} s")
         chosen = [r for r in sc.robots if robots is None or r.name in robots]

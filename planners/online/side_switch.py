@@ -49,10 +49,12 @@ def side_switches(plan: Plan, scenario: Scenario, after_s: float = -math.inf,
 
 def unflyable_side_switches(plan: Plan, scenario: Scenario, after_s: float = -math.inf,
                             margin: float = DEFAULT_MARGIN, states: dict[str, np.ndarray] | None = None,
-                            model: PairModel | None = None) -> list[SideSwitch]:
+                            model: PairModel | None = None,
+                            observed_margin: float | None = None) -> list[SideSwitch]:
     """The side switches (second impact after ``after_s``) the robot cannot fly with ``margin``
     (``HandoverConfig.margin``: the time there is must be ``1 + margin`` times the least time,
-    :meth:`Handover.flyable`).
+    :meth:`Handover.flyable`); those whose first impact is past and that are tested from the observed
+    ``states`` with ``observed_margin`` instead (None: ``margin``).
 
     A switch whose first impact is at or after ``after_s`` is tested as the offline planner tests it (with
     ``model``'s law if given: ``model(robot, object)`` -> (restitution, (m_robot, m_object))). One whose first
@@ -64,12 +66,15 @@ def unflyable_side_switches(plan: Plan, scenario: Scenario, after_s: float = -ma
     the time left."""
     out = []
     for sw in side_switches(plan, scenario, after_s, model):
+        m = margin
         if sw.t1_s < after_s:
             needed = _needed_from_state_s(sw, scenario, states, model)
             if needed is None:
                 continue
             sw = dataclasses.replace(sw, from_s=after_s, needed_s=needed)
-        if not sw.flyable(margin):
+            if observed_margin is not None and states is not None and sw.robot in states and sw.object in states:
+                m = observed_margin
+        if not sw.flyable(m):
             out.append(sw)
     return out
 

@@ -107,6 +107,30 @@ def test_a_switch_under_way_is_tested_from_the_observed_state(two_objects):
     assert blind.needed_s == pytest.approx(7.72, abs=0.01)
 
 
+
+def test_a_switch_under_way_has_the_observed_margin(two_objects):
+    """The switch under way above needs 6.93 s of the 9 s left, 1.30 times its least time: refused with the
+    planner's hand-over margin (0.5), flown with the margin of a switch tested from the observed state
+    (``MissionConfig.observed_handover_margin``, 0.25). Before the stop, or without the observed states, the
+    planner's margin stays: the blind way round (7.72 s) is refused with either."""
+    plan = stop_then_push(12.0)
+    obj = np.array([2.0, 3.0, 0.0, 0.0, 0.0, 0.0])
+    in_front = np.array([2.5, 3.0, 0.0, 0.0, 0.0, 0.0])
+    states = {"R1": in_front, "O1": obj}
+    assert MissionConfig().observed_handover_margin == 0.25
+    assert len(unflyable_side_switches(plan, two_objects, 11.0, states=states)) == 1
+    assert unflyable_side_switches(plan, two_objects, 11.0, states=states, observed_margin=0.25) == []
+    assert len(unflyable_side_switches(plan, two_objects, 11.0, observed_margin=0.25)) == 1
+    # tested at 5 s, before the stop: the whole hand-over (7.72 s) in the 10 s between the impacts, 1.30 times,
+    # is the planner's to judge, with the planner's margin whatever the observed one
+    (planned,) = unflyable_side_switches(stop_then_push(10.0), two_objects, 5.0, states=states,
+                                         observed_margin=0.25)
+    assert planned.from_s is None and planned.needed_s == pytest.approx(7.72, abs=0.01)
+    assert unflyable_side_switches(stop_then_push(10.0), two_objects, 5.0, states=states, margin=0.25) == []
+    with pytest.raises(PlannerError, match="observed_handover_margin"):
+        MissionConfig(observed_handover_margin=-0.1)
+
+
 def test_box_reachable_keeps_a_velocity_bound():
     """From rest, 1 m in 4 s at 1 m/s^2: reachable; not with a bound of 0.2 m/s (4 s at 0.2 m/s is 0.8 m), nor
     when the robot is already faster than the bound; with zero tolerances it is bounds_feasible."""
