@@ -29,6 +29,7 @@ REQUIRED = {  # valid values of required fields
     "TrainConfig": {"algo": "ppo", "scenario": "corridor"},
     "RLlibTrainConfig": {"scenario": "corridor"},
     "BCConfig": {"scenario": "corridor"},
+    "DAggerConfig": {"scenario": "corridor"},
     "Sb3PpoConfig": {"scenario": "corridor"},
     "MarlConfig": {"algorithm": "mappo", "task": "corridor"},
     "TaskBCConfig": {"family": "throw_and_catch"},
