@@ -256,8 +256,6 @@ def train(config: TrainConfig) -> Path:
     _save(model, venv, run_dir, config, scenario_name, env_id, timesteps, n_envs, interrupted,
           time.perf_counter() - start + (previous or {}).get("wall_time_s", 0.0))
     for env in (venv, eval_env):
-        if interrupted:
-            _stop_workers(env)
         try:
             env.close()
         except Exception:  # noqa: BLE001 - after Ctrl-C the worker processes may be gone already
@@ -267,25 +265,6 @@ def train(config: TrainConfig) -> Path:
               f"impact-env train {config.algo} {config.scenario} --out {run_dir} --resume", flush=True)
         raise KeyboardInterrupt
     return run_dir
-
-
-def _stop_workers(venv: Any) -> None:
-    """After Ctrl-C, end a SubprocVecEnv's workers instead of asking them to close: the interrupt may have cut
-    the main process's read of a worker's reply in half, and a graceful close would then wait on that pipe for
-    bytes that never come. Nothing is lost: the model and the normalisation statistics live in this process."""
-    from stable_baselines3.common.vec_env import SubprocVecEnv
-
-    inner = getattr(venv, "unwrapped", venv)
-    if not isinstance(inner, SubprocVecEnv) or inner.closed:
-        return
-    for process in inner.processes:
-        process.terminate()
-    for process in inner.processes:
-        process.join(timeout=10)
-    for remote in inner.remotes:
-        remote.close()
-    inner.waiting = False
-    inner.closed = True
 
 
 def _worker_env(env_cls: type, **kwargs: Any):
