@@ -136,8 +136,11 @@ def test_ctrl_c_saves_the_model_and_resume_continues_it(tiny_yaml, tmp_path):
     cmd = [sys.executable, "-m", "impact_env.cli", "train", "ppo", "throw_and_catch_exp", "--timesteps", "100000000",
            "--n-envs", "2", "--hyperparams", str(tiny_yaml), "--out", str(run)]
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    # the terminal's SIGINT, whatever this process inherited: a suite started in the background (`make test &`,
+    # nohup) ignores SIGINT, a child inherits that, and Python then keeps Ctrl-C ignored
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                            start_new_session=True, cwd=tmp_path)
+                            start_new_session=True, cwd=tmp_path,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         _wait_for(proc, "  step ", timeout_s=300)  # training has started
         os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does: the whole process group
