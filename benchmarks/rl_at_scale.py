@@ -14,7 +14,9 @@ and ``result.json`` when the budget is spent and the final evaluation done), wit
 (default ``<runs>/logs/``). ``--trainer-args`` passes further options to every trainer.
 Runs go in the order seed, then scenario, then algorithm, so the first seed of every scenario finishes
 first. A killed queue started again with the same command skips the finished cells and resumes the others
-from their last checkpoint. A larger ``--frames`` than a finished cell's budget trains that cell on from its
+from their last checkpoint. On a new machine (no run folders), the cells already in ``--out``/cells.jsonl count
+as finished: their ``result.json`` is written back from the published cell (:func:`restore`) before the queue
+starts, so only the missing runs train. A larger ``--frames`` than a finished cell's budget trains that cell on from its
 last checkpoint (its earlier result is kept as ``result_<budget>.json``).
 
 After every run, ``results/rl_at_scale/`` is rebuilt from the run folders (:func:`publish`): ``cells.jsonl``
@@ -172,6 +174,24 @@ def publish(runs_dir: Path, out: Path = RESULTS, report: bool = True) -> list[di
     return store.cells()
 
 
+def restore(out: Path, runs_dir: Path) -> list[str]:
+    """Write ``result.json`` back into the run folder of every published cell of ``out``/cells.jsonl whose folder
+    has none (a new machine, or run folders deleted), so that :func:`status` sees it as finished and the queue does
+    not train it again (a run being extended to a larger budget finds its earlier result there and goes on from
+    its checkpoint). Returns the names of the runs restored."""
+    from impact_env.results_store import CellStore, write_atomic
+
+    restored = []
+    for cell in CellStore(out / "cells.jsonl", cell_key).cells():
+        folder = runs_dir / str(cell["run"])
+        if (folder / "result.json").exists():
+            continue
+        result = {k: v for k, v in cell.items() if k != "run"}
+        write_atomic(folder / "result.json", json.dumps(result).encode("utf-8"))
+        restored.append(folder.name)
+    return restored
+
+
 def print_status(runs: list[Run], runs_dir: Path) -> dict[str, int]:
     counts = {"done": 0, "partial": 0, "pending": 0, "extend": 0}
     for run in runs:
@@ -224,6 +244,9 @@ def main(argv: list[str] | None = None) -> None:
         cells = publish(args.runs, args.out)
         print(f"{len(cells)} finished cells in {args.out}/cells.jsonl")
         return
+    restored = restore(args.out, args.runs)
+    if restored:
+        print(f"{len(restored)} finished run(s) restored from {args.out}/cells.jsonl into {args.runs}", flush=True)
     try:
         runs = queue([k for k in args.kinds.split(",") if k], [int(s) for s in args.seeds.split(",")], args.frames,
                      [s for s in args.scenarios.split(",") if s], args.compile, tuple(shlex.split(args.trainer_args)))

@@ -257,3 +257,18 @@ def test_report_interquartile_means_and_files(tmp_path):
     for name in ("summary.md", "summary.json", "curves_steps.png", "curves_wall.png", "profile.png"):
         assert (tmp_path / name).stat().st_size > 0, name
     assert json.loads((tmp_path / "summary.json").read_text())["overall"][0]["algorithm"] == "sb3_ppo"
+
+
+def test_restore_counts_published_cells_as_finished_on_a_new_machine(tmp_path, trained):
+    runs_dir, out = tmp_path / "runs", tmp_path / "out"
+    shutil.copytree(trained, runs_dir / trained.name)
+    publish(runs_dir, out, report=False)
+    shutil.rmtree(runs_dir)  # a new machine: the published cells, no run folders
+    run = Run("sb3_ppo", SCENARIO, 0, 64)
+    assert status(run, runs_dir) == ("pending", 0)
+    assert rl_at_scale.restore(out, runs_dir) == [trained.name]
+    assert status(run, runs_dir) == ("done", 64)
+    assert json.loads((runs_dir / trained.name / "result.json").read_text()) == \
+        json.loads((trained / "result.json").read_text())
+    assert rl_at_scale.restore(out, runs_dir) == []  # a folder with its result is left alone
+    assert publish(runs_dir, out, report=False) == publish(runs_dir, out, report=False)
