@@ -28,7 +28,8 @@ keeps them all busy shows T times its wall rate's worth of CPU time, so on an id
 of the same run (the load average is recorded with every line); the table prints both. Under load, run it
 with ``OMP_WAIT_POLICY=PASSIVE`` (recorded with every line; the VMAS subprocess inherits it): OpenMP's
 threads then sleep at a barrier instead of spinning, so a thread that waits for a descheduled one burns no
-CPU time.
+CPU time. On an idle machine leave it unset: there, sleeping at every barrier cost the 2-thread batched world
+two thirds of its rate at 4,096 envs (docs/batched.md, "OpenMP's wait policy").
 """
 
 from __future__ import annotations
