@@ -243,6 +243,7 @@ def test_report_interquartile_means_and_files(tmp_path):
     assert rows[("mappo", "a")]["policy"] == ["sampled"] and rows[("mappo", "a")]["deterministic_success"] == [0.5]
     assert rows[("mappo", "a")]["batched_success"] == [0.8] and rows[("mappo", "a")]["robustness"] == [0.2]
     assert numbers["transfer"]["max_abs_points"] == pytest.approx(10)  # mappo's sampled 0.8 against 0.9
+    assert numbers["transfer"]["differ_at_0_01"] == []  # 8 of 10 against 9 of 10 is no evidence of a difference
     text = markdown(numbers)
     assert "| a | sb3_ppo | 0,1,2,3 | 1k | 2.5 | 100 | 10 | deterministic |" in text and "0 / 20 / 40 / 100" in text
     assert "| a | mappo | 0 | 1k | 1.0 | 100 | 10 | sampled | 90 [90, 90] | 90 | 80 | 50 |" in text
@@ -272,3 +273,13 @@ def test_restore_counts_published_cells_as_finished_on_a_new_machine(tmp_path, t
         json.loads((trained / "result.json").read_text())
     assert rl_at_scale.restore(out, runs_dir) == []  # a folder with its result is left alone
     assert publish(runs_dir, out, report=False) == publish(runs_dir, out, report=False)
+
+
+def test_success_differ_is_fishers_exact_test():
+    pytest.importorskip("scipy")
+    from benchmarks.rl_at_scale_report import success_differ
+
+    assert success_differ(1.0, 0.0, 50) and success_differ(0.9, 0.6, 100)  # p = 1e-29, 1.2e-6
+    assert not success_differ(0.5, 0.54, 50) and not success_differ(0.8, 0.9, 10)
+    assert not success_differ(0.3, 0.5, 50)  # p = 0.066: a 20-point gap that 50 episodes cannot tell apart
+    assert success_differ(0.3, 0.5, 50, alpha=0.1)
