@@ -120,8 +120,8 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """A temporary path beside ``path`` (same folder, same suffix) for the block to write; when the block ends
     without an error the file is flushed to disk and renamed over ``path`` (``os.replace``: atomic on one file
     system), otherwise removed. The folder is created if missing. A path that is something else than a regular
-file (a folder, a device) is refused, and any failure of the file system is an
-:class:`~impact_env.errors.OutputPathError` naming the path. For writers that want a path, not a string
+    file (a folder, a device) is refused, and any failure of the file system is an
+    :class:`~impact_env.errors.OutputPathError` naming the path. For writers that want a path, not a string
     (``Plan.save``, ``csv``, ``Figure.savefig``, which reads the format from the suffix)::
 
         with atomic_path(out / "bench.png") as tmp:
