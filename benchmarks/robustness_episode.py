@@ -293,12 +293,16 @@ def story(scenario, expert, record: EpisodeRecord, result, true_restitution: flo
     for trim in (station.records if station is not None else []):
         lines.append(f"t={trim.time_s:6.2f} station keeping {trim.goal} by {trim.robot}: drift margin "
                      f"{trim.drift_margin_m:+.3f} m -> {trim.status}"
-                     + (f" (trim rho {trim.new_robustness:+.3f}, {trim.impacts_added:+d} impacts)"
-                        if trim.new_robustness is not None else ""))
+                     + (f" (trim rho {trim.new_robustness:+.3f}, {trim.impacts_added:+d} impacts, {trim.planner}"
+                        + (f", delta {trim.delta_mps:.4f} m/s" if trim.delta_mps is not None else "") + ")"
+                        if trim.new_robustness is not None else "")
+                     + (f"; the object's error {trim.observed_error_mps:.4f} m/s"
+                        if trim.observed_error_mps is not None else ""))
     if expert.mission is not None:
         m = expert.mission.report()
         lines.append(f"mission monitor: {m['checks']} checks, {m['unreachable']} of them found a pending impact "
-                     f"unreachable; {m['attempts']} re-plan attempts, {m['replans']} accepted")
+                     f"unreachable; {m['attempts']} re-plan attempts, {m['replans']} accepted; "
+                     f"{m['settled']} kept a settled success")
     lines.append(f"result: robustness {result.robustness:+.3f} m, success {result.success}; "
                  f"unplanned contacts {dict(sorted(expert.book.unplanned.items())) or 'none'}")
     for row in task_parts(scenario, result.positions, scenario.control_period_s):

@@ -6,9 +6,11 @@ it drifting: nothing in the plan brings it back. At each of the mission monitor'
 still open, the object's free flight from its observed state is predicted (:func:`drift_margin`); when it
 comes closer than ``margin_m`` to the region's edge before ``b``, the nearest robot with no impact left plans
 a trim: the offline planner on a scenario of that robot and that object alone (the rest of the task that
-reads only those two, progressed to now, as the task), under the mission's node budget. Its impacts and the
-two bodies' curves are spliced into the plan; every other body keeps its own. A trim is flown only when its
-robustness beats the drift's and the robot can fly its next segment (the mission layer's flyability check).
+reads only those two, progressed to now, as the task), under the mission's node budget, impact-robust (the trim
+whose impacts tolerate the largest post-impact velocity error: each trim takes the noise again) where the
+planner finds one. Its impacts and the two bodies' curves are spliced into the plan; every other body keeps its
+own. A trim is flown only when its robustness beats the drift's and the robot can fly its next segment (the
+mission layer's flyability check).
 Why, and what was measured: ``docs/expert_design.md#station-keeping``.
 """
 
@@ -20,10 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from impact_env.config_checks import check_integer, check_number
+from impact_env.config_checks import check_flag, check_integer, check_number
 from impact_env.stl import Always, And, Formula, InRegion, conjuncts, progress, without_constants
 from impact_env.transport.scenario import Body, Scenario
 from planners.errors import PlannerError
+from planners.online.sampling import PlanSampler
 from planners.online.splicing import initial_state, splice, without_end_states
 from planners.plan import BodyPlan, Plan, Segment
 
@@ -46,11 +49,17 @@ class StationKeepingConfig:
     """Trims per episode."""
     min_window_left_s: float = 2.0
     """No trim is planned when less than this is left of the window (s): there is no time to get there."""
+    impact_robust: bool = True
+    """Plan the trim with the impact-robust planner: the trim that tolerates the largest post-impact velocity
+    error (delta, m/s per axis) over the rest of the window, which sends the object deeper into the region and
+    slower than the trim that is best if its impact were exact; the spatially robust planner when that finds
+    no delta > 0 (the reason in the record). False: always the spatially robust planner."""
 
     def __post_init__(self) -> None:
         check_number(self, "margin_m", PlannerError, low=0)
         check_integer(self, "max_trims", PlannerError, low=0)
         check_number(self, "min_window_left_s", PlannerError, low=0)
+        check_flag(self, "impact_robust", PlannerError)
 
 
 @dataclass(frozen=True)
@@ -94,6 +103,10 @@ class TrimRecord:
     status: str  # "accepted", "kept: <reason>"
     new_robustness: float | None = None
     impacts_added: int = 0
+    planner: str = ""  # the trim's planner ("sr" or "ir")
+    delta_mps: float | None = None  # an impact-robust trim's delta
+    impact_robust: str = ""  # why a trim asked impact-robust is not
+    observed_error_mps: float | None = None  # the object's velocity error against the plan when the trim was asked
 
 
 class StationKeeper:
@@ -102,8 +115,9 @@ class StationKeeper:
     Args:
         scenario: the episode's scenario.
         config: :class:`StationKeepingConfig`.
-        solve: ``solve(derived_scenario, t, plan, intervals, record)`` -> Plan or a reason string: the mission
-            planner's re-plan of a derived scenario under its node budget.
+        solve: ``solve(derived_scenario, t, plan, intervals, record, impact_robust)`` -> Plan or a reason string:
+            the mission planner's re-plan of a derived scenario under its node budget (impact-robust first when
+            ``impact_robust``, the reason it is not in ``record.impact_robust``).
         grid_dt: the offline plan's grid interval (s); a trim's grid has intervals as long.
     """
 
@@ -174,30 +188,55 @@ class StationKeeper:
             return initial_state(body, s[:2], s[3:5], sc)
 
         pair = _two_bodies(plan, robot.name, obj.name)
+        # the error the object's last impact left it with (per axis, m/s: its velocity against the plan's): an
+        # impact-robust trim that tolerates less guarantees nothing against such noise, and the spatially robust
+        # trim's nominal margin is flown instead
+        seen = float(np.max(np.abs(states[index[obj.name]][3:5] - PlanSampler(plan).velocity(obj.name, t))))
+        record.observed_error_mps = seen
         for intervals in grids:
             derived = dataclasses.replace(sc, tf_s=remaining, task=str(task), robots=(moved(robot),),
                                           objects=(moved(obj),), planner_intervals=intervals)
+            best: tuple[Plan, Plan] | None = None  # (trim, spliced plan)
             for scenario in (derived, without_end_states(derived)):
-                solved = self.solve(scenario, t, pair, intervals, record)
+                solved = self.solve(scenario, t, pair, intervals, record, self.config.impact_robust)
+                if not isinstance(solved, str) and solved.planner == "ir" and _delta(solved) < seen:
+                    exact = self.solve(scenario, t, pair, intervals, record, False)
+                    solved = solved if isinstance(exact, str) else exact
                 if isinstance(solved, str):
+                    if best is not None:
+                        break
                     record.status = solved
                     if solved in _TRY_AGAIN:
                         continue
                     return None
-                record.new_robustness = solved.robustness
-                if not solved.impacts:
-                    record.status = "kept: the trim has no impact"
-                    return None
-                if solved.robustness <= margin:
-                    record.status = "kept: no better than the drift"
+                if best is None:
+                    record.new_robustness = solved.robustness
+                    record.planner, record.delta_mps = solved.planner, solved.delta_mps
+                if not solved.impacts or solved.robustness <= margin:
+                    if best is not None:
+                        break
+                    record.status = ("kept: the trim has no impact" if not solved.impacts
+                                     else "kept: no better than the drift")
                     return None
                 trimmed, _ = splice(pair, solved, t)
                 spliced = _merged(plan, trimmed, t, {robot.name, obj.name})
                 reasons = unflyable(spliced, t, {robot.name})
                 if reasons:
-                    record.status = "kept: not flyable (" + "; ".join(reasons) + ")"
+                    if best is None:
+                        record.status = "kept: not flyable (" + "; ".join(reasons) + ")"
                     continue
+                if best is None or _delta(solved) > _delta(best[0]):
+                    best = (solved, spliced)
+                if _delta(solved) < seen:
+                    break  # a spatially robust trim (or one tolerating less than the noise seen): the first flown
+                # asked impact-robust, the trim with the end states is compared with the one without them: the
+                # object's end state (at rest at tf) can cost the trim most of the noise it tolerates, and what
+                # the held goal needs is the noise it tolerates (the larger delta is flown)
+            if best is not None:
+                solved, spliced = best
                 record.status = "accepted"
+                record.new_robustness = solved.robustness
+                record.planner, record.delta_mps = solved.planner, solved.delta_mps
                 record.impacts_added = len(solved.impacts)
                 return spliced, set(done)
         return None
@@ -220,10 +259,18 @@ class StationKeeper:
         return [dataclasses.asdict(r) for r in self.records]
 
 
+def _delta(trim: Plan) -> float:
+    """The post-impact velocity error a trim tolerates (m/s; 0 for a spatially robust one)."""
+    return float(trim.delta_mps or 0.0) if trim.planner == "ir" else 0.0
+
+
 def _two_bodies(plan: Plan, robot: str, obj: str) -> Plan:
     """The plan restricted to one robot and one object (their curves, no impacts: both have none left), as a
-    spatially robust plan: a trim is one small impact, re-planned spatially robust even in an impact-robust
-    plan (whose copies then cover the other impacts, and the trim is flown by the plan's contact rule)."""
+    spatially robust plan. Only the trim's curves and impacts are merged (:func:`_merged`), never an
+    impact-robust trim's copies: the trim's object starts from its observed state, so its first impact's copies
+    are its nominal curve, and the local layer re-aims each impact at the observed state anyway; in an
+    impact-robust plan the plan's copies still cover its own impacts, and the trim is flown by the plan's
+    contact rule."""
     bodies = {name: plan.bodies[name] for name in (robot, obj)}
     return Plan(plan.scenario, "sr", plan.robustness, bodies, [], plan.solver, stats=dict(plan.stats))
 
