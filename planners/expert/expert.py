@@ -187,7 +187,7 @@ class Expert:
         self.selector = ReferenceSelector(plan, self.grid_dt, self.dt, strategy, cfg.replan_intervals,
                                           disc_offset=cfg.disc_offset, box=self._safe_box)
         self.mission = (MissionPlanner(sc, plan, cfg.mission, planner_config, cfg.aim_final_position,
-                                       cfg.late_grace_s)
+                                       cfg.late_grace_s, identified=cfg.identification is not None)
                         if cfg.mission is not None else None)
         self.stats = ExpertStats()
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}

@@ -200,11 +200,13 @@ class MissionPlanner:
         late_grace_s: a planned impact not yet observed is still approached this long after its time (the
             expert's ``ExpertConfig.late_grace_s``): while one is, its robot and object are not tested for
             reachability.
+        identified: whether the expert identifies restitution online (``ExpertConfig.identification``): station
+            keeping plans impact-robust trims only then (:class:`~planners.online.station_keeping.StationKeeper`).
     """
 
     def __init__(self, scenario: Scenario, plan: Plan, config: MissionConfig | None = None,
                  planner_config: PlannerConfig | None = None, aim_final_position: bool = False,
-                 late_grace_s: float = 0.5) -> None:
+                 late_grace_s: float = 0.5, identified: bool = True) -> None:
         self.scenario = scenario
         self.aim_final_position = aim_final_position
         self.late_grace_s = float(late_grace_s)
@@ -221,7 +223,7 @@ class MissionPlanner:
                           len(plan.bodies[scenario.robots[0].name].segments[0].control_points) - 1)
         self.grid_dt = scenario.tf_s / self.intervals
         keeping = self.config.station_keeping
-        self.station = (StationKeeper(scenario, keeping, self._solve, self.grid_dt)
+        self.station = (StationKeeper(scenario, keeping, self._solve, self.grid_dt, identified)
                         if keeping is not None and held_goals(self.formula, {o.name for o in scenario.objects})
                         else None)
         self.reset(plan)
