@@ -4,11 +4,14 @@ world: ``impact-env bc-rl SCENARIO --policy BC_FOLDER --out DIR``.
 The policy starts as the BC (or DAgger) policy of ``--policy`` (``impact-env bc`` or ``impact-env dagger``: an
 SB3 ``MlpPolicy``), with its architecture and its observation statistics, which stay frozen (the weights were
 fitted to them). Every PPO gradient step adds the negative log-likelihood of a minibatch of the expert's
-(observation, action) pairs, weighted by ``bc_weight * 0.5 ** (max(0, t - critic_warmup_frames) /
-bc_half_life_frames)`` at env-step t, to PPO's loss (the BC term of DAPG, Rajeswaran et al. 2018, or of
-"PPO + BC"): early on the expert keeps the policy where BC put it, later the reward decides. For the first
-``critic_warmup_frames`` env-steps only the value network learns (its weights are fresh: BC fits the actor
-only, and advantages from an untrained critic would undo the BC policy before the reward could say anything).
+(observation, action) pairs, weighted by ``bc_weight * 0.5 ** ((t - warm-up) / bc_half_life_frames)`` at
+env-step t, to PPO's loss (the BC term of DAPG, Rajeswaran et al. 2018, or of "PPO + BC"): early on the expert
+keeps the policy where BC put it, later the reward decides. For the first ``critic_warmup_rollouts`` only the
+value network learns (its weights are fresh: BC fits the actor only, and advantages from an untrained critic
+would undo the BC policy before the reward could say anything). A rollout is, by default, one whole episode
+of every env: the batched world's envs run in lockstep, and with SB3's short rollouts (16 steps) the critic
+only ever saw one stretch of the episode at a time; on the corridor that made every setting tried lose
+success as training went on, while whole-episode rollouts improved it steadily (docs/baselines.md).
 The expert pairs are the labels of the DAgger run folder the policy comes from (``rounds/``; a BC run of
 ``dagger --rounds 0`` too), else the Minari dataset ``impact-env bc`` was fitted to (``dataset_dir``).
 
@@ -25,7 +28,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -68,20 +71,21 @@ class BcRlConfig:
     """Env-step budget of the fine-tuning (the critic's warm-up included)."""
     bc_weight: float = 1.0
     """Weight of the BC loss (the expert actions' negative log-likelihood) against PPO's, before it decays."""
-    bc_half_life_frames: int | None = 200_000
+    bc_half_life_frames: int | None = 1_000_000
     """Env-steps after the warm-up in which the BC weight halves; None: constant."""
     bc_batch_size: int = 2048
     """Expert pairs per gradient step."""
-    critic_warmup_frames: int = 32_768
-    """Env-steps at the start during which only the value network learns (0: none)."""
+    critic_warmup_rollouts: int = 1
+    """Rollouts at the start during which only the value network learns (0: none)."""
     log_std: float | None = None
     """The Gaussian's log standard deviation at the start; None: the BC policy's own."""
-    num_envs: int = 512
+    num_envs: int = 256
     """Envs of the batch."""
-    n_steps: int = 16
-    """Steps of each env per rollout."""
-    batch_size: int = 2048
-    """Env-steps per gradient step."""
+    n_steps: int | None = None
+    """Steps of each env per rollout; None: the scenario's horizon (every rollout one whole episode per env)."""
+    batch_size: int | None = None
+    """Env-steps per gradient step, a divisor of num_envs x n_steps; None: num_envs x the largest divisor of
+    n_steps up to 32."""
     n_epochs: int = 4
     """Passes over each rollout."""
     lr: float = 1e-4
@@ -94,12 +98,22 @@ class BcRlConfig:
     """PPO's clip range."""
     ent_coef: float = 0.0
     """Entropy bonus."""
+    normalize_advantage: bool = False
+    """Normalise the advantages in each minibatch (SB3's default). Off: the dense reward is a robustness increment,
+    zero wherever the task's minimum does not move (most of a corridor episode), and normalising a minibatch of
+    near-zero advantages turns the critic's noise into full-size policy steps."""
     thrust_noise: float = 0.05
     """Multiplicative thrust noise of the training world."""
     initial_position_noise_m: float = 0.05
     """Objects start within this radius (m)."""
     reward_mode: str = "dense"
     """The world's reward (``dense``, ``sparse``, ``conjuncts``)."""
+    fuel_penalty: float = 0.0
+    """Reward cost per N s of fuel."""
+    restitution: float | None = None
+    """Simulate with this restitution instead of the scenario's; None: the scenario's."""
+    impact_velocity_noise_mps: float = 0.0
+    """A uniform error in [-M, M] m/s per axis on an object's velocity after each robot-object impact."""
     compile: bool = False
     """Run the world's torch.compile kernels."""
     checkpoint_frames: int = 131_072
@@ -117,11 +131,13 @@ class BcRlConfig:
             check_text(self, name, ImpactEnvError)
         check_text(self, "dataset_dir", ImpactEnvError, none="Minari's own folder")
         check_integer(self, "seed", ImpactEnvError, low=0)
-        for name in ("frames", "bc_batch_size", "num_envs", "n_steps", "batch_size", "n_epochs", "checkpoint_frames",
-                     "eval_episodes", "threads"):
+        for name in ("frames", "bc_batch_size", "num_envs", "n_epochs", "checkpoint_frames", "eval_episodes",
+                     "threads"):
             check_integer(self, name, ImpactEnvError, low=1)
+        check_integer(self, "n_steps", ImpactEnvError, low=1, none="the scenario's horizon")
+        check_integer(self, "batch_size", ImpactEnvError, low=1, none="num_envs x a divisor of n_steps up to 32")
         check_integer(self, "bc_half_life_frames", ImpactEnvError, low=1, none="a constant weight")
-        check_integer(self, "critic_warmup_frames", ImpactEnvError, low=0)
+        check_integer(self, "critic_warmup_rollouts", ImpactEnvError, low=0)
         check_number(self, "bc_weight", ImpactEnvError, low=0)
         check_number(self, "log_std", ImpactEnvError, low=-20, high=2, none="the BC policy's own")
         for name in ("lr", "clip_range"):
@@ -129,33 +145,53 @@ class BcRlConfig:
         check_number(self, "gamma", ImpactEnvError, low=0, high=1, low_open=True)
         check_number(self, "gae_lambda", ImpactEnvError, low=0, high=1)
         check_number(self, "ent_coef", ImpactEnvError, low=0)
-        for name in ("thrust_noise", "initial_position_noise_m"):
+        for name in ("thrust_noise", "initial_position_noise_m", "fuel_penalty", "impact_velocity_noise_mps"):
             check_number(self, name, ImpactEnvError, low=0)
+        check_number(self, "restitution", ImpactEnvError, low=0, high=1, none="the scenario's")
         check_choice(self, "reward_mode", ImpactEnvError, REWARD_MODES)
-        for name in ("compile", "eval_batched_world"):
+        for name in ("compile", "eval_batched_world", "normalize_advantage"):
             check_flag(self, name, ImpactEnvError)
-        if (self.num_envs * self.n_steps) % self.batch_size:
+        if self.n_steps and self.batch_size and (self.num_envs * self.n_steps) % self.batch_size:
             fail("BcRlConfig.batch_size", self.batch_size, f"a divisor of num_envs x n_steps ({self.num_envs} x "
                  f"{self.n_steps} = {self.num_envs * self.n_steps})", ImpactEnvError)
+
+    def with_horizon(self, horizon_steps: int) -> BcRlConfig:
+        """This config with ``n_steps`` and ``batch_size`` filled in for a scenario of ``horizon_steps``."""
+        n_steps = self.n_steps or horizon_steps
+        divisor = max(d for d in range(1, min(32, n_steps) + 1) if n_steps % d == 0)
+        return replace(self, n_steps=n_steps, batch_size=self.batch_size or self.num_envs * divisor)
+
+    @property
+    def rollout_frames(self) -> int:
+        """Env-steps per rollout (n_steps filled in: :meth:`with_horizon`)."""
+        if self.n_steps is None:
+            raise ImpactEnvError("BcRlConfig.n_steps is the scenario's horizon: call with_horizon() first")
+        return self.num_envs * self.n_steps
 
     @property
     def chunk_frames(self) -> int:
         """Env-steps between checkpoints: whole rollouts."""
-        rollout = self.num_envs * self.n_steps
-        return -(-self.checkpoint_frames // rollout) * rollout
+        return -(-self.checkpoint_frames // self.rollout_frames) * self.rollout_frames
+
+    @property
+    def warmup_frames(self) -> int:
+        """Env-steps of the critic's warm-up."""
+        return self.critic_warmup_rollouts * self.rollout_frames
 
     def world_options(self) -> dict[str, Any]:
-        return {"thrust_noise": self.thrust_noise, "initial_position_noise_m": self.initial_position_noise_m,
-                "reward_mode": self.reward_mode}
+        options = {"thrust_noise": self.thrust_noise, "initial_position_noise_m": self.initial_position_noise_m,
+                   "reward_mode": self.reward_mode, "fuel_penalty": self.fuel_penalty,
+                   "impact_velocity_noise_mps": self.impact_velocity_noise_mps}
+        return options | ({} if self.restitution is None else {"restitution": self.restitution})
 
     def bc_weight_at(self, frames: int) -> float:
         """The BC term's weight in the update after ``frames`` env-steps (0 during the critic's warm-up, when
         the actor does not learn)."""
-        if frames <= self.critic_warmup_frames:
+        if frames <= self.warmup_frames:
             return 0.0
         if self.bc_half_life_frames is None:
             return self.bc_weight
-        return self.bc_weight * 0.5 ** ((frames - self.critic_warmup_frames) / self.bc_half_life_frames)
+        return self.bc_weight * 0.5 ** ((frames - self.warmup_frames) / self.bc_half_life_frames)
 
 
 class FrozenStatistics(RunningMeanStd):
@@ -201,7 +237,7 @@ class BCRegularisedPPO(PPO):
         self._update_learning_rate(self.policy.optimizer)
         clip_range = self.clip_range(self._current_progress_remaining)  # type: ignore[operator]
         cfg = self.bc_config
-        warmup = self.num_timesteps <= cfg.critic_warmup_frames
+        warmup = self.num_timesteps <= cfg.warmup_frames
         weight = cfg.bc_weight_at(self.num_timesteps)
         rng = np.random.default_rng([cfg.seed, self.num_timesteps])  # the same minibatches after a resume
         rows: dict[str, list[float]] = {"policy_loss": [], "value_loss": [], "bc_nll": [], "clip_fraction": []}
@@ -271,6 +307,9 @@ def initial_policy(cfg: BcRlConfig, observation_space: Any, action_space: Any) -
     from impact_env.transport.scenario import load_scenario
 
     folder = Path(cfg.policy)
+    if not (folder / "model.zip").is_file():
+        raise ImpactEnvError(f"{folder} holds no model.zip: --policy is the run folder of `impact-env bc` or "
+                             "`impact-env dagger`")
     meta = read_train_json(folder)
     check_scenario(meta, load_scenario(cfg.scenario), str(folder))
     if meta.get("algo", "ppo") != "ppo" or meta.get("multiagent"):
@@ -295,6 +334,7 @@ def build(cfg: BcRlConfig, venv_monitor: Any) -> tuple[BCRegularisedPPO, Any]:
 
     from impact_env.transport.scenario import load_scenario
 
+    cfg = cfg.with_horizon(venv_monitor.venv.world.horizon_steps)
     bc, stats = initial_policy(cfg, venv_monitor.observation_space, venv_monitor.action_space)
     venv = VecNormalize(venv_monitor, gamma=cfg.gamma, norm_obs=stats.norm_obs, clip_obs=stats.clip_obs,
                         epsilon=stats.epsilon)
@@ -305,7 +345,8 @@ def build(cfg: BcRlConfig, venv_monitor: Any) -> tuple[BCRegularisedPPO, Any]:
     model = BCRegularisedPPO(
         "MlpPolicy", venv, config=cfg, expert_obs=venv.normalize_obs(obs), expert_actions=act, n_steps=cfg.n_steps,
         batch_size=cfg.batch_size, n_epochs=cfg.n_epochs, learning_rate=cfg.lr, gamma=cfg.gamma,
-        gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range, ent_coef=cfg.ent_coef, seed=cfg.seed, device="cpu",
+        gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range, ent_coef=cfg.ent_coef,
+        normalize_advantage=cfg.normalize_advantage, seed=cfg.seed, device="cpu",
         verbose=0, policy_kwargs={"net_arch": bc.policy.net_arch})
     model.policy.load_state_dict(bc.policy.state_dict())
     if cfg.log_std is not None:
@@ -324,10 +365,13 @@ def run(cfg: BcRlConfig, out: Path, progress: bool = True) -> dict:
     :mod:`baselines.batched.sb3_ppo`'s files the folder holds ``init_evaluation.json`` (the BC policy flown
     before training, on the result's episode seeds) and ``updates.jsonl`` (one line per PPO update: the BC
     weight and loss, PPO's losses and the policy's action error on expert pairs)."""
+    from impact_env.transport.core import TransportCore
+
     result_path = out / "result.json"
     if result_path.exists():
         return json.loads(result_path.read_text(encoding="utf-8"))
     torch.set_num_threads(cfg.threads)
+    cfg = cfg.with_horizon(TransportCore(cfg.scenario).horizon_steps)
     out.mkdir(parents=True, exist_ok=True)
     config_path = out / "config.json"
     now = json.loads(json.dumps(asdict(cfg)))
@@ -366,7 +410,7 @@ def run(cfg: BcRlConfig, out: Path, progress: bool = True) -> dict:
                   f"{cfg.eval_episodes} pymunk episodes", flush=True)
     setup_s = time.perf_counter() - start
     meta = {"method": "BC+RL", "normalized": True, "init_policy": str(cfg.policy), "bc_weight": cfg.bc_weight,
-            "bc_half_life_frames": cfg.bc_half_life_frames, "critic_warmup_frames": cfg.critic_warmup_frames,
+            "bc_half_life_frames": cfg.bc_half_life_frames, "critic_warmup_rollouts": cfg.critic_warmup_rollouts,
             "expert_pairs": len(model.expert_obs)}
     callback = curve_callback(curve, wall_before)
     while model.num_timesteps < cfg.frames:

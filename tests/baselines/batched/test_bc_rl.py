@@ -21,7 +21,7 @@ pytestmark = requires("stable_baselines3")
 SCENARIO = "throw_and_catch_exp"
 NOISE = {"thrust_noise": 0.05, "initial_position_noise_m": 0.05}
 TINY = {"num_envs": 4, "n_steps": 8, "batch_size": 16, "n_epochs": 1, "checkpoint_frames": 32, "eval_episodes": 2,
-        "bc_batch_size": 64, "critic_warmup_frames": 0}
+        "bc_batch_size": 64, "critic_warmup_rollouts": 0}
 
 
 @pytest.fixture(scope="module")
@@ -85,18 +85,19 @@ def test_a_large_bc_weight_pulls_the_policy_to_the_expert_and_weight_zero_lets_p
     assert errors[100.0] < 0.9 * start < 0.9 * errors[0.0]
 
 
-@pytest.mark.parametrize("weight", [0.0, 1.0])
-def test_with_bc_weight_zero_an_update_is_ppos(bc_folder, weight):
+@pytest.mark.parametrize(("weight", "normalize"), [(0.0, False), (0.0, True), (1.0, False)])
+def test_with_bc_weight_zero_an_update_is_ppos(bc_folder, weight, normalize):
     """From the same weights, optimiser state, rollout and random draws, BCRegularisedPPO.train with weight 0
-    gives exactly the weights of stable-baselines3's PPO.train; with weight 1 it does not."""
+    gives exactly the weights of stable-baselines3's PPO.train (with or without advantage normalisation); with
+    weight 1 it does not."""
     import torch
     from stable_baselines3 import PPO
 
-    model, venv = built(tiny(bc_folder, bc_weight=weight, n_epochs=2))
+    model, venv = built(tiny(bc_folder, bc_weight=weight, n_epochs=2, normalize_advantage=normalize))
     model.learn(32)  # one rollout, one update: the buffer holds the rollout
     plain = PPO("MlpPolicy", venv, n_steps=8, batch_size=16, n_epochs=2, learning_rate=model.learning_rate,
                 gamma=model.gamma, gae_lambda=model.gae_lambda, clip_range=0.2, seed=0, device="cpu",
-                policy_kwargs={"net_arch": model.policy.net_arch})
+                normalize_advantage=normalize, policy_kwargs={"net_arch": model.policy.net_arch})
     plain.policy.load_state_dict(copy.deepcopy(model.policy.state_dict()))
     plain.policy.optimizer.load_state_dict(copy.deepcopy(model.policy.optimizer.state_dict()))
     plain.rollout_buffer = model.rollout_buffer
@@ -113,7 +114,7 @@ def test_with_bc_weight_zero_an_update_is_ppos(bc_folder, weight):
 def test_during_the_warm_up_only_the_critic_learns(bc_folder):
     import torch
 
-    model, _ = built(tiny(bc_folder, critic_warmup_frames=64, bc_weight=1.0))
+    model, _ = built(tiny(bc_folder, critic_warmup_rollouts=2, bc_weight=1.0))  # 2 rollouts of 4 envs x 8 steps
     before = copy.deepcopy(model.policy.state_dict())
     model.learn(64)
     after = model.policy.state_dict()
@@ -124,8 +125,8 @@ def test_during_the_warm_up_only_the_critic_learns(bc_folder):
 
 
 def test_the_bc_weight_halves_every_half_life_after_the_warm_up(bc_folder):
-    config = tiny(bc_folder, bc_weight=2.0, bc_half_life_frames=100, critic_warmup_frames=50)
-    assert [config.bc_weight_at(f) for f in (0, 50, 150, 250)] == [0.0, 0.0, 1.0, 0.5]
+    config = tiny(bc_folder, bc_weight=2.0, bc_half_life_frames=100, critic_warmup_rollouts=1)  # 32 env-steps
+    assert [config.bc_weight_at(f) for f in (0, 32, 132, 232)] == [0.0, 0.0, 1.0, 0.5]
     assert tiny(bc_folder, bc_half_life_frames=None, bc_weight=3.0).bc_weight_at(10**9) == 3.0
 
 
@@ -161,10 +162,21 @@ def test_the_cli_fine_tunes_and_prints_before_and_after(bc_folder, tmp_path, cap
     out = tmp_path / "cli"
     assert main(["bc-rl", SCENARIO, "--policy", str(bc_folder), "--out", str(out), "--frames", "32",
                  "--num-envs", "4", "--n-steps", "8", "--batch-size", "16", "--eval-episodes", "1",
-                 "--critic-warmup", "0", "--quiet"]) == 0
+                 "--critic-warmup-rollouts", "0", "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "BC policy" in printed and "after 32 env-steps" in printed and str(out / "model.zip") in printed
-    assert json.loads((out / "result.json").read_text())["config"]["bc_half_life_frames"] == 200_000
+    assert json.loads((out / "result.json").read_text())["config"]["bc_half_life_frames"] == 1_000_000
+
+
+def test_a_rollout_is_by_default_one_whole_episode_of_every_env(bc_folder):
+    from baselines.batched.bc_rl import BcRlConfig
+
+    config = BcRlConfig(SCENARIO, str(bc_folder), num_envs=4).with_horizon(200)
+    assert (config.n_steps, config.batch_size, config.rollout_frames) == (200, 100, 800)  # 4 x 25 (25 divides 200)
+    assert config.warmup_frames == 800 and config.chunk_frames == 131_200
+    assert BcRlConfig(SCENARIO, str(bc_folder), n_steps=8, batch_size=16).with_horizon(200).n_steps == 8
+    with pytest.raises(ImpactEnvError, match="batch_size must be a divisor"):
+        BcRlConfig(SCENARIO, str(bc_folder), num_envs=4, batch_size=7).with_horizon(200)
 
 
 def test_a_policy_of_another_scenario_is_refused(bc_folder):
@@ -180,11 +192,23 @@ def test_a_policy_of_another_scenario_is_refused(bc_folder):
 
 @pytest.mark.parametrize(("field", "value", "message"), [
     ("policy", "", "policy"), ("bc_weight", -1.0, "bc_weight"), ("bc_half_life_frames", 0, "bc_half_life_frames"),
-    ("critic_warmup_frames", -1, "critic_warmup_frames"), ("bc_batch_size", 0, "bc_batch_size"),
+    ("critic_warmup_rollouts", -1, "critic_warmup_rollouts"), ("bc_batch_size", 0, "bc_batch_size"),
+    ("n_steps", 0, "n_steps"),
     ("log_std", float("nan"), "log_std"), ("lr", 0.0, "lr"), ("batch_size", 5, "batch_size"),
-    ("reward_mode", "shaped", "reward_mode"), ("eval_batched_world", "no", "eval_batched_world")])
+    ("reward_mode", "shaped", "reward_mode"), ("eval_batched_world", "no", "eval_batched_world"),
+    ("normalize_advantage", 1, "normalize_advantage")])
 def test_a_bad_config_is_a_typed_error_naming_the_field(field, value, message):
     from baselines.batched.bc_rl import BcRlConfig
 
     with pytest.raises(ImpactEnvError, match=f"BcRlConfig.{message}"):
         BcRlConfig(**{"scenario": SCENARIO, "policy": "runs/bc", **TINY, field: value})
+
+
+def test_the_cli_checks_its_run_folder_and_its_policy_folder_before_training(tmp_path, capsys):
+    from tests.helpers import one_line_error
+
+    (tmp_path / "a_file").write_text("x")
+    err = one_line_error(["bc-rl", SCENARIO, "--policy", str(tmp_path), "--out", str(tmp_path / "a_file")], capsys)
+    assert "--out" in err and "is a file, not a folder" in err
+    err = one_line_error(["bc-rl", SCENARIO, "--policy", str(tmp_path), "--out", str(tmp_path / "run")], capsys)
+    assert "holds no model.zip" in err
