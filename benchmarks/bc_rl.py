@@ -114,8 +114,10 @@ def _row(scenario: str, label: str, cells: list[dict], method: str, rl_steps: st
     rows = [c[method] for c in cells]
     success = [r["success_rate"] for r in rows]
     robustness = [r["robustness_mean"] for r in rows]
-    share = (f"{100 * statistics.fmean(robustness) / expert['robustness_mean']:.0f} %"
-             if expert and expert["robustness_mean"] > 0 else "-")
+    share = "-"
+    if expert and expert["robustness_mean"] > 0:  # a share of a negative mean says nothing more than its sign
+        share = (f"{100 * statistics.fmean(robustness) / expert['robustness_mean']:.0f} %"
+                 if statistics.fmean(robustness) > 0 else "below 0")
     return (f"| {scenario} | {label} | {settings} | {','.join(str(c['seed']) for c in cells)} | "
             f"{statistics.fmean(c['bc']['labels'] for c in cells):,.0f} | {rl_steps} | "
             f"{_over_seeds(success, 100, '.0f')} | {' / '.join(f'{100 * s:.0f}' for s in success)} | "

@@ -422,7 +422,7 @@ def run(cfg: BcRlConfig, out: Path, progress: bool = True) -> dict:
             print(f"{out.name}: {model.num_timesteps:,} / {cfg.frames:,} env-steps, {wall:.0f} s "
                   f"({model.num_timesteps / max(wall, 1e-9):,.0f} env-steps/s), BC weight "
                   f"{cfg.bc_weight_at(model.num_timesteps):.3g}, expert action error "
-                  f"{model.expert_action_mse():.4f}", flush=True)
+                  f"{model.expert_action_mse():.2e}", flush=True)
     train_wall = json.loads(state_path.read_text(encoding="utf-8"))["wall_s"]
     start = time.perf_counter()
     venv.training = False
