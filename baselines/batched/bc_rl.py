@@ -1,27 +1,19 @@
 """BC+RL: PPO fine-tuning of a behaviour-cloned policy with an auxiliary behaviour-cloning loss, on the batched
-world: ``impact-env bc-rl SCENARIO --policy BC_FOLDER --out DIR``.
+world: ``impact-env bc-rl SCENARIO --policy BC_FOLDER``.
 
-The policy starts as the BC (or DAgger) policy of ``--policy`` (``impact-env bc`` or ``impact-env dagger``: an
-SB3 ``MlpPolicy``), with its architecture and its observation statistics, which stay frozen (the weights were
-fitted to them). Every PPO gradient step adds the negative log-likelihood of a minibatch of the expert's
-(observation, action) pairs, weighted by ``bc_weight * 0.5 ** ((t - warm-up) / bc_half_life_frames)`` at
-env-step t, to PPO's loss (the BC term of DAPG, Rajeswaran et al. 2018, or of "PPO + BC"): early on the expert
-keeps the policy where BC put it, later the reward decides. For the first ``critic_warmup_rollouts`` only the
-value network learns (its weights are fresh: BC fits the actor only, and advantages from an untrained critic
-would undo the BC policy before the reward could say anything). A rollout is, by default, one whole episode
-of every env: the batched world's envs run in lockstep, and with SB3's short rollouts (16 steps) the critic
-only ever saw one stretch of the episode at a time; on the corridor that made every setting tried lose
-success as training went on, while whole-episode rollouts improved it steadily (docs/baselines.md).
-The expert pairs are the labels of the DAgger run folder the policy comes from (``rounds/``; a BC run of
-``dagger --rounds 0`` too), else the Minari dataset ``impact-env bc`` was fitted to (``dataset_dir``).
+The policy starts as the ``bc`` or ``dagger`` policy of ``--policy``, with its architecture and its observation
+statistics, which stay frozen (the weights were fitted to them). Every PPO gradient step adds the expert pairs'
+negative log-likelihood, weighted by ``bc_weight * 0.5 ** ((t - warm-up) / bc_half_life_frames)`` at env-step t
+(:mod:`baselines.batched.bc_ppo`); during the first ``critic_warmup_rollouts`` only the fresh value network
+learns. The expert pairs are the labels of the DAgger run folder (``rounds/``; BC is ``dagger --rounds 0``),
+else the Minari dataset ``impact-env bc`` was fitted to. A rollout is by default one whole episode of every
+env: the batched world's envs run in lockstep, and with 16-step rollouts every corridor run of 2 million
+env-steps lost success, while whole-episode rollouts kept it (docs/baselines.md, results/bc_rl/).
 
-Why stable-baselines3's PPO: the BC policy is an SB3 ``MlpPolicy``, so the start is a copy of its weights;
-SB3's PPO already trains on the batched world (:mod:`baselines.batched.sb3_ppo`, whose checkpoints, resume,
-curve and evaluation this module reuses), and its model folder is the one ``impact-env run`` and ``bench`` fly
-without unpickling. :class:`BCRegularisedPPO` copies ``PPO.train`` (SB3 2.x, Box actions, no value clipping or
-target KL) rather than wrapping it, because the BC term must enter the same gradient step as PPO's loss (one
-optimiser step, one gradient-norm clip), and SB3 has no hook there. The ``imitation`` library (1.0.1) would
-pin gymnasium 0.29 and SB3 2.2, and TorchRL's MAPPO (:mod:`baselines.batched.marl`) has another policy class.
+Why stable-baselines3's PPO: the BC policy is an SB3 ``MlpPolicy``, so the start is a copy of its weights; SB3's
+PPO already trains on the batched world (:mod:`baselines.batched.sb3_ppo`, whose checkpoints, resume, curve and
+evaluation this module reuses), and its model folder is the one ``run`` and ``bench`` fly without unpickling.
+The ``imitation`` library (1.0.1) would pin gymnasium 0.29 and SB3 2.2; TorchRL's MAPPO has another policy class.
 """
 
 from __future__ import annotations
@@ -34,10 +26,8 @@ from typing import Any
 
 import numpy as np
 import torch
-from stable_baselines3 import PPO
-from stable_baselines3.common.running_mean_std import RunningMeanStd
-from torch.nn import functional as F
 
+from baselines.batched.bc_ppo import BCRegularisedPPO, FrozenStatistics
 from baselines.batched.sb3_ppo import (
     curve_callback,
     evaluate,
@@ -52,7 +42,6 @@ from impact_env.results_store import write_atomic
 from impact_env.transport.core import REWARD_MODES
 
 TRAINER = "baselines.batched.bc_rl (BC+RL, batched world)"
-MSE_PAIRS = 2048  # expert pairs of the logged action error (the same ones at every update)
 
 
 @dataclass(frozen=True)
@@ -194,91 +183,6 @@ class BcRlConfig:
         return self.bc_weight * 0.5 ** ((frames - self.warmup_frames) / self.bc_half_life_frames)
 
 
-class FrozenStatistics(RunningMeanStd):
-    """Observation statistics that training does not update: the BC policy's weights were fitted to them."""
-
-    def update(self, arr: np.ndarray) -> None:
-        pass
-
-
-class BCRegularisedPPO(PPO):
-    """SB3's PPO whose loss adds ``weight * -log pi(a_expert | s_expert)`` on a minibatch of expert pairs at every
-    gradient step, and whose actor does not learn during the critic's warm-up (module docstring).
-
-    ``expert_obs`` (P, obs) are already normalised with the policy's frozen statistics; ``expert_actions`` (P,
-    act). With ``config.bc_weight`` 0 and no warm-up, :meth:`train` is ``PPO.train`` (a test checks the weights
-    agree after an update). ``updates_log``, when set, gets one JSON line per update.
-    """
-
-    def __init__(self, *args: Any, config: BcRlConfig, expert_obs: np.ndarray, expert_actions: np.ndarray,
-                 **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self.bc_config = config
-        self.expert_obs = torch.as_tensor(expert_obs, dtype=torch.float32)
-        self.expert_actions = torch.as_tensor(expert_actions, dtype=torch.float32)
-        pick = np.random.default_rng(0).permutation(len(expert_obs))[:MSE_PAIRS]
-        self.mse_pairs = (self.expert_obs[pick], self.expert_actions[pick])
-        self.updates_log: Path | None = None
-
-    def _excluded_save_params(self) -> list[str]:
-        # not pickled into model.zip: a model folder holds no pickle it cannot rebuild (baselines/model_files.py)
-        return [*super()._excluded_save_params(), "bc_config", "expert_obs", "expert_actions", "mse_pairs",
-                "updates_log"]
-
-    def expert_action_mse(self) -> float:
-        """Mean squared error of the deterministic action (clipped) against the expert's, on fixed expert pairs."""
-        obs, act = self.mse_pairs
-        with torch.no_grad():
-            mean = self.policy.get_distribution(obs).distribution.mean.clamp(-1.0, 1.0)
-        return float(((mean - act) ** 2).mean())
-
-    def train(self) -> None:
-        self.policy.set_training_mode(True)
-        self._update_learning_rate(self.policy.optimizer)
-        clip_range = self.clip_range(self._current_progress_remaining)  # type: ignore[operator]
-        cfg = self.bc_config
-        warmup = self.num_timesteps <= cfg.warmup_frames
-        weight = cfg.bc_weight_at(self.num_timesteps)
-        rng = np.random.default_rng([cfg.seed, self.num_timesteps])  # the same minibatches after a resume
-        rows: dict[str, list[float]] = {"policy_loss": [], "value_loss": [], "bc_nll": [], "clip_fraction": []}
-        for _ in range(self.n_epochs):
-            for data in self.rollout_buffer.get(self.batch_size):
-                values, log_prob, entropy = self.policy.evaluate_actions(data.observations, data.actions)
-                values = values.flatten()
-                advantages = data.advantages
-                if self.normalize_advantage and len(advantages) > 1:
-                    advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
-                ratio = torch.exp(log_prob - data.old_log_prob)
-                policy_loss = -torch.min(advantages * ratio,
-                                         advantages * torch.clamp(ratio, 1 - clip_range, 1 + clip_range)).mean()
-                value_loss = F.mse_loss(data.returns, values)
-                entropy_loss = -torch.mean(-log_prob) if entropy is None else -torch.mean(entropy)
-                if warmup:
-                    loss = self.vf_coef * value_loss
-                else:  # PPO.train's sum, in its order (the same floats with weight 0)
-                    loss = policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss
-                if weight > 0:
-                    idx = torch.as_tensor(rng.integers(0, len(self.expert_obs), size=cfg.bc_batch_size))
-                    bc_nll = -self.policy.get_distribution(self.expert_obs[idx]).log_prob(self.expert_actions[idx])
-                    loss = loss + weight * bc_nll.mean()
-                    rows["bc_nll"].append(bc_nll.mean().item())
-                rows["policy_loss"].append(policy_loss.item())
-                rows["value_loss"].append(value_loss.item())
-                rows["clip_fraction"].append(torch.mean((torch.abs(ratio - 1) > clip_range).float()).item())
-                self.policy.optimizer.zero_grad()
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
-                self.policy.optimizer.step()
-            self._n_updates += 1
-        if self.updates_log is not None:
-            row = {"frames": int(self.num_timesteps), "warmup": warmup, "bc_weight": weight,
-                   **{k: (float(np.mean(v)) if v else None) for k, v in rows.items()},
-                   "expert_action_mse": self.expert_action_mse(),
-                   "log_std_mean": float(self.policy.log_std.detach().mean())}
-            with self.updates_log.open("a", encoding="utf-8") as f:
-                f.write(json.dumps(row) + "\n")
-
-
 # ------------------------------------------------------------------------------------------------ the inputs
 def expert_pairs(cfg: BcRlConfig, scenario_name: str) -> tuple[np.ndarray, np.ndarray]:
     """The expert's (observations (P, obs), actions (P, act)): every label of the DAgger run in ``cfg.policy``
@@ -340,10 +244,10 @@ def build(cfg: BcRlConfig, venv_monitor: Any) -> tuple[BCRegularisedPPO, Any]:
                         epsilon=stats.epsilon)
     frozen = FrozenStatistics(shape=stats.mean.shape)
     frozen.mean, frozen.var, frozen.count = stats.mean.copy(), stats.var.copy(), stats.count
-    venv.obs_rms = frozen
+    venv.obs_rms = frozen  # type: ignore[assignment]  # SB3 types it for Dict spaces too; a Box has one
     obs, act = expert_pairs(cfg, load_scenario(cfg.scenario).name)
     model = BCRegularisedPPO(
-        "MlpPolicy", venv, config=cfg, expert_obs=venv.normalize_obs(obs), expert_actions=act, n_steps=cfg.n_steps,
+        "MlpPolicy", venv, config=cfg, expert_obs=stats.apply(obs), expert_actions=act, n_steps=cfg.n_steps,
         batch_size=cfg.batch_size, n_epochs=cfg.n_epochs, learning_rate=cfg.lr, gamma=cfg.gamma,
         gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range, ent_coef=cfg.ent_coef,
         normalize_advantage=cfg.normalize_advantage, seed=cfg.seed, device="cpu",

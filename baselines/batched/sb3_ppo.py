@@ -58,11 +58,20 @@ class WorldRun(Protocol):
     """What the helpers below read of a run's config (:class:`Sb3PpoConfig`, and
     :class:`~baselines.batched.bc_rl.BcRlConfig`, which trains through them too)."""
 
-    scenario: str
-    seed: int
-    frames: int
-    num_envs: int
-    compile: bool
+    @property
+    def scenario(self) -> str: ...
+
+    @property
+    def seed(self) -> int: ...
+
+    @property
+    def frames(self) -> int: ...
+
+    @property
+    def num_envs(self) -> int: ...
+
+    @property
+    def compile(self) -> bool: ...
 
     def world_options(self) -> dict[str, Any]: ...
 
@@ -280,7 +289,7 @@ def evaluate(model, obs_rms_venv, cfg: WorldRun, episodes: int, first_seed: int 
                           "robustness": [round(float(r), 6) for r in batched]}
     envs = [TransportEnv(cfg.scenario, **cfg.world_options()) for _ in range(episodes)]
     obs = np.stack([env.reset(seed=first_seed + i)[0] for i, env in enumerate(envs)])
-    for _ in range(envs[0].unwrapped.core.horizon_steps):
+    for _ in range(envs[0].core.horizon_steps):
         steps = [env.step(a) for env, a in zip(envs, act(obs))]
         obs = np.stack([s[0] for s in steps])
     infos = [s[4] for s in steps]

@@ -1,7 +1,7 @@
-"""BC+RL (baselines/batched/bc_rl.py) at tiny sizes on throw_and_catch_exp (200 steps an episode): the start is
-the BC policy and its frozen observation statistics, the BC term holds the policy to the expert and without it
-an update is SB3's PPO's, the critic warms up alone, the run folder resumes and flies, the CLI, the config. A
-run here is 4 envs for a few dozen env-steps."""
+"""BC+RL (baselines/batched/bc_rl.py, bc_ppo.py) at tiny sizes on throw_and_catch_exp (200 steps an
+episode): the start is the BC policy and its frozen observation statistics, the BC term holds the policy to
+the expert and without it an update is SB3's PPO's, the critic warms up alone, the run folder resumes and
+flies, the CLI, the config. A run here is 4 envs for a few dozen env-steps."""
 
 from __future__ import annotations
 
@@ -121,7 +121,7 @@ def test_during_the_warm_up_only_the_critic_learns(bc_folder):
     for name, value in after.items():
         moved = not torch.equal(before[name], value)
         assert moved == name.startswith(("value_net", "mlp_extractor.value_net")), name
-    assert model.bc_config.bc_weight_at(64) == 0.0
+    assert model.bc_config.bc_weight_at(64) == 0.0  # the weight the update used
 
 
 def test_the_bc_weight_halves_every_half_life_after_the_warm_up(bc_folder):
