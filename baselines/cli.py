@@ -1,6 +1,6 @@
 """``impact-env train`` (baselines/train.py), ``bench`` (baselines/bench.py), ``record`` (baselines/record.py),
-``dataset`` (baselines/task_dataset.py), ``bc`` (baselines/bc.py), ``dagger`` (baselines/dagger.py), ``curves``
-(baselines/curves.py)."""
+``dataset`` (baselines/task_dataset.py), ``bc`` (baselines/bc.py), ``dagger`` (baselines/dagger.py), ``bc-rl``
+(baselines/batched/bc_rl.py), ``curves`` (baselines/curves.py)."""
 
 from __future__ import annotations
 
@@ -142,6 +142,45 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_quiet(p, "no line per round")
     p.set_defaults(func=_dagger)
 
+    p = subparsers.add_parser("bc-rl", help="BC+RL: PPO from a BC or DAgger policy with a decaying behaviour-cloning "
+                                            "loss, on the batched world",
+                              description="Fine-tune the policy of --policy (impact-env bc or dagger) with "
+                                          "stable-baselines3's PPO on the batched world, adding the expert pairs' "
+                                          "negative log-likelihood to PPO's loss with a weight that halves every "
+                                          "--bc-half-life env-steps; the value network learns alone for the first "
+                                          "--critic-warmup-rollouts. The world is nominal unless noise options are "
+                                          "given (a nominal world replays one episode in every env). Resumable: "
+                                          "run the same command again.")
+    p.add_argument("scenario", help="a shipped scenario name (impact-env scenarios) or a .toml file")
+    p.add_argument("--policy", required=True, metavar="DIR",
+                   help="the BC or DAgger run folder (its rounds/ are the expert pairs, else --dataset's)")
+    p.add_argument("--dataset", default=None, metavar="DIR",
+                   help="the Minari datasets folder of `impact-env record --out` (for a BC folder; default: Minari's)")
+    add_out(p, "the run folder: model.zip, vecnormalize.json, train.json, curve.jsonl, updates.jsonl, result.json "
+               "(default: <--runs-dir>/bc_rl_<scenario>_s<seed>)")
+    p.add_argument("--runs-dir", default="runs", help="parent of the default run folder")
+    add_seed(p, "seed of PPO, the BC minibatches and the envs")
+    p.add_argument("--frames", type=int, default=1_000_000, help="env-step budget (default 1,000,000)")
+    p.add_argument("--bc-weight", type=float, default=1.0, help="the BC loss's weight before it decays (default 1)")
+    p.add_argument("--bc-half-life", type=int, default=1_000_000, metavar="FRAMES",
+                   help="env-steps in which the BC weight halves (default 1,000,000; 0: constant)")
+    p.add_argument("--critic-warmup-rollouts", type=int, default=1, metavar="N",
+                   help="rollouts during which only the value network learns (default 1)")
+    p.add_argument("--lr", type=float, default=1e-4, help="Adam learning rate (default 1e-4)")
+    p.add_argument("--num-envs", type=int, default=256, help="envs of the batched world (default 256)")
+    p.add_argument("--n-steps", type=int, default=None,
+                   help="steps per env per rollout (default: the scenario's horizon, one whole episode)")
+    p.add_argument("--batch-size", type=int, default=None,
+                   help="env-steps per gradient step, a divisor of num-envs x n-steps (default: num-envs x the "
+                        "largest divisor of n-steps up to 32)")
+    p.add_argument("--normalize-advantage", action="store_true",
+                   help="normalise each minibatch's advantages (SB3's default; off here: see BcRlConfig)")
+    p.add_argument("--eval-episodes", type=int, default=50,
+                   help="pymunk episodes flown by the BC policy before and by the result after (default 50)")
+    add_transport_options(p, REWARD_MODES)
+    add_quiet(p, "no line per checkpoint")
+    p.set_defaults(func=_bc_rl)
+
     p = subparsers.add_parser("dataset", help="expert episodes on a family's kept generated tasks as Minari datasets "
                                               "(training and held-out)",
                               description="Fly the plans of the kept tasks in TASKS_DIR (impact-env filter --out) "
@@ -252,6 +291,29 @@ def _dagger(args: argparse.Namespace) -> int:
         resume=args.resume, quiet=args.quiet))
     print(f"saved {run_dir / 'model.zip'} (rounds in {run_dir / 'dagger.json'}); fly it with: impact-env run "
           f"{args.scenario} --controller {run_dir / 'model.zip'}")
+    return 0
+
+
+def _bc_rl(args: argparse.Namespace) -> int:
+    from baselines.batched.bc_rl import BcRlConfig, run
+    from impact_env.results_store import check_output_folder
+    from impact_env.transport.scenario import load_scenario
+
+    config = BcRlConfig(args.scenario, args.policy, dataset_dir=args.dataset, seed=args.seed, frames=args.frames,
+                        bc_weight=args.bc_weight, bc_half_life_frames=args.bc_half_life or None,
+                        critic_warmup_rollouts=args.critic_warmup_rollouts, lr=args.lr, num_envs=args.num_envs,
+                        n_steps=args.n_steps, batch_size=args.batch_size,
+                        normalize_advantage=args.normalize_advantage, eval_episodes=args.eval_episodes,
+                        **transport_options(args))
+    name = load_scenario(args.scenario).name
+    out = Path(args.out) if args.out else Path(args.runs_dir) / f"bc_rl_{name}_s{args.seed}"
+    check_output_folder(out, "--out")  # before the world is built
+    result = run(config, out, progress=not args.quiet)
+    before, after = result["evaluation_init"]["pymunk"], result["evaluation"]["pymunk"]
+    print(f"BC policy {100 * before['success_rate']:.0f} % ({before['robustness_mean']:+.3f} m), after "
+          f"{result['env_steps']:,} env-steps {100 * after['success_rate']:.0f} % ({after['robustness_mean']:+.3f} m) "
+          f"of {config.eval_episodes} pymunk episodes; saved {out / 'model.zip'}; fly it with: impact-env run "
+          f"{args.scenario} --controller {out / 'model.zip'}")
     return 0
 
 

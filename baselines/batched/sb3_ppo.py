@@ -33,7 +33,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import torch
@@ -52,6 +52,28 @@ from impact_env.results_store import atomic_path, write_atomic
 from impact_env.transport.core import REWARD_MODES
 
 EVAL_FIRST_SEED = 1_000_000
+
+
+class WorldRun(Protocol):
+    """What the helpers below read of a run's config (:class:`Sb3PpoConfig`, and
+    :class:`~baselines.batched.bc_rl.BcRlConfig`, which trains through them too)."""
+
+    @property
+    def scenario(self) -> str: ...
+
+    @property
+    def seed(self) -> int: ...
+
+    @property
+    def frames(self) -> int: ...
+
+    @property
+    def num_envs(self) -> int: ...
+
+    @property
+    def compile(self) -> bool: ...
+
+    def world_options(self) -> dict[str, Any]: ...
 
 
 @dataclass(frozen=True)
@@ -137,7 +159,7 @@ class Sb3PpoConfig:
                 "reward_mode": self.reward_mode}
 
 
-def _venv(cfg: Sb3PpoConfig):
+def make_venv(cfg: WorldRun):
     from stable_baselines3.common.vec_env import VecMonitor
 
     from impact_env.transport.batched.sb3_vec_env import TransportSB3VecEnv
@@ -147,7 +169,7 @@ def _venv(cfg: Sb3PpoConfig):
     return VecMonitor(venv)
 
 
-def _curve_callback(curve: Path, wall_before: float):
+def curve_callback(curve: Path, wall_before: float):
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -197,7 +219,7 @@ def _curve_callback(curve: Path, wall_before: float):
     return CurveLogger()
 
 
-def _truncate_curve(curve: Path, frames: int) -> None:
+def truncate_curve(curve: Path, frames: int) -> None:
     if not curve.exists():
         return
     rows = [line for line in curve.read_text(encoding="utf-8").splitlines()
@@ -205,10 +227,12 @@ def _truncate_curve(curve: Path, frames: int) -> None:
     write_atomic(curve, "".join(r + "\n" for r in rows))
 
 
-def _save_checkpoint(model, venv, cfg: Sb3PpoConfig, out: Path, wall_s: float) -> None:
+def save_checkpoint(model, venv, cfg: WorldRun, out: Path, wall_s: float,
+                    trainer: str = "baselines.batched.sb3_ppo (batched world)",
+                    meta: dict[str, Any] | None = None) -> None:
     """model.zip, vecnormalize.json and train.json (the package's pickle-free model folder, which ``impact-env
-    bench`` reads as a controller), then state.json, each atomically: state.json names the step count of the
-    files beside it only once they are all written."""
+    bench`` reads as a controller; ``meta`` adds keys to train.json), then state.json, each atomically:
+    state.json names the step count of the files beside it only once they are all written."""
     from baselines.model_files import save_normalization
     from baselines.run_meta import scenario_fingerprint
     from impact_env.transport.scenario import load_scenario
@@ -222,11 +246,11 @@ def _save_checkpoint(model, venv, cfg: Sb3PpoConfig, out: Path, wall_s: float) -
         "algo": "ppo", "scenario": scenario.name, "scenario_fingerprint": scenario_fingerprint(scenario),
         "env_id": None, "timesteps": cfg.frames, "timesteps_trained": int(model.num_timesteps), "n_envs": cfg.num_envs,
         "seed": cfg.seed, "multiagent": False, "env_options": cfg.world_options(), "interrupted": False,
-        "wall_time_s": round(wall_s, 2), "trainer": "baselines.batched.sb3_ppo (batched world)"}, indent=2))
+        "wall_time_s": round(wall_s, 2), "trainer": trainer} | (meta or {}), indent=2))
     write_atomic(out / "state.json", json.dumps({"frames": int(model.num_timesteps), "wall_s": round(wall_s, 2)}))
 
 
-def _restore(model, venv, out: Path) -> None:
+def restore(model, venv, out: Path) -> None:
     """The checkpoint's weights and optimiser state (SB3's set_parameters reads tensors only, no pickle) and the
     normalisation statistics, into a freshly built model."""
     from baselines.model_files import NORMALIZATION_FILE, read_normalization
@@ -241,36 +265,40 @@ def _restore(model, venv, out: Path) -> None:
 
 
 # ------------------------------------------------------------------------------------------------- evaluation
-def evaluate(model, obs_rms_venv, cfg: Sb3PpoConfig, episodes: int, first_seed: int = EVAL_FIRST_SEED) -> dict:
-    """Success rate and final robustness of the deterministic policy on the batched world and on the pymunk
-    Gymnasium env: ``episodes`` seeded episodes each (seeds first_seed, first_seed + 1, ...), the training's
-    noise. ``obs_rms_venv`` is the training's VecNormalize (its observation statistics, frozen)."""
+def evaluate(model, obs_rms_venv, cfg: WorldRun, episodes: int, first_seed: int = EVAL_FIRST_SEED,
+             batched_world: bool = True) -> dict:
+    """Success rate and final robustness of the deterministic policy on the batched world (unless
+    ``batched_world`` is False) and on the pymunk Gymnasium env: ``episodes`` seeded episodes each (seeds
+    first_seed, first_seed + 1, ...), the training's noise. ``obs_rms_venv`` is the training's VecNormalize (its
+    observation statistics, frozen)."""
     from impact_env.transport.batched import BatchedTransportWorld
     from impact_env.transport.gym_env import TransportEnv
 
     def act(obs: np.ndarray) -> np.ndarray:
         return model.predict(obs_rms_venv.normalize_obs(obs.astype(np.float32)), deterministic=True)[0]
 
-    world = BatchedTransportWorld(cfg.scenario, episodes, **cfg.world_options())
-    obs = world.reset(seeds=first_seed).cpu().numpy()
-    for _ in range(world.horizon_steps):
-        step_obs, _, _, _, info = world.step(torch.as_tensor(act(obs)))
-        obs = step_obs.cpu().numpy()
-    batched = info["robustness"].double().numpy()
+    out: dict[str, Any] = {"episodes": episodes, "first_seed": first_seed}
+    if batched_world:
+        world = BatchedTransportWorld(cfg.scenario, episodes, **cfg.world_options())
+        obs = world.reset(seeds=first_seed).cpu().numpy()
+        for _ in range(world.horizon_steps):
+            step_obs, _, _, _, info = world.step(torch.as_tensor(act(obs)))
+            obs = step_obs.cpu().numpy()
+        batched = info["robustness"].double().numpy()
+        out["batched"] = {"success_rate": float((batched > 0).mean()), "robustness_mean": float(batched.mean()),
+                          "robustness": [round(float(r), 6) for r in batched]}
     envs = [TransportEnv(cfg.scenario, **cfg.world_options()) for _ in range(episodes)]
     obs = np.stack([env.reset(seed=first_seed + i)[0] for i, env in enumerate(envs)])
-    for _ in range(world.horizon_steps):
+    for _ in range(envs[0].core.horizon_steps):
         steps = [env.step(a) for env, a in zip(envs, act(obs))]
         obs = np.stack([s[0] for s in steps])
     infos = [s[4] for s in steps]
     pymunk = np.array([inf["robustness"] for inf in infos])
     fuel = np.array([inf.get("fuel_Ns", np.nan) for inf in infos])
-    return {"episodes": episodes, "first_seed": first_seed,
-            "batched": {"success_rate": float((batched > 0).mean()), "robustness_mean": float(batched.mean()),
-                        "robustness": [round(float(r), 6) for r in batched]},
-            "pymunk": {"success_rate": float((pymunk > 0).mean()), "robustness_mean": float(pymunk.mean()),
-                       "fuel_Ns_mean": float(np.nanmean(fuel)) if np.isfinite(fuel).any() else None,
-                       "robustness": [round(float(r), 6) for r in pymunk]}}
+    out["pymunk"] = {"success_rate": float((pymunk > 0).mean()), "robustness_mean": float(pymunk.mean()),
+                     "fuel_Ns_mean": float(np.nanmean(fuel)) if np.isfinite(fuel).any() else None,
+                     "robustness": [round(float(r), 6) for r in pymunk]}
+    return out
 
 
 # -------------------------------------------------------------------------------------------------------- run
@@ -298,7 +326,7 @@ def run(cfg: Sb3PpoConfig, out: Path, progress: bool = True) -> dict:
     curve = out / "curve.jsonl"
     state_path = out / "state.json"
     start = time.perf_counter()
-    monitor = _venv(cfg)
+    monitor = make_venv(cfg)
     venv = VecNormalize(monitor, gamma=cfg.gamma)
     model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                 learning_rate=cfg.lr, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
@@ -306,9 +334,9 @@ def run(cfg: Sb3PpoConfig, out: Path, progress: bool = True) -> dict:
                 policy_kwargs={"net_arch": list(cfg.hidden), "log_std_init": cfg.log_std_init})
     if state_path.exists():
         state = json.loads(state_path.read_text(encoding="utf-8"))
-        _restore(model, venv, out)
+        restore(model, venv, out)
         model.num_timesteps = int(state["frames"])
-        _truncate_curve(curve, state["frames"])
+        truncate_curve(curve, state["frames"])
         wall_before = float(state["wall_s"])
         if progress:
             print(f"resuming {out} at {state['frames']:,} env-steps", flush=True)
@@ -316,11 +344,11 @@ def run(cfg: Sb3PpoConfig, out: Path, progress: bool = True) -> dict:
         curve.unlink(missing_ok=True)
         wall_before = 0.0
     setup_s = time.perf_counter() - start
-    callback = _curve_callback(curve, wall_before)
+    callback = curve_callback(curve, wall_before)
     while model.num_timesteps < cfg.frames:
         chunk = min(cfg.chunk_frames, cfg.frames - model.num_timesteps)
         model.learn(chunk, callback=callback, reset_num_timesteps=False, progress_bar=False)
-        _save_checkpoint(model, venv, cfg, out, callback.wall_s())
+        save_checkpoint(model, venv, cfg, out, callback.wall_s())
         if progress:
             wall = callback.wall_s()
             print(f"{out.name}: {model.num_timesteps:,} / {cfg.frames:,} env-steps, {wall:.0f} s "

@@ -35,8 +35,8 @@ def test_main_help_is_clean_text(capsys):
     assert "examples:" in out and "impact-env plan corridor" in out
 
 
-@pytest.mark.parametrize("command", ["scenarios", "show", "run", "train", "bench", "record", "bc", "dagger", "curves",
-                                     "plan"])
+@pytest.mark.parametrize("command", ["scenarios", "show", "run", "train", "bench", "record", "bc", "dagger", "bc-rl",
+                                     "curves", "plan"])
 def test_every_option_has_help_and_shows_its_default(command):
     parser = _subparsers(build_parser())[command]
     text = parser.format_help()
