@@ -33,6 +33,7 @@ REQUIRED = {  # valid values of required fields
     "Sb3PpoConfig": {"scenario": "corridor"},
     "MarlConfig": {"algorithm": "mappo", "task": "corridor"},
     "TaskBCConfig": {"family": "throw_and_catch"},
+    "BcRlConfig": {"scenario": "corridor", "policy": "runs/bc_corridor"},
 }
 
 
