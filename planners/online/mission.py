@@ -487,11 +487,13 @@ class MissionPlanner:
 
     def _solve_impact_robust(self, scenario: Scenario, config: PlannerConfig) -> Plan | str:
         """The impact-robust remainder (delta > 0), or why there is none."""
+        from planners.offline.common import DEFAULT_INTERVALS
         from planners.offline.config import DEFAULT_COPY_INTERVALS, IRPlannerConfig
         from planners.offline.impact_robust import plan_impact_robust
 
         # the copy window fits the re-plan's grid (at most half of it): a late re-plan or a trim has few intervals
-        window = min(scenario.planner_copy_intervals or DEFAULT_COPY_INTERVALS, max(1, config.intervals // 2))
+        intervals = config.intervals or scenario.planner_intervals or DEFAULT_INTERVALS  # as the planner reads it
+        window = min(scenario.planner_copy_intervals or DEFAULT_COPY_INTERVALS, max(1, intervals // 2))
         ir = IRPlannerConfig(intervals=config.intervals, robot_degree=config.robot_degree, copy_intervals=window,
                              thrust_fraction=config.thrust_fraction, solver=config.solver,
                              solver_options=config.solver_options, refine_nodes=config.refine_nodes,
