@@ -16,7 +16,8 @@ Runs go in the order seed, then scenario, then algorithm, so the first seed of e
 first. A killed queue started again with the same command skips the finished cells and resumes the others
 from their last checkpoint. On a new machine (no run folders), the cells already in ``--out``/cells.jsonl count
 as finished: their ``result.json`` is written back from the published cell (:func:`restore`) before the queue
-starts, so only the missing runs train. A larger ``--frames`` than a finished cell's budget trains that cell on from its
+starts, so only the missing runs train (a restored run has no checkpoint, so a larger ``--frames`` trains it
+again from the start). A larger ``--frames`` than a finished cell's budget trains that cell on from its
 last checkpoint (its earlier result is kept as ``result_<budget>.json``).
 
 After every run, ``results/rl_at_scale/`` is rebuilt from the run folders (:func:`publish`): ``cells.jsonl``
