@@ -32,3 +32,17 @@ def test_final_robustness_distribution_matches_pymunk(name):
 @pytest.mark.parametrize("name", scenario_names())
 def test_final_robustness_distribution_matches_pymunk_200_episodes(name):
     check(name, 200)
+
+
+def test_draws_are_independent_replications_and_the_table_combines_them():
+    from benchmarks.batched_parity import batched_finals, key_of, pymunk_finals, replications
+
+    # draw 0 is the benchmark's published seeds; another draw flies other episodes on both sides
+    assert not (pymunk_finals("throw_and_catch_exp", 3) == pymunk_finals("throw_and_catch_exp", 3, draw=1)).all()
+    assert not (batched_finals("throw_and_catch_exp", 3) == batched_finals("throw_and_catch_exp", 3, draw=1)).all()
+    old = {"scenario": "s", "episodes": 10, "ks_pvalue": 0.004}  # a cell written before draws existed
+    assert key_of(old) == ("s", 10, 0)
+    cells = [old] + [dict(old, draw=d, ks_pvalue=p) for d, p in ((1, 0.5), (2, 0.02), (3, 0.005))]
+    row = replications(cells).splitlines()[2]
+    assert "| s | 10 | 3 | 0.500, 0.020, 0.005 | 2 of 3 |" in row  # draw 0 is not one of the replications
+    assert replications([old]) == ""
