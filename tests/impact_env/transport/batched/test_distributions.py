@@ -46,3 +46,11 @@ def test_draws_are_independent_replications_and_the_table_combines_them():
     row = replications(cells).splitlines()[2]
     assert "| s | 10 | 3 | 0.500, 0.020, 0.005 | 2 of 3 |" in row  # draw 0 is not one of the replications
     assert replications([old]) == ""
+
+
+def test_holm_adjustment_against_its_definition():
+    from benchmarks.batched_parity import holm
+
+    # m = 4: sorted 0.01, 0.02, 0.03, 0.5 -> 0.04, max(0.04, 0.06), max(0.06, 0.06), max(0.06, 0.5)
+    assert holm([0.03, 0.5, 0.01, 0.02]) == pytest.approx([0.06, 0.5, 0.04, 0.06])
+    assert holm([0.9, 0.8]) == [1.0, 1.0]
