@@ -122,6 +122,14 @@ def _register() -> None:
         gymnasium.register(id="impact_env/Transport-v0", entry_point="impact_env.transport.gym_env:make_with_horizon",
                            vector_entry_point=TRANSPORT_VECTOR_ENTRY_POINT)
     _add_vector_entry_points()
+    # one id per generated-task family: a task of the family per episode, goal-conditioned observations; no
+    # max_episode_steps (each task ends at its own horizon)
+    from impact_env.transport.family_env import FAMILY_IDS
+
+    for env_id, family in FAMILY_IDS.items():
+        if env_id not in gymnasium.registry:
+            gymnasium.register(id=env_id, entry_point="impact_env.transport.family_env:TaskFamilyEnv",
+                               kwargs={"family": family})
     for ids, cls in ((TETHER_GYM_IDS, "TetherEnv"), (TETHER_GYM_IDS_V0, "TetherEnvV0")):
         for env_id, station in ids.items():
             if env_id not in gymnasium.registry:

@@ -37,7 +37,7 @@ from impact_env.transport.core import ACTION_PER_ROBOT, OBS_PER_BODY
 from impact_env.transport.generate import FamilyLimits
 from impact_env.transport.scenario import Scenario
 
-__all__ = ["TaskConditioned", "TaskObservation", "task_clauses"]
+__all__ = ["TaskConditioned", "TaskObservation", "padded_spaces", "task_clauses"]
 
 _CLAUSE = re.compile(r"([FG])\s*\[\s*([0-9.eE+-]+)\s*,\s*([0-9.eE+-]+)\s*\]\s*\(?\s*in\(\s*(\w+)\s*,\s*(\w+)\s*\)")
 
@@ -73,11 +73,7 @@ class TaskObservation:
                 raise EnvConfigError(f"obstacle {o.name!r} of {sc.name!r} has {len(o.polygon.vertices)} vertices; this "
                                      f"observation pads to at most {limits.obstacle_vertices}")
         self.n_robots, self.n_objects = len(sc.robots), len(sc.objects)
-        self.region_size = 10 + limits.objects
-        self.obstacle_size = 1 + 2 * limits.obstacle_vertices
-        self.bodies_size = self.BODY * (limits.robots + limits.objects)
-        self.size = self.bodies_size + 1 + self.region_size * limits.regions + self.obstacle_size * limits.obstacles
-        self.action_size = ACTION_PER_ROBOT * limits.robots
+        self.region_size, self.obstacle_size, self.bodies_size, self.size, self.action_size = _sizes(limits)
         # the constant part (regions without the object-relative centre, obstacles), built once
         self._static = np.zeros(self.size, dtype=np.float32)
         self._object_slot = {o.name: i for i, o in enumerate(sc.objects)}
@@ -134,8 +130,23 @@ class TaskObservation:
 
     def spaces(self) -> tuple[spaces.Box, spaces.Box]:
         """(observation space, action space) of the padded layout: the same for every task of the family."""
-        return (spaces.Box(-np.inf, np.inf, shape=(self.size,), dtype=np.float32),
-                spaces.Box(-1.0, 1.0, shape=(self.action_size,), dtype=np.float32))
+        return padded_spaces(self.limits)
+
+
+def _sizes(limits: FamilyLimits) -> tuple[int, int, int, int, int]:
+    """(region slot, obstacle slot, bodies part, whole observation, action) sizes of the padded layout."""
+    region_size = 10 + limits.objects
+    obstacle_size = 1 + 2 * limits.obstacle_vertices
+    bodies_size = TaskObservation.BODY * (limits.robots + limits.objects)
+    size = bodies_size + 1 + region_size * limits.regions + obstacle_size * limits.obstacles
+    return region_size, obstacle_size, bodies_size, size, ACTION_PER_ROBOT * limits.robots
+
+
+def padded_spaces(limits: FamilyLimits) -> tuple[spaces.Box, spaces.Box]:
+    """(observation space, action space) of a family's padded layout (they depend on its limits only)."""
+    _, _, _, size, action_size = _sizes(limits)
+    return (spaces.Box(-np.inf, np.inf, shape=(size,), dtype=np.float32),
+            spaces.Box(-1.0, 1.0, shape=(action_size,), dtype=np.float32))
 
 
 class TaskConditioned(gym.Wrapper):
