@@ -23,9 +23,12 @@ are exported to a temporary folder, and each baseline episode runs in a Python o
 it loads under that tree too). The stacks' episodes are
 interleaved in one pool, so machine load hits all of them alike; the load average is printed with the
 table. Mission replan steps are reported apart (a replan is a MILP solve inside one act). It runs on local
-processes only (each baseline job needs a fresh process of its own).
+processes only (each baseline job needs a fresh process of its own). Both stacks load this tree's scenario
+file by its path, so a scenario added after the baseline is timed too, and fly the plan the robustness
+benchmark flies (``results/robustness/plans/``, planned and cached there when missing);
+``--baseline-ref 0378a64`` is issue 22's baseline.
 
-    python -m benchmarks.expert --timing [--scenarios throw_and_catch_exp] [--episodes 10]
+    python -m benchmarks.expert --timing [--scenarios throw_and_catch_exp] [--episodes 10] [--baseline-ref REF]
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ import os
 import shutil
 import statistics
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -142,8 +146,8 @@ def timed_act(scenario_name: str, plan_dict: dict, stack: str, seed: int, mismat
 
 
 def timing(scenarios: list[str], episodes: int, workers: int, ref: str) -> None:
-    from impact_env.transport.scenario import load_scenario
-    from planners.offline.spatially_robust import plan_spatially_robust
+    from benchmarks.robustness import RESULTS, plan_for
+    from impact_env.transport import scenarios as shipped
 
     baseline_dir = export_tree(ref, prefix="impact_env_baseline_")
     stacks = ("baseline", "paper", "all")
@@ -154,12 +158,14 @@ def timing(scenarios: list[str], episodes: int, workers: int, ref: str) -> None:
     print("|---|---|---|---:|---:|---:|---:|---:|")
     ctx = multiprocessing.get_context("spawn")
     for name in scenarios:
-        plan = plan_spatially_robust(load_scenario(name)).to_dict()
+        plan = plan_for(name, RESULTS)
+        path = Path(shipped.__file__).parent / f"{name}.toml"  # by path: the baseline may not ship it
+        path = str(path if path.exists() else Path(name).resolve())
         for mismatch in (False, True):
             # one pool per stack kind would let them run at different times; instead every worker gets
             # jobs of all three stacks in turn (a baseline job re-imports its packages, so it goes first
             # in a fresh pool of its own only when workers cannot be shared: here each job decides)
-            jobs = [(name, plan, stack, seed, mismatch, baseline_dir) for seed in range(episodes) for stack in stacks]
+            jobs = [(path, plan, stack, seed, mismatch, baseline_dir) for seed in range(episodes) for stack in stacks]
             results: dict[str, list[dict]] = {s: [] for s in stacks}
             with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, max_tasks_per_child=1) as pool:
                 for r in pool.map(_timed_episode, jobs):
