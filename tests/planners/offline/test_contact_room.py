@@ -67,8 +67,8 @@ def test_the_disc_has_room_behind_every_contact_for_errors_up_to_delta(plans):
 
 def test_contact_room_is_the_disc_centre_inside_the_shrunk_world():
     scenario = near_wall()  # x in [0, 3.3], radii 0.2: the robot's centre in [0.2, 3.1]
-    # pushed toward +x at x = 2.6: the robot is at 2.2, 1.3 m from the low y side (y from -1.5 + 0.2)
-    assert contact_room(scenario, "R2", "O1", np.array([2.6, 0.0]), np.array([0.1, 0.0])) == pytest.approx(1.3)
+    # pushed toward +x at x = 2.6: the robot is at 2.2, 0.9 m from 3.1 (2.0 from 0.2, 1.3 from the y sides)
+    assert contact_room(scenario, "R2", "O1", np.array([2.6, 0.0]), np.array([0.1, 0.0])) == pytest.approx(0.9)
     # pushed toward -x at x = 2.8: the robot would be at 3.2, 0.1 m beyond 3.1
     assert contact_room(scenario, "R2", "O1", np.array([2.8, 0.0]), np.array([-0.1, 0.0])) == pytest.approx(-0.1)
     assert contact_room(scenario, "R2", "O1", np.array([2.8, 0.0]), np.zeros(2)) == math.inf
