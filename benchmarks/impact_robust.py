@@ -222,11 +222,15 @@ def label(cell: dict) -> str:
     return f"e {cell['level']:+g}"
 
 
-def row(cell: dict) -> str:
+def row(cell: dict, delta: float | None = None) -> str:
+    """A cell's table row; ``delta``: the scenario's IR plan's delta now (a cell flown at another, with an
+    earlier plan, is marked with a dagger)."""
     eps = cell["episodes"]
     rho = [e["robustness"] for e in eps]
     speed = [e["final_speed"] for e in eps]
     stack = cell["stack"] if cell.get("config") == config_fingerprint(cell["stack"]) else f"{cell['stack']} *"
+    if delta is not None and not np.isclose(cell["delta"], delta, rtol=1e-9, atol=0.0):
+        stack += " †"
     return (f"| {cell['scenario']} | {label(cell)} | {stack} | {cell['planner']} | {len(eps)} | "
             f"{100 * np.mean([e['success'] for e in eps]):.0f}% | {np.mean(rho):+.3f} ({min(rho):+.3f}) | "
             f"{np.mean(speed):.3f} ({max(speed):.3f}) | {100 * np.mean([e['in_final_box'] for e in eps]):.0f}% | "
@@ -246,20 +250,31 @@ def all_scenarios(cells: list[dict]) -> list[str]:
     return list(SHIPPED) + [n for n in dict.fromkeys(c["scenario"] for c in cells) if n not in SHIPPED]
 
 
-def table(cells: list[dict], scenarios) -> str:
+def table(cells: list[dict], scenarios, deltas: dict[str, float] | None = None) -> str:
+    """The cells' table; ``deltas``: per scenario, its IR plan's delta now (:func:`plan_deltas`)."""
     cells = sort_cells(cells, scenarios)
+    deltas = deltas or {}
     lines = ["| scenario | simulator | stack | plan | episodes | success | robustness mean (min) | "
              "final speed m/s mean (max) | in final box | mission replans / ep | e error mean / max |",
              "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
-    rows = [row(c) for c in cells]
+    rows = [row(c, deltas.get(c["scenario"])) for c in cells]
     note = (["", "\\* flown with an earlier config of the stack, or before cells recorded theirs (`--stale STACK` "
-             "flies it again)"] if any(" * |" in r for r in rows) else [])
+             "flies it again)"] if any(" * " in r for r in rows) else [])
+    if any(" † |" in r for r in rows):
+        note += ["", "† flown with an earlier plan of the scenario (another IR delta; the plans in `plans/` are "
+                 "today's): not what today's plans do"]
     return "\n".join(lines + rows + note)
 
 
+def plan_deltas(out: Path) -> dict[str, float]:
+    """Per scenario with a cached IR plan in ``out``/plans/ir/, its delta (m/s)."""
+    paths = sorted((out / "plans" / "ir").glob("*.json"))
+    return {path.stem: json.loads(path.read_text())["delta_mps"] for path in paths}
+
+
 def write_table(out: Path, cells: list[dict]) -> Path:
-    """``out``/table.md: the table of every cell (atomically, as the cells)."""
-    return write_atomic(out / "table.md", table(cells, all_scenarios(cells)) + "\n")
+    """``out``/table.md: the table of every cell (atomically, as the cells), cells of an earlier plan marked."""
+    return write_atomic(out / "table.md", table(cells, all_scenarios(cells), plan_deltas(out)) + "\n")
 
 
 def estimate(scenarios, stacks, seeds: int) -> float:
@@ -317,7 +332,7 @@ def main() -> None:
     cells = cell_store(out).cells()
     if cells:
         write_table(out, cells)
-    print(table(cells, scenarios))
+    print(table(cells, scenarios, plan_deltas(out)))
 
 
 if __name__ == "__main__":

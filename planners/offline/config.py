@@ -206,6 +206,10 @@ class IRPlannerConfig(PlannerConfig):
     disjunctive_resets: bool = True
     """The box resets in Balas' convex-hull form (False: big-M switching, the baseline of
     ``benchmarks/planner.py``)."""
+    contact_cones: int | None = 8
+    """Room for the disc robot behind every copy's contact (``planners/offline/milp/contact_room.py``): the
+    circle of push directions cut into this many cones (>= 4; more: less conservative, more binaries).
+    None: the copies are points that meet the object's centre (as before this option; a disc robot may not fit)."""
 
     def __post_init__(self, *solver_keywords: Any) -> None:
         super().__post_init__(*solver_keywords)
@@ -216,6 +220,7 @@ class IRPlannerConfig(PlannerConfig):
                  "numbers > 0", PlannerError)
         check_integer(self, "copy_intervals", PlannerError, low=1, none="the scenario's hint, else 2")
         check_flag(self, "disjunctive_resets", PlannerError)
+        check_integer(self, "contact_cones", PlannerError, low=4, none="point contacts (no room for the disc)")
         if self.robot_object_separation:
             fail("IRPlannerConfig.robot_object_separation", True, "False: with the impact-robust planner the "
                  "controller keeps robots off objects away from planned impacts", PlannerError)

@@ -5,9 +5,11 @@ object off with a velocity error ``errors[i]`` (m/s per axis, on top of the poin
 impacts objects fly straight; at each impact the impacting robot flies the multilinear blend of its copies
 that the object's state selects (:meth:`~planners.plan.types.ImpactCopies.blend`), and the object leaves with
 Eq. (5) applied to the blended robot's pre-impact velocity, plus the error. The result says whether the task
-holds (STL robustness of the sampled trace), whether every object ends inside its final box, and how far
-out of its box the object ever was at an impact (|xi| <= 1: inside). A plan with delta promises all three
-for every error in [-delta, delta]^2 at every impact.
+holds (STL robustness of the sampled trace), whether every object ends inside its final box, how far
+out of its box the object ever was at an impact (|xi| <= 1: inside) and how much room the disc robot had
+behind its contact (its centre one robot and object radius from the object's, against the push, inside the
+world shrunk by its radius). A plan with delta promises all four for every error in [-delta, delta]^2 at
+every impact (the room since ``IRPlannerConfig.contact_cones``).
 """
 
 from __future__ import annotations
@@ -29,7 +31,9 @@ class Outcome:
     """One rollout. robustness: the task's STL robustness (m) on the trace sampled every control period;
     final_position_error_m / final_velocity_error_mps: per object, |state(tf) - plan(tf)| per axis;
     in_final_box: every object's final state within its final box; max_box_coordinate: the largest |xi|
-    of an object's state at an impact (> 1: it left the box the copies cover)."""
+    of an object's state at an impact (> 1: it left the box the copies cover); contact_room_m: the smallest
+    distance (m) of the disc robot's centre at an impact inside the world shrunk by its radius (< 0: the
+    robot would have to be beyond a wall; :func:`contact_room`)."""
 
     robustness: float
     final_position_error_m: dict[str, np.ndarray]
@@ -38,11 +42,27 @@ class Outcome:
     max_box_coordinate: float
     positions: dict[str, np.ndarray]
     times_s: np.ndarray
+    contact_room_m: float = np.inf
 
     @property
     def ok(self) -> bool:
-        """The task holds, every object ends in its final box and stayed in its boxes (to 1e-6)."""
-        return self.robustness >= -1e-6 and self.in_final_box and self.max_box_coordinate <= 1.0 + 1e-6
+        """The task holds, every object ends in its final box, stayed in its boxes and left the disc robot
+        room behind every contact (to 1e-6)."""
+        return (self.robustness >= -1e-6 and self.in_final_box and self.max_box_coordinate <= 1.0 + 1e-6
+                and self.contact_room_m >= -1e-6)
+
+
+def contact_room(scenario: Scenario, robot: str, obj: str, position: np.ndarray, push: np.ndarray) -> float:
+    """Room (m) of the disc robot that gives the object at ``position`` the velocity change ``push`` (m/s):
+    its centre is r_R + r_O behind the object's, against the push; the smallest distance of that centre
+    inside the world box shrunk by r_R (< 0: beyond a wall). A zero push leaves the side open: inf."""
+    norm = float(np.hypot(*push))
+    if norm <= 1e-12:
+        return float("inf")
+    r = scenario.body(robot).radius_m
+    centre = np.asarray(position, float) - (r + scenario.body(obj).radius_m) * np.asarray(push, float) / norm
+    xmin, xmax, ymin, ymax = scenario.world_box
+    return float(min(centre[0] - xmin - r, xmax - r - centre[0], centre[1] - ymin - r, ymax - r - centre[1]))
 
 
 def rollout(plan: Plan, scenario: Scenario, errors: Sequence[np.ndarray] | np.ndarray) -> Outcome:
@@ -54,7 +74,7 @@ def rollout(plan: Plan, scenario: Scenario, errors: Sequence[np.ndarray] | np.nd
     copies = {(c.robot, round(c.time_s, 9)): c for c in plan.copies}
     state = {o.name: (np.array(o.position_m, float), np.array(o.velocity_mps, float), 0.0) for o in scenario.objects}
     robots = {r.name: plan.bodies[r.name] for r in scenario.robots}
-    worst = 0.0
+    worst, room = 0.0, float("inf")
     breaks: dict[str, list[tuple[float, np.ndarray, np.ndarray]]] = {o.name: [] for o in scenario.objects}
     for imp, err in zip(plan.impacts, errors):
         p0, v0, t0 = state[imp.object]
@@ -69,6 +89,7 @@ def rollout(plan: Plan, scenario: Scenario, errors: Sequence[np.ndarray] | np.nd
         _, _, m3, m4 = mass_fractions(scenario.body(imp.robot).mass_kg, scenario.body(imp.object).mass_kg,
                                       scenario.restitution)
         v1 = m3 * v_robot + m4 * v0 + err
+        room = min(room, contact_room(scenario, imp.robot, imp.object, p, m3 * (v_robot - v0)))
         state[imp.object] = (p, v1, imp.time_s)
         breaks[imp.object].append((imp.time_s, p, v1))
 
@@ -91,7 +112,7 @@ def rollout(plan: Plan, scenario: Scenario, errors: Sequence[np.ndarray] | np.nd
     from impact_env.stl import robustness
 
     rho = float(robustness(scenario.formula, trace, scenario.region_map(), dt=dt))
-    return Outcome(rho, pos_err, vel_err, inside, worst, trace, times)
+    return Outcome(rho, pos_err, vel_err, inside, worst, trace, times, room)
 
 
 def _piecewise_linear(times: np.ndarray, p0: np.ndarray, v0: np.ndarray,

@@ -327,3 +327,22 @@ def test_handover_agreement_table_counts_the_episodes_that_differ():
     text = table([cell("this checkout", [0.2, -0.1]), cell("old", [0.2, 0.3])], "old", ["relay"])
     assert "| relay e 0.3 | this checkout | 1/2 | +0.050 | -0.100 | 2 | 0 | 1 |" in text
     assert "| relay e 0.3 | old | 2/2 | +0.250 | +0.200 | 2 | 0 | 1 |" in text
+
+
+def test_impact_robust_cells_of_an_earlier_plan_are_marked(tmp_path):
+    """A cell flown at another delta than the cached IR plan's (the plan changed since) gets a dagger and the
+    note; one at the plan's delta does not."""
+    (tmp_path / "plans" / "ir").mkdir(parents=True)
+    shutil.copy(DATA / "plans" / "ir" / "throw_and_catch_exp.json", tmp_path / "plans" / "ir")
+    deltas = impact_robust.plan_deltas(tmp_path)
+    delta = deltas["throw_and_catch_exp"]
+    episodes = [{"seed": 0, "success": True, "robustness": 0.2, "final_speed": 0.01, "in_final_box": True,
+                 "mission_replans": 0}]
+    cells = [{"scenario": "throw_and_catch_exp", "planner": "ir", "stack": "paper", "axis": "noise", "level": d,
+              "delta": d, "episodes": episodes, "config": impact_robust.config_fingerprint("paper")}
+             for d in (delta, 0.06)]
+    text = impact_robust.table(cells, ["throw_and_catch_exp"], deltas)
+    assert f"| impact noise 1 delta ({delta:.4g} m/s) | paper | ir |" in text
+    assert "| impact noise 1 delta (0.06 m/s) | paper † | ir |" in text
+    assert text.endswith("not what today's plans do") and "flies it again" not in text
+    assert "†" not in impact_robust.table(cells[:1], ["throw_and_catch_exp"], deltas)
