@@ -199,9 +199,10 @@ def profiled_episode(args: tuple) -> dict:
     tree, scenario_name, plan_dict, seed, mismatch, variant = args
     import numpy as np
 
+    # paths every tree since 0.2 has (a reference commit from before the 0.3 layout runs this too)
+    from impact_env import load_scenario
+    from impact_env.envs import TransportEnv
     from impact_env.rollout import run_episode
-    from impact_env.transport.gym_env import TransportEnv
-    from impact_env.transport.scenario import load_scenario
     from planners.expert import Expert
     from planners.plan import Plan
 
