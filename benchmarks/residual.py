@@ -6,7 +6,8 @@
 For each scenario the expert (stack ``all``, the robustness benchmark's cached plan, results/robustness/plans)
 flies ``--seeds`` episodes (env seeds ``--first-seed`` ...) under the residual's training condition
 (:data:`baselines.residual.TRAINING_NOISE`: 0.02 m/s post-impact velocity noise, 5 % thrust noise, 5 cm start
-noise), alone and with each trained residual (``runs/residual_<scenario>_s<seed>``, ``impact-env residual``,
+noise), alone and with each trained residual (``results/residual/runs/residual_<scenario>_s<seed>``,
+``impact-env residual``,
 whose training episodes use other env seeds). The seeds are shared, so the start, the thrust noise and the
 impact noise draws are the same until the correction changes what happens.
 
@@ -157,7 +158,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenarios", default="", help="comma-separated scenario names")
     ap.add_argument("--train-seeds", default="0", help="comma-separated training seeds of the residual runs")
-    ap.add_argument("--runs-dir", type=Path, default=ROOT / "runs", help="where runs/residual_<scenario>_s<seed> are")
+    ap.add_argument("--runs-dir", type=Path, default=RESULTS / "runs",
+                    help="where the run folders residual_<scenario>_s<seed> are (default results/residual/runs)")
     ap.add_argument("--seeds", type=int, default=50, help="episodes per controller (default 50)")
     ap.add_argument("--first-seed", type=int, default=0, help="env seed of the first episode (default 0)")
     ap.add_argument("--out", type=Path, default=RESULTS, help="cells.jsonl and table.md (default results/residual)")

@@ -52,6 +52,7 @@ def _residual(args: argparse.Namespace) -> int:
         env_options=options, timesteps=args.timesteps, save_every=args.save_every, max_minutes=args.max_minutes,
         seed=args.seed, out=args.out, runs_dir=args.runs_dir, resume=args.resume, quiet=args.quiet)
     run_dir = train_residual(config)
-    print(f"saved {Path(run_dir) / 'model.zip'}; compare it with the expert alone: python -m benchmarks.residual "
-          f"--scenarios {args.scenario} --runs {run_dir}")
+    print(f"saved {Path(run_dir) / 'model.zip'}; compare it with the expert alone on the same seeds: python -m "
+          f"benchmarks.residual --scenarios {args.scenario} --train-seeds {args.seed} "
+          f"--runs-dir {Path(run_dir).parent}")
     return 0
