@@ -151,6 +151,13 @@ def table(out: Path) -> str:
     text = "\n".join(lines)
     if over_seeds:
         text += "\n\n" + "\n".join(over_seeds)
+    experts = sorted((c for c in cells if c["controller"] == "expert"), key=lambda c: c["scenario"])
+    text += ("\n\nThe expert alone (stack all), every scenario flown:\n\n| scenario | episodes | successes | "
+             "robustness mean (min) m | controller ms per step (median) |\n|---|---:|---:|---:|---:|\n")
+    text += "\n".join(f"| {c['scenario']} | {len(c['episodes'])} | {sum(e['success'] for e in c['episodes'])} | "
+                      f"{np.mean([e['robustness'] for e in c['episodes']]):+.3f} "
+                      f"({min(e['robustness'] for e in c['episodes']):+.3f}) | "
+                      f"{np.median([e['ms_per_step'] for e in c['episodes']]):.2f} |" for c in experts)
     return text
 
 
