@@ -175,3 +175,13 @@ def test_the_benchmark_pairs_the_same_seeds():
     cmp = compare(cells[0], cells[1])
     assert (cmp["expert_successes"], cmp["residual_successes"]) == (3, 4)
     assert cmp["robustness_diff_ci"][0] <= 0.2 <= cmp["robustness_diff_ci"][1]
+
+
+def test_the_controller_refuses_a_folder_without_a_residual_policy(tmp_path):
+    from baselines.residual import ResidualController, build_expert
+    from impact_env.errors import ControllerError
+
+    (tmp_path / "model.zip").write_bytes(b"PK")
+    (tmp_path / "train.json").write_text(json.dumps({"algo": "ppo", "method": "DAgger"}))
+    with pytest.raises(ControllerError, match="no residual policy"):
+        ResidualController(build_expert(SCENARIO, _plan(), "all"), tmp_path)
