@@ -96,7 +96,9 @@ class ResidualEnv(gym.Env):
             raise EnvConfigError(f"action_penalty must be a finite number >= 0, got {action_penalty!r}")
         self.env, self.expert = env, expert
         self.scale, self.action_penalty = _check_scale(scale), float(action_penalty)
-        assert isinstance(env.observation_space, spaces.Box) and isinstance(env.action_space, spaces.Box)
+        if not (isinstance(env.observation_space, spaces.Box) and isinstance(env.action_space, spaces.Box)):
+            raise EnvConfigError("the residual needs Box observation and action spaces (a central TransportEnv), got "
+                                 f"{env.observation_space} and {env.action_space}")
         self.n_actions = int(env.action_space.shape[0])
         self.observation_space, self.action_space = residual_spaces(env.observation_space, self.n_actions)
         self._command = np.zeros(self.n_actions, dtype=np.float32)
