@@ -254,7 +254,8 @@ def _train(config: ResidualConfig) -> Path:
             rob = "-" if row["robustness_mean"] is None else f"{row['robustness_mean']:+.3f} m"
             print(f"  {done:,}/{config.timesteps:,} env-steps, {wall_s / 60:.1f} min: {row['episodes']} training "
                   f"episodes, success {rate}, robustness {rob}, RMS correction {row['residual_rms']:.3f}", flush=True)
-        if config.max_minutes is not None and time.perf_counter() - started > 60 * config.max_minutes:
+        if (config.max_minutes is not None and done < config.timesteps
+                and time.perf_counter() - started > 60 * config.max_minutes):
             if not config.quiet:
                 print(f"  --max-minutes {config.max_minutes:g} reached: saved; continue with --resume", flush=True)
             break
