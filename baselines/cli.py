@@ -1,6 +1,6 @@
 """``impact-env train`` (baselines/train.py), ``bench`` (baselines/bench.py), ``record`` (baselines/record.py),
 ``dataset`` (baselines/task_dataset.py), ``bc`` (baselines/bc.py), ``dagger`` (baselines/dagger.py), ``bc-rl``
-(baselines/batched/bc_rl.py), ``curves`` (baselines/curves.py)."""
+(baselines/batched/bc_rl.py), ``curves`` (baselines/curves.py), ``residual`` (baselines/residual/)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import numpy as np
 # Nothing from the [rl] extra is imported here: `impact-env` loads this module at start-up, also in a base
 # install (make demo), so stable-baselines3, yaml and minari are imported only by the command handlers.
 from baselines import ALGOS, rllib_cli
+from baselines.residual import cli as residual_cli
 from impact_env.cli_options import (
     add_files,
     add_out,
@@ -208,6 +209,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--labels", default=None, help="comma-separated legend labels, one per run")
     p.add_argument("--table", default=None, metavar="MD", help="also write a markdown table of the runs to this file")
     p.set_defaults(func=_curves)
+
+    residual_cli.register(subparsers)
 
 
 def _convert(args: argparse.Namespace) -> int:

@@ -36,7 +36,7 @@ def test_main_help_is_clean_text(capsys):
 
 
 @pytest.mark.parametrize("command", ["scenarios", "show", "run", "train", "bench", "record", "bc", "dagger", "bc-rl",
-                                     "curves", "plan"])
+                                     "residual", "curves", "plan"])
 def test_every_option_has_help_and_shows_its_default(command):
     parser = _subparsers(build_parser())[command]
     text = parser.format_help()

@@ -22,8 +22,8 @@ from impact_env.cli import build_parser, main
 from impact_env.errors import OutputPathError
 from tests.helpers import one_line_error
 
-LONG_COMMANDS = ("run", "plan", "train", "bench", "record", "bc", "dagger", "bc-rl", "dataset", "filter")
-EPISODE_COMMANDS = ("run", "bench", "record", "train", "dataset", "dagger", "bc-rl")
+LONG_COMMANDS = ("run", "plan", "train", "bench", "record", "bc", "dagger", "bc-rl", "residual", "dataset", "filter")
+EPISODE_COMMANDS = ("run", "bench", "record", "train", "dataset", "dagger", "bc-rl", "residual")
 NOISE = ("--thrust-noise", "--initial-position-noise-m", "--impact-velocity-noise-mps", "--restitution",
          "--fuel-penalty", "--reward-mode")
 STATION = ("--fidelity", "--energy-penalty", "--pull-speed-mps", "--max-active")
