@@ -34,6 +34,7 @@ REQUIRED = {  # valid values of required fields
     "MarlConfig": {"algorithm": "mappo", "task": "corridor"},
     "TaskBCConfig": {"family": "throw_and_catch"},
     "BcRlConfig": {"scenario": "corridor", "policy": "runs/bc_corridor"},
+    "ResidualConfig": {"scenario": "corridor"},
 }
 
 
