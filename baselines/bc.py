@@ -25,6 +25,7 @@ import numpy as np
 
 from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization, set_obs_statistics
 from baselines.record import dataset_id, datasets_path, use_datasets_path
+from baselines.run_folder import check_run_folder, run_folder_path
 from baselines.run_meta import scenario_fingerprint
 from impact_env.config_checks import check_flag, check_integer, check_number, check_text, check_widths
 from impact_env.errors import ImpactEnvError
@@ -71,8 +72,7 @@ class BCConfig:
         check_text(self, "scenario", ImpactEnvError)
         check_text(self, "dataset_dir", ImpactEnvError, none="Minari's own folder")
         check_fit_fields(self)
-        check_text(self, "out", ImpactEnvError, none="<runs_dir>/bc_<scenario>_s<seed>")
-        check_text(self, "runs_dir", ImpactEnvError)
+        check_run_folder(self, "bc_<scenario>_s<seed>")
 
 
 def check_fit_fields(config: Any) -> None:
@@ -233,7 +233,7 @@ def save_policy(fitted: FittedPolicy, run_dir: Path, meta: dict[str, Any]) -> No
 def behaviour_clone(config: BCConfig) -> Path:
     """Fit a policy to the expert's demonstrations and save it; returns the run directory."""
     scenario = load_scenario(config.scenario)
-    run_dir = Path(config.out) if config.out else Path(config.runs_dir) / f"bc_{scenario.name}_s{config.seed}"
+    run_dir = run_folder_path(config.out, config.runs_dir, f"bc_{scenario.name}_s{config.seed}")
     check_output_folder(run_dir, "--out")  # before any epoch
     episodes = load_demonstrations(scenario.name, config.dataset_dir)
     train_eps, val_eps = split_episodes(episodes, config.validation_share)

@@ -13,10 +13,12 @@ import numpy as np
 # install (make demo), so stable-baselines3, yaml and minari are imported only by the command handlers.
 from baselines import ALGOS, rllib_cli
 from baselines.residual import cli as residual_cli
+from baselines.run_folder import run_folder_path
 from impact_env.cli_options import (
     add_files,
     add_out,
     add_quiet,
+    add_run_folder,
     add_seed,
     add_tether_options,
     add_transport_options,
@@ -44,12 +46,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="parallel environments, in subprocesses when more than one (default: n_envs of the file)")
     p.add_argument("--max-minutes", type=float, default=None,
                    help="wall-clock budget: stop before --timesteps when it runs out (default: none)")
-    add_out(p, "the run folder, with model.zip, vecnormalize.json, train.json, eval/, tb/, checkpoints/ (default: "
-               "<--runs-dir>/<algo>_<scenario>_s<seed>)")
-    p.add_argument("--runs-dir", default="runs", help="parent of the default run folder")
-    p.add_argument("--resume", action="store_true",
-                   help="continue the run saved in the run folder (after Ctrl-C, --max-minutes or a shorter "
-                        "--timesteps) up to --timesteps")
+    add_run_folder(p, "model.zip, vecnormalize.json, train.json, eval/, tb/, checkpoints/",
+                   "<algo>_<scenario>_s<seed>",
+                   resume="continue the run saved in the run folder (after Ctrl-C, --max-minutes or a shorter "
+                          "--timesteps) up to --timesteps")
     p.add_argument("--hyperparams", default=None, metavar="YAML",
                    help="an rl-baselines3-zoo style YAML file (default: baselines/hyperparams/<algo>.yml)")
     p.add_argument("--multiagent", action="store_true",
@@ -108,9 +108,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--batch-size", type=int, default=256, help="minibatch size")
     p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate")
     add_seed(p, "seed of the policy and the minibatches")
-    add_out(p, "the run folder, with model.zip, vecnormalize.json, train.json (default: "
-               "<--runs-dir>/bc_<scenario>_s<seed>)")
-    p.add_argument("--runs-dir", default="runs", help="parent of the default run folder")
+    add_run_folder(p, "model.zip, vecnormalize.json, train.json", "bc_<scenario>_s<seed>")
     add_quiet(p, "no line per epoch")
     p.set_defaults(func=_bc)
 
@@ -135,10 +133,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--batch-size", type=int, default=256, help="minibatch size")
     p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate")
     add_seed(p, "seed of the fits, the per-step choices and the training episodes")
-    add_out(p, "the run folder, with model.zip, vecnormalize.json, train.json, dagger.json, rounds/ (default: "
-               "<--runs-dir>/dagger_<scenario>_s<seed>)")
-    p.add_argument("--runs-dir", default="runs", help="parent of the default run folder")
-    p.add_argument("--resume", action="store_true", help="continue the run in the run folder after its last round")
+    add_run_folder(p, "model.zip, vecnormalize.json, train.json, dagger.json, rounds/", "dagger_<scenario>_s<seed>",
+                   resume="continue the run in the run folder after its last round")
     add_transport_options(p, REWARD_MODES)
     add_quiet(p, "no line per round")
     p.set_defaults(func=_dagger)
@@ -157,9 +153,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="the BC or DAgger run folder (its rounds/ are the expert pairs, else --dataset's)")
     p.add_argument("--dataset", default=None, metavar="DIR",
                    help="the Minari datasets folder of `impact-env record --out` (for a BC folder; default: Minari's)")
-    add_out(p, "the run folder: model.zip, vecnormalize.json, train.json, curve.jsonl, updates.jsonl, result.json "
-               "(default: <--runs-dir>/bc_rl_<scenario>_s<seed>)")
-    p.add_argument("--runs-dir", default="runs", help="parent of the default run folder")
+    add_run_folder(p, "model.zip, vecnormalize.json, train.json, curve.jsonl, updates.jsonl, result.json",
+                   "bc_rl_<scenario>_s<seed>")
     add_seed(p, "seed of PPO, the BC minibatches and the envs")
     p.add_argument("--frames", type=int, default=1_000_000, help="env-step budget (default 1,000,000)")
     p.add_argument("--bc-weight", type=float, default=1.0, help="the BC loss's weight before it decays (default 1)")
@@ -309,7 +304,7 @@ def _bc_rl(args: argparse.Namespace) -> int:
                         normalize_advantage=args.normalize_advantage, eval_episodes=args.eval_episodes,
                         **transport_options(args))
     name = load_scenario(args.scenario).name
-    out = Path(args.out) if args.out else Path(args.runs_dir) / f"bc_rl_{name}_s{args.seed}"
+    out = run_folder_path(args.out, args.runs_dir, f"bc_rl_{name}_s{args.seed}")
     check_output_folder(out, "--out")  # before the world is built
     result = run(config, out, progress=not args.quiet)
     before, after = result["evaluation_init"]["pymunk"], result["evaluation"]["pymunk"]

@@ -36,6 +36,7 @@ import numpy as np
 
 from baselines.bc import check_fit_fields, fit_policy, load_demonstrations, save_policy, split_episodes
 from baselines.dagger_label import LabelledEpisode, labelled_episode
+from baselines.run_folder import check_run_folder, run_folder_path
 from baselines.run_meta import scenario_fingerprint
 from impact_env.config_checks import check_flag, check_instance, check_integer, check_number, check_text, fail
 from impact_env.errors import ImpactEnvError
@@ -113,8 +114,7 @@ class DAggerConfig:
         if self.seed >= 1000:
             fail("DAggerConfig.seed", self.seed, "< 1000 (the training env seeds are seed * 10**6 + ...)",
                  ImpactEnvError)
-        check_text(self, "out", ImpactEnvError, none="<runs_dir>/dagger_<scenario>_s<seed>")
-        check_text(self, "runs_dir", ImpactEnvError)
+        check_run_folder(self, "dagger_<scenario>_s<seed>")
         check_flag(self, "resume", ImpactEnvError)
 
     def beta(self, round_: int) -> float:
@@ -241,7 +241,7 @@ def dagger(config: DAggerConfig) -> Path:
     import torch
 
     scenario = load_scenario(config.scenario)
-    run_dir = Path(config.out) if config.out else Path(config.runs_dir) / f"dagger_{scenario.name}_s{config.seed}"
+    run_dir = run_folder_path(config.out, config.runs_dir, f"dagger_{scenario.name}_s{config.seed}")
     check_output_folder(run_dir, "--out")
     rows = _start(config, run_dir)
     threads = torch.get_num_threads()

@@ -33,6 +33,7 @@ import numpy as np
 
 from baselines import ALGOS, hyperparams
 from baselines.model_files import LEGACY_NORMALIZATION_FILE, NORMALIZATION_FILE, save_normalization
+from baselines.run_folder import check_run_folder, run_folder_path
 from impact_env import GYM_IDS
 from impact_env.config_checks import (
     check_choice,
@@ -93,8 +94,7 @@ class TrainConfig:
                            ("eval_freq", "about five per run")):
             check_integer(self, name, ImpactEnvError, low=1, none=none)
         check_integer(self, "seed", ImpactEnvError, low=0)
-        check_text(self, "out", ImpactEnvError, none="<runs_dir>/<algo>_<scenario>[_ma]_s<seed>")
-        check_text(self, "runs_dir", ImpactEnvError)
+        check_run_folder(self, "<algo>_<scenario>[_ma]_s<seed>")
         check_instance(self, "env_options", ImpactEnvError, dict, what="a dict of environment keywords")
         for name in ("eval_episodes", "checkpoint_freq"):
             check_integer(self, name, ImpactEnvError, low=1)
@@ -121,7 +121,8 @@ def run_dir_for(config: TrainConfig) -> Path:
     if config.out is not None:
         return Path(config.out)
     name = load_world(config.scenario).name
-    return Path(config.runs_dir) / f"{config.algo}_{name}{'_ma' if config.multiagent else ''}_s{config.seed}"
+    return run_folder_path(None, config.runs_dir,
+                           f"{config.algo}_{name}{'_ma' if config.multiagent else ''}_s{config.seed}")
 
 
 def effective_timesteps(algo: str, timesteps: int, n_envs: int, entry: dict[str, Any], multiagent: bool = False,

@@ -143,6 +143,15 @@ def add_out(p: argparse.ArgumentParser, what: str, default: str | None = None) -
     p.add_argument("--out", metavar="DIR", default=default, type=output_path, help=f"output folder: {what}")
 
 
+def add_run_folder(p: argparse.ArgumentParser, contents: str, default_name: str, resume: str | None = None) -> None:
+    """A trainer's run folder: ``--out DIR`` (holding ``contents``), else ``<--runs-dir>/<default_name>``; with
+    ``resume`` (its help text), ``--resume`` too."""
+    add_out(p, f"the run folder, with {contents} (default: <--runs-dir>/{default_name})")
+    p.add_argument("--runs-dir", default="runs", type=output_path, help="parent of the default run folder")
+    if resume is not None:
+        p.add_argument("--resume", action="store_true", help=resume)
+
+
 def add_files(p: argparse.ArgumentParser, **what: str) -> None:
     """The single-file options ``--json PATH``, ``--plot PATH``, ``--video PATH`` that ``what`` names, each
     with its help text (``add_files(p, json="the plan", plot="a figure of it")``)."""

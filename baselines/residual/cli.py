@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from impact_env.cli_options import add_out, add_quiet, add_seed, add_transport_options, transport_options
+from impact_env.cli_options import add_quiet, add_run_folder, add_seed, add_transport_options, transport_options
 from impact_env.transport.core import REWARD_MODES
 
 STACKS = ("paper", "+id", "+mission", "all")
@@ -33,10 +33,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-minutes", type=float, default=None,
                    help="stop at the first save after this many minutes (continue with --resume)")
     add_seed(p, "seed of PPO and of the training episodes (0-99)")
-    add_out(p, "the run folder: model.zip, vecnormalize.json, train.json (default: "
-               "<--runs-dir>/residual_<scenario>_s<seed>)")
-    p.add_argument("--runs-dir", default="runs", help="parent of the default run folder")
-    p.add_argument("--resume", action="store_true", help="continue the run in the run folder up to --timesteps")
+    add_run_folder(p, "model.zip, vecnormalize.json, train.json", "residual_<scenario>_s<seed>",
+                   resume="continue the run in the run folder up to --timesteps")
     add_transport_options(p, REWARD_MODES)
     p.set_defaults(impact_velocity_noise_mps=0.02, thrust_noise=0.05, initial_position_noise_m=0.05)
     add_quiet(p, "no line per save")

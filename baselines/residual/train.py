@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from baselines.residual.env import DEFAULT_SCALE, ResidualEnv
+from baselines.run_folder import check_run_folder, run_folder_path
 from impact_env.config_checks import check_flag, check_instance, check_integer, check_number, check_text, check_widths
 from impact_env.errors import ImpactEnvError
 from impact_env.results_store import atomic_path, check_output_folder, write_atomic
@@ -108,8 +109,7 @@ class ResidualConfig:
         check_widths(self, "net_arch", ImpactEnvError)
         check_number(self, "max_minutes", ImpactEnvError, low=0, low_open=True, none="no wall-clock budget")
         check_integer(self, "seed", ImpactEnvError, low=0, high=99)
-        check_text(self, "out", ImpactEnvError, none="<runs_dir>/residual_<scenario>_s<seed>")
-        check_text(self, "runs_dir", ImpactEnvError)
+        check_run_folder(self, "residual_<scenario>_s<seed>")
         check_flag(self, "resume", ImpactEnvError)
         check_flag(self, "quiet", ImpactEnvError)
 
@@ -206,7 +206,7 @@ def _train(config: ResidualConfig) -> Path:
     from impact_env.transport.scenario import load_scenario
 
     scenario = load_scenario(config.scenario)
-    run_dir = Path(config.out) if config.out else Path(config.runs_dir) / f"residual_{scenario.name}_s{config.seed}"
+    run_dir = run_folder_path(config.out, config.runs_dir, f"residual_{scenario.name}_s{config.seed}")
     check_output_folder(run_dir, "--out")
     meta = _start(config, run_dir)
     env = TransportEnv(scenario, **config.env_options)  # a bad option is an error before the plan is made
