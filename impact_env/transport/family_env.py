@@ -33,7 +33,7 @@ from impact_env.transport.gym_env import TransportEnv
 from impact_env.transport.scenario import Scenario, load_scenario
 from impact_env.transport.task_observation import TaskObservation, padded_spaces
 
-__all__ = ["FAMILY_IDS", "TaskFamilyEnv"]
+__all__ = ["FAMILY_IDS", "TaskFamilyEnv", "family_task"]
 
 FAMILY_IDS = {
     "impact_env/ThrowAndCatchTasks-v0": "throw_and_catch",
@@ -45,6 +45,19 @@ CACHED_TASKS = 32  # transport envs kept for tasks seen recently (building one c
 TASK_SEEDS = 2**31  # a generated task's seed, drawn by the env when no ``tasks`` are given, is below this
 
 Task = int | str | Path | Scenario
+
+
+def family_task(family: str, task: Task) -> Scenario:
+    """The scenario of a task given as a generated-task seed of ``family`` (int), a scenario name or file, or a
+    Scenario."""
+    if isinstance(task, Scenario):
+        return task
+    if isinstance(task, (int, np.integer)) and not isinstance(task, bool):
+        return generate_task(family, int(task))
+    if isinstance(task, (str, Path)):
+        return load_scenario(task)
+    raise EnvConfigError(f"a task is a generated-task seed (int), a scenario name or file, or a Scenario; got "
+                         f"{task!r}")
 
 
 class TaskFamilyEnv(gym.Env):
@@ -89,14 +102,7 @@ class TaskFamilyEnv(gym.Env):
 
     # -------------------------------------------------------------------------------------------- tasks
     def _scenario(self, task: Task) -> Scenario:
-        if isinstance(task, Scenario):
-            return task
-        if isinstance(task, (int, np.integer)) and not isinstance(task, bool):
-            return generate_task(self.family, int(task))
-        if isinstance(task, (str, Path)):
-            return load_scenario(task)
-        raise EnvConfigError(f"a task is a generated-task seed (int), a scenario name or file, or a Scenario; got "
-                             f"{task!r}")
+        return family_task(self.family, task)
 
     def _open(self, task: Task) -> tuple[TransportEnv, TaskObservation]:
         key = task if not isinstance(task, Path) else str(task)

@@ -115,6 +115,20 @@ class TaskObservation:
             out[j:j + 2] = (cx - ox, cy - oy)
         return out
 
+    def scatter(self) -> tuple[np.ndarray, np.ndarray, int, list[tuple[int, int, float, float]]]:
+        """Where :meth:`__call__` puts each number, for a batched implementation of it
+        (:class:`~impact_env.transport.batched.family_world.TaskFamilyWorld`): ``(base, columns, time_column,
+        centres)``. ``base`` is the padded observation before the bodies are written (the task's constant
+        part and every present body's flag); the environment observation's body numbers ``obs[:-1]`` go to
+        ``columns`` and its time left to ``time_column``; each ``(j, slot, cx, cy)`` of ``centres`` writes the
+        region centre relative to object ``slot`` at columns ``j, j + 1``."""
+        base = self._static.copy()
+        columns = []
+        for start in self._rows:
+            base[start - 1] = 1.0
+            columns.extend(range(start, start + OBS_PER_BODY))
+        return base, np.asarray(columns, dtype=np.int64), self.bodies_size, list(self._centres)
+
     def pad_action(self, action: np.ndarray) -> np.ndarray:
         """A ``3 n_robots`` action padded with zeros to ``3 limits.robots``."""
         out = np.zeros(self.action_size, dtype=np.float32)

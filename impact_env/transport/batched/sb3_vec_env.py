@@ -38,6 +38,9 @@ class TransportSB3VecEnv(VecEnv):
     Args:
         scenario: a shipped scenario name, a path to a TOML file or a Scenario.
         num_envs: N.
+        world: instead of ``scenario`` and ``num_envs``, a world built already: a
+            :class:`~impact_env.transport.batched.BatchedTransportWorld` or a
+            :class:`~impact_env.transport.batched.family_world.TaskFamilyWorld` (many tasks of a family).
         render_env_indices: the envs ``get_images()`` / ``render()`` draw (default the first).
         render_width_px: width of a frame.
         **world_options: :class:`~impact_env.transport.batched.BatchedTransportWorld`'s options.
@@ -45,10 +48,16 @@ class TransportSB3VecEnv(VecEnv):
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, scenario: Scenario | str, num_envs: int, *, render_env_indices: Sequence[int] = (0,),
-                 render_width_px: int = 600, **world_options: Any) -> None:
-        self.world = BatchedTransportWorld(scenario, num_envs, **world_options)
-        w = self.world
+    def __init__(self, scenario: Scenario | str | None = None, num_envs: int | None = None, *, world: Any = None,
+                 render_env_indices: Sequence[int] = (0,), render_width_px: int = 600, **world_options: Any) -> None:
+        if world is None:
+            if scenario is None or num_envs is None:
+                raise EnvConfigError("give a scenario and num_envs, or a world")
+            world = BatchedTransportWorld(scenario, num_envs, **world_options)
+        elif scenario is not None or num_envs is not None or world_options:
+            raise EnvConfigError("give a scenario and num_envs (and world options), or a world built already, not both")
+        self.world = w = world
+        num_envs = w.num_envs
         indices = tuple(render_env_indices)
         if not indices or any(isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not 0 <= i < num_envs
                               for i in indices):
@@ -84,6 +93,9 @@ class TransportSB3VecEnv(VecEnv):
         infos = [{"robustness": float(host["robustness"][i]), "is_success": bool(host["is_success"][i]),
                   "fuel_Ns": float(host["fuel_Ns"][i]), "time_s": float(host["time_s"][i]),
                   "impacts": int(host["impacts"][i])} for i in range(self.num_envs)]
+        if "task_index" in host:  # a TaskFamilyWorld: which of its tasks each env runs
+            for i, k in enumerate(host["task_index"].tolist()):
+                infos[i]["task_index"] = k
         done_np = done.cpu().numpy()
         if done_np.any():
             truncated_np = (truncated & ~terminated).cpu().numpy()
@@ -94,9 +106,7 @@ class TransportSB3VecEnv(VecEnv):
         return obs_np, reward.detach().cpu().numpy().astype(np.float32), done_np, infos
 
     def close(self) -> None:
-        for renderer in self.world._renderers.values():
-            renderer.close()
-        self.world._renderers.clear()
+        self.world.close()
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         return [self.world.render_rgb(i, self.render_width_px) for i in self.render_env_indices]

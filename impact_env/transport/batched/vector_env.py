@@ -198,8 +198,6 @@ class TransportVectorEnv(VectorEnv):
     def close_extras(self, **kwargs: Any) -> None:
         world = getattr(self, "world", None)  # None: the constructor raised
         if world is not None:
-            for renderer in world._renderers.values():
-                renderer.close()
-            world._renderers.clear()
+            world.close()
 
 

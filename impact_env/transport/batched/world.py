@@ -444,6 +444,12 @@ class BatchedTransportWorld:
         time_left = obs[:, -1:].unsqueeze(1).expand(-1, R, 1)
         return torch.cat((blocks.reshape(-1, R, OBS_PER_BODY * B), time_left), dim=2)
 
+    def close(self) -> None:
+        """Close the renderers ``render_rgb`` opened."""
+        for renderer in self._renderers.values():
+            renderer.close()
+        self._renderers.clear()
+
     def render_rgb(self, env_index: int, width_px: int = 600) -> np.ndarray:
         """A uint8 (H, W, 3) frame of env ``env_index``, drawn by :mod:`impact_env.transport.rendering`."""
         from impact_env.transport.batched.render import render_env
