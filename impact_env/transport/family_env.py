@@ -139,6 +139,14 @@ class TaskFamilyEnv(gym.Env):
         info["task"] = self.env.scenario.name
         return self.task_observation(obs), reward, terminated, truncated, info
 
+    @property
+    def core(self):
+        """The current task's :class:`~impact_env.transport.core.TransportCore` (after a reset), as
+        :func:`impact_env.rollout.run_episode` reads it from any transport env."""
+        if self.env is None:
+            raise EnvConfigError("call reset() before reading the current task's core")
+        return self.env.core
+
     def render(self):
         return None if self.env is None else self.env.render()
 
