@@ -29,10 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from impact_env.config_checks import check_choice, check_integer, check_number, check_widths, fail
+from baselines.batched.sb3_ppo import check_ppo_settings
+from impact_env.config_checks import check_choice, check_integer, fail
 from impact_env.errors import ImpactEnvError, ModelFileError
 from impact_env.results_store import atomic_path, write_atomic
-from impact_env.transport.core import REWARD_MODES
 from impact_env.transport.generate import FAMILIES
 
 __all__ = ["FamilyPpoConfig", "FamilyPpoPolicy", "run"]
@@ -93,22 +93,8 @@ class FamilyPpoConfig:
                  ImpactEnvError)
         if len(set(self.tasks)) != len(self.tasks):
             fail("FamilyPpoConfig.tasks", self.tasks, "seeds without repeats", ImpactEnvError)
-        check_integer(self, "seed", ImpactEnvError, low=0)
-        for name in ("envs_per_task", "frames", "n_steps", "batch_size", "n_epochs", "checkpoint_frames", "threads"):
-            check_integer(self, name, ImpactEnvError, low=1)
-        for name in ("lr", "clip_range"):
-            check_number(self, name, ImpactEnvError, low=0, low_open=True)
-        check_number(self, "gamma", ImpactEnvError, low=0, high=1, low_open=True)
-        check_number(self, "gae_lambda", ImpactEnvError, low=0, high=1)
-        check_number(self, "ent_coef", ImpactEnvError, low=0)
-        check_number(self, "log_std_init", ImpactEnvError)
-        for name in ("thrust_noise", "initial_position_noise_m"):
-            check_number(self, name, ImpactEnvError, low=0)
-        check_choice(self, "reward_mode", ImpactEnvError, REWARD_MODES)
-        check_widths(self, "hidden", ImpactEnvError)
-        if (self.num_envs * self.n_steps) % self.batch_size:
-            fail("FamilyPpoConfig.batch_size", self.batch_size, f"a divisor of the envs x n_steps ({self.num_envs} x "
-                 f"{self.n_steps} = {self.num_envs * self.n_steps})", ImpactEnvError)
+        check_integer(self, "envs_per_task", ImpactEnvError, low=1)
+        check_ppo_settings(self, self.num_envs)
 
     @property
     def num_envs(self) -> int:

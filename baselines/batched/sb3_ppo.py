@@ -76,6 +76,29 @@ class WorldRun(Protocol):
     def world_options(self) -> dict[str, Any]: ...
 
 
+def check_ppo_settings(cfg: Any, num_envs: int) -> None:
+    """The checks of the PPO settings :class:`Sb3PpoConfig` shares with the family trainer
+    (:class:`~baselines.batched.family_ppo.FamilyPpoConfig`): seed, budget, rollout, optimiser, network, noise
+    and reward. ``num_envs``: the batch, whose rollout the minibatches must divide."""
+    name_of = type(cfg).__name__
+    check_integer(cfg, "seed", ImpactEnvError, low=0)
+    for name in ("frames", "n_steps", "batch_size", "n_epochs", "checkpoint_frames", "threads"):
+        check_integer(cfg, name, ImpactEnvError, low=1)
+    for name in ("lr", "clip_range"):
+        check_number(cfg, name, ImpactEnvError, low=0, low_open=True)
+    check_number(cfg, "gamma", ImpactEnvError, low=0, high=1, low_open=True)
+    check_number(cfg, "gae_lambda", ImpactEnvError, low=0, high=1)
+    check_number(cfg, "ent_coef", ImpactEnvError, low=0)
+    check_number(cfg, "log_std_init", ImpactEnvError)
+    for name in ("thrust_noise", "initial_position_noise_m"):
+        check_number(cfg, name, ImpactEnvError, low=0)
+    check_choice(cfg, "reward_mode", ImpactEnvError, REWARD_MODES)
+    check_widths(cfg, "hidden", ImpactEnvError)
+    if (num_envs * cfg.n_steps) % cfg.batch_size:
+        fail(f"{name_of}.batch_size", cfg.batch_size, f"a divisor of num_envs x n_steps ({num_envs} x "
+             f"{cfg.n_steps} = {num_envs * cfg.n_steps})", ImpactEnvError)
+
+
 @dataclass(frozen=True)
 class Sb3PpoConfig:
     """One SB3 PPO run on the batched world."""
@@ -126,24 +149,10 @@ class Sb3PpoConfig:
 
     def __post_init__(self) -> None:
         check_text(self, "scenario", ImpactEnvError)
-        check_integer(self, "seed", ImpactEnvError, low=0)
-        for name in ("frames", "num_envs", "n_steps", "batch_size", "n_epochs", "checkpoint_frames", "eval_episodes",
-                     "threads"):
+        for name in ("num_envs", "eval_episodes"):
             check_integer(self, name, ImpactEnvError, low=1)
-        for name in ("lr", "clip_range"):
-            check_number(self, name, ImpactEnvError, low=0, low_open=True)
-        check_number(self, "gamma", ImpactEnvError, low=0, high=1, low_open=True)
-        check_number(self, "gae_lambda", ImpactEnvError, low=0, high=1)
-        check_number(self, "ent_coef", ImpactEnvError, low=0)
-        check_number(self, "log_std_init", ImpactEnvError)
-        for name in ("thrust_noise", "initial_position_noise_m"):
-            check_number(self, name, ImpactEnvError, low=0)
-        check_choice(self, "reward_mode", ImpactEnvError, REWARD_MODES)
         check_flag(self, "compile", ImpactEnvError)
-        check_widths(self, "hidden", ImpactEnvError)
-        if (self.num_envs * self.n_steps) % self.batch_size:
-            fail("Sb3PpoConfig.batch_size", self.batch_size, f"a divisor of num_envs x n_steps ({self.num_envs} x "
-                 f"{self.n_steps} = {self.num_envs * self.n_steps})", ImpactEnvError)
+        check_ppo_settings(self, self.num_envs)
 
     @property
     def rollout_frames(self) -> int:
