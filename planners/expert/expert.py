@@ -359,16 +359,24 @@ class Expert:
 
     def _planned_path(self, name: str):
         """Callable times -> (N, 2): robot ``name``'s planned centres, with its replanned segments."""
-        sampler, replanned = self.selector.sampler, self.selector.replanned
+        sampler, replanned, tf = self.selector.sampler, self.selector.replanned, self.selector.tf
+        # the replanner can ask twice for the same times (the closed form's check, then the QP's rows about the
+        # same curve); the path is fixed while this step's other robot is planned, so answers are kept
+        seen: dict[bytes, np.ndarray] = {}
 
         def path(times: np.ndarray) -> np.ndarray:
-            out = sampler.state(name, np.minimum(times, self.selector.tf))[:, :2]
+            key = times.tobytes()
+            out = seen.get(key)
+            if out is not None:
+                return out
+            out = sampler.positions(name, np.minimum(times, tf))
             current = replanned.get(name)
             if current is not None:
                 for seg in (current.pre, current.post):
                     mask = (times >= seg.t0_s) & (times <= seg.t1_s)
-                    if np.any(mask):
+                    if mask.any():
                         out[mask] = seg.position(times[mask])
+            seen[key] = out
             return out
 
         return path
