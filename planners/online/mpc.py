@@ -84,6 +84,8 @@ class FreeflyerMPC:
         self._lam_x = self._in["lam_x0"]
         self._lam_g = self._in["lam_g0"]
         self._calls: dict[str, _SolverCall] = {}
+        self._off_normals = np.zeros((self.horizon + 1, self._nka, 2))
+        self._off_normals[:, :, 0] = 1.0
         self._cold_multipliers()
 
     # ------------------------------------------------------------------------------------- building
@@ -289,15 +291,14 @@ class FreeflyerMPC:
                 lbg[row:row + 4] = ubg[row:row + 4] = np.r_[impact.position, impact.velocity_before]
         specs = self._avoid_specs(avoid)
         guess = self._initial_guess(x0, ref) if self._guess is None else self._guess
-        normals = np.zeros((n + 1, self._nka, 2))
-        normals[:, :, 0] = 1.0  # rows that are off still need a finite normal
+        normals = self._off_normals.copy()  # rows that are off still need a finite normal: +x
         for j, spec in enumerate(specs):
             if isinstance(spec, AvoidSpec):
                 normals[:, j] = self._normals(guess, x0, ref, spec.centers)
                 offsets = np.einsum("kd,kd->k", normals[:, j], spec.centers) + spec.min_distance
             else:
                 normals[:, j], offsets = spec.normals, spec.offsets
-            active = np.flatnonzero(spec.active[1:])
+            active = spec.active[1:]
             lbg[self._avoid_rows[active, j]] = offsets[1:][active]  # n . p + sigma >= offset
         p[ps["normals"]] = normals.ravel()
         self._in["x0"][:] = guess
@@ -330,7 +331,8 @@ class FreeflyerMPC:
             node = predicted[impact.step]
             result.impact_error = float(np.max(np.abs(np.r_[node[0:2] - impact.position,
                                                             node[3:5] - impact.velocity_before])))
-        clearances = [spec.clearance(predicted[:, 0:2]) for spec in specs if spec.active[1:].any()]
+        positions = predicted[:, 0:2]
+        clearances = [spec.clearance(positions) for spec in specs if spec.active[1:].any()]
         if clearances:
             result.min_clearance_m = float(min(clearances))
         result.solve_ms = (time.perf_counter() - start) * 1e3
