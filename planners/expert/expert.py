@@ -241,7 +241,7 @@ class Expert:
                 plan, done = new
                 self._set_plan(plan, done)
         actions = [self._robot_action(i, robot, t, step, states) for i, robot in enumerate(self.robots)]
-        action = np.clip(np.concatenate(actions), -1.0, 1.0).astype(np.float32)
+        action = np.minimum(np.maximum(np.concatenate(actions), -1.0), 1.0).astype(np.float32)  # np.clip
         self._cache = (step, action)
         self._cache_obs = obs
         self.stats.replans = self.selector.replans

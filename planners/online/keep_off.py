@@ -33,7 +33,8 @@ def object_keep_off(robot: Body, objects: list[Body], t: float, times: np.ndarra
     the impact is the planned one, not the free flight). ``object_states``: name -> [x, y, vx, vy]."""
     if not objects:
         return None
-    obj = min(objects, key=lambda o: float(np.hypot(*(object_states[o.name][:2] - position))))
+    obj = objects[0] if len(objects) == 1 else \
+        min(objects, key=lambda o: float(np.hypot(*(object_states[o.name][:2] - position))))
     s = object_states[obj.name]
     centers = s[:2] + np.outer(times - t, s[2:4])
     active = np.ones(len(times), dtype=bool)

@@ -178,6 +178,7 @@ class FreeflyerMPC:
         self._shift_w = self._shift_map(self._vblocks, self._nw)
         self._shift_g = self._shift_map(self._gblocks, self._ng)
         self._x_idx = np.array([np.arange(self._nw)[self._vblocks[("x", k)]] for k in range(1, n + 1)])
+        self._xy_idx = self._x_idx[:, 0:2].copy()
         self._avoid_rows = np.array([[self._gblocks[("path", k)].start + 4 + j for j in range(nk)]
                                      for k in range(1, n + 1)])  # (N, nk)
         self._slack_idx = np.concatenate([np.arange(self._nw)[self._vblocks[("s", k)]] for k in range(1, n + 1)])
@@ -274,7 +275,7 @@ class FreeflyerMPC:
         p[ps["x0"]] = x0
         p[ps["ref"]] = ref.ravel()
         two_pi = 2.0 * math.pi
-        p[ps["heading"]] = self.heading_ref + two_pi * round((x0[2] - self.heading_ref) / two_pi)
+        p[ps["heading"]] = self.heading_ref + two_pi * round((float(x0[2]) - self.heading_ref) / two_pi)
         p[ps["select"]] = 0.0
         p[ps["v_after"]] = 0.0
         lbg, ubg = self._in["lbg"], self._in["ubg"]
@@ -357,10 +358,10 @@ class FreeflyerMPC:
         """Unit normals (N+1, 2) of the keep-off half-planes: from each centre towards the planned position
         (previous solution shifted), else the current position, else the reference, else +x."""
         planned = np.empty((self.horizon + 1, 2))
-        planned[0], planned[1:] = x0[0:2], guess[self._x_idx[:, 0:2]]
+        planned[0], planned[1:] = x0[0:2], guess[self._xy_idx]
         v = planned - centers
         norm = np.hypot(v[:, 0], v[:, 1])
-        if np.all(norm > 1e-9):  # the usual case: every node has a planned position off the centre
+        if (norm > 1e-9).all():  # the usual case: every node has a planned position off the centre
             return v / norm[:, None]
         out = np.tile([1.0, 0.0], (self.horizon + 1, 1))
         todo = np.ones(self.horizon + 1, dtype=bool)

@@ -38,12 +38,13 @@ def within_bounds(segment: Segment, velocity_bound, acceleration_bound=None) -> 
     if d == 0:
         return velocity_bound is None or bool((0.0 <= np.asarray(velocity_bound) + 1e-9).all())
     # the control points of Segment.velocity_control_points / acceleration_control_points, computed alike
-    first = d * np.diff(cp, axis=0)
+    # (a[1:] - a[:-1] is np.diff without its argument handling: the same numbers)
+    first = d * (cp[1:] - cp[:-1])
     if velocity_bound is not None and \
             not (np.abs(first / segment.duration_s) <= np.asarray(velocity_bound) + 1e-9).all():
         return False
     if acceleration_bound is not None and d > 1 and \
-            not (np.abs((d - 1) * np.diff(first, axis=0) / segment.duration_s ** 2)
+            not (np.abs((d - 1) * (first[1:] - first[:-1]) / segment.duration_s ** 2)
                  <= np.asarray(acceleration_bound) + 1e-9).all():
         return False
     return True
@@ -64,7 +65,7 @@ def respects(segment: Segment, velocity_bound, limits: SegmentLimits | None, tol
                 or cp[:, 1].max() > y1 + tol:
             return False
     for n, b in limits.half_planes:
-        if np.min(cp @ n) < b - tol:
+        if (cp @ n).min() < b - tol:
             return False
     rows = separation_rows(segment, limits)
     if not rows:

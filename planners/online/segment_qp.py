@@ -77,10 +77,10 @@ def separation_rows(segment: Segment, limits: SegmentLimits) -> list[tuple[np.nd
     for other in limits.others:
         q = np.asarray(other(times), float)
         d = mine - q
-        dist = np.hypot(d[:, 0], d[:, 1])
-        near = np.flatnonzero(dist < limits.separation_m + 0.05)
-        if not len(near):
+        close = np.hypot(d[:, 0], d[:, 1]) < limits.separation_m + 0.05
+        if not close.any():
             continue
+        near = np.flatnonzero(close)
         motion = np.gradient(d, axis=0) if len(d) > 1 else np.tile(chord, (len(d), 1))
         for k in near:
             u = motion[k] if np.hypot(*motion[k]) > 1e-9 else chord
