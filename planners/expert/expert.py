@@ -230,7 +230,9 @@ class Expert:
             return self._cache[1].copy()  # the same observation again (e.g. PettingZoo agents, then act)
         t = step * self.dt
         rows = obs[:-1].reshape(len(self.names), OBS_PER_BODY)
-        states = np.column_stack([rows[:, 0:2], np.arctan2(rows[:, 5], rows[:, 4]), rows[:, 2:4], rows[:, 6]])
+        states = np.empty((len(self.names), 6))  # [x, y, theta, vx, vy, omega] per body
+        states[:, 0:2], states[:, 2], states[:, 3:5], states[:, 5] = \
+            rows[:, 0:2], np.arctan2(rows[:, 5], rows[:, 4]), rows[:, 2:4], rows[:, 6]
         events = (info or {}).get("impacts", [])
         completed = self.book.observe(events, self._robot_names, self._object_names)
         if self.config.identification is not None:
@@ -272,6 +274,7 @@ class Expert:
         self.selector.set_plan(plan)
         self._impacts_by_robot = {r.name: [(k, i) for k, i in enumerate(plan.impacts) if i.robot == r.name]
                                   for r in self.robots}
+        self._impact_times_of = {o.name: [i.time_s for i in plan.impacts_of(o.name)] for o in self.objects}
 
     def _safe_box(self, robot: Body) -> tuple[float, float, float, float]:
         """The box a robot's centre stays in: the world box shrunk by its radius and the wall margin."""
@@ -287,12 +290,15 @@ class Expert:
         return sc.restitution, (sc.body(robot).mass_kg, sc.body(obj).mass_kg)
 
     def _object_prediction(self, states: np.ndarray, t: float):
-        plan, sampler = self.plan, self.selector.sampler
+        plan, sampler, impact_times = self.plan, self.selector.sampler, self._impact_times_of
 
         def predict(name: str, t_target: float) -> tuple[np.ndarray, np.ndarray]:
             """Object position and velocity at ``t_target``: free flight from the observation, unless another
             planned impact on it comes first, in which case the plan's state just before ``t_target``."""
-            if any(t < i.time_s < t_target - 1e-9 for i in plan.impacts_of(name)):
+            times = impact_times.get(name)
+            if times is None:
+                times = [i.time_s for i in plan.impacts_of(name)]
+            if any(t < time_s < t_target - 1e-9 for time_s in times):
                 return sampler.position(name, t_target), sampler.velocity(name, t_target - 1e-6)
             s = states[self._index[name]]
             return s[:2] + s[3:5] * (t_target - t), s[3:5].copy()

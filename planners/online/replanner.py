@@ -108,7 +108,9 @@ def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
     if acc is not None:
         attempts.append((None, acc))
     for lim, bound in attempts:
-        qp = bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound, limits=lim, acceleration_bound=bound)
+        # the separation rows are linearised about the closed form: ``segment`` is that curve, made once
+        qp = bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound, limits=lim, around=segment,
+                             acceleration_bound=bound)
         if qp is not None:
             return qp
     if within_bounds(segment, velocity_bound):
