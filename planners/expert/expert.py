@@ -195,7 +195,8 @@ class Expert:
         self._cache_obs: np.ndarray | None = None  # the observation the cached action is for
         # per-episode constants of every step: the horizon's node offsets (s); per robot, how far it can get
         # within a replanned segment (m, at its velocity bound) and its largest acceleration (m/s^2)
-        self._node_offsets = self.dt * np.arange(self.mpc_config.horizon + 1)
+        self._node_index = np.arange(self.mpc_config.horizon + 1)
+        self._node_offsets = self.dt * self._node_index
         self._segment_reach = {r.name: float(np.hypot(*(r.velocity_bound_mps or (1.0, 1.0))))
                                * self.grid_dt * (cfg.replan_intervals + 1) for r in self.robots}
         self._a_max = {r.name: float(np.hypot(*r.wrench_limits[:2])) / r.mass_kg for r in self.robots}
@@ -393,7 +394,7 @@ class Expert:
         if name in self._predicted:
             at, pred = self._predicted[name]
             shift = step - at
-            idx = np.minimum(np.maximum(np.arange(n + 1) + shift, 0), len(pred) - 1)
+            idx = np.minimum(np.maximum(self._node_index[:n + 1] + shift, 0), len(pred) - 1)
             return pred[idx]
         return np.tile(states[self._index[name]][:2], (n + 1, 1))
 

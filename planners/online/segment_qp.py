@@ -257,7 +257,7 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
     if not qp.solve():  # infeasible, or an answer that breaks what was asked (see _SegmentQP.answer_holds)
         return None
     x = buf["x"]
-    return Segment(t0, t1, np.column_stack([x[:n], x[n:]]))
+    return Segment(t0, t1, x.reshape(2, n).T.copy())  # [x_0..x_d, y_0..y_d] as (d + 1, 2) points
 
 
 def _linspace(start: float, stop: float, ramp: np.ndarray) -> np.ndarray:
