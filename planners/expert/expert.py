@@ -193,6 +193,7 @@ class Expert:
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}
         self._cache: tuple[int, np.ndarray] | None = None
         self._cache_obs: np.ndarray | None = None  # the observation the cached action is for
+        self._step_objects: tuple[int, np.ndarray, dict[str, np.ndarray]] | None = None
         # per-episode constants of every step: the horizon's node offsets (s); per robot, how far it can get
         # within a replanned segment (m, at its velocity bound) and its largest acceleration (m/s^2)
         self._node_index = np.arange(self.mpc_config.horizon + 1)
@@ -326,7 +327,7 @@ class Expert:
                                     2 * robot.radius_m + cfg.robot_margin_m, reach)
         ref = self.selector.robot_reference(robot, self.scenario.body, t, state, nxt, past, times,
                                             self._object_prediction(states, t), self._model, limits)
-        object_states = {o.name: states[self._index[o.name]][[0, 1, 3, 4]] for o in self.objects}
+        object_states = self._object_states(step, states)
         keep_off: list[AvoidSpec | HalfPlaneSpec | None] = [
             object_keep_off(robot, self.objects, t, times, state[:2], object_states, self.plan.impacts,
                             ref.approaching, cfg.object_margin_m, cfg.contact_window_s)]
@@ -351,6 +352,13 @@ class Expert:
         if not result.success:
             self.stats.mpc_failures += 1
         return np.asarray(result.wrench, float) / self.limits[index]
+
+    def _object_states(self, step: int, states: np.ndarray) -> dict[str, np.ndarray]:
+        """name -> [x, y, vx, vy] of every object at this step (the same for every robot: made once)."""
+        if self._step_objects is None or self._step_objects[0] != step or self._step_objects[1] is not states:
+            self._step_objects = (step, states, {o.name: states[self._index[o.name]][[0, 1, 3, 4]]
+                                                 for o in self.objects})
+        return self._step_objects[2]
 
     def _contact_beyond(self, wall, name: str, ref) -> bool:
         """True if the robot approaches a contact that ``wall`` (a keep-off half-plane) would keep it from: an

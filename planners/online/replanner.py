@@ -61,8 +61,8 @@ def respects(segment: Segment, velocity_bound, limits: SegmentLimits | None, tol
     cp = segment.control_points
     if limits.box is not None:
         x0, x1, y0, y1 = limits.box
-        if cp[:, 0].min() < x0 - tol or cp[:, 0].max() > x1 + tol or cp[:, 1].min() < y0 - tol \
-                or cp[:, 1].max() > y1 + tol:
+        (xlo, ylo), (xhi, yhi) = cp.min(axis=0), cp.max(axis=0)
+        if xlo < x0 - tol or xhi > x1 + tol or ylo < y0 - tol or yhi > y1 + tol:
             return False
     for n, b in limits.half_planes:
         if (cp @ n).min() < b - tol:

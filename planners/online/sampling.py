@@ -59,7 +59,7 @@ class PlanSampler:
 
     def _locate(self, b: _Body, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         # np.minimum(np.maximum(...)) is np.clip without its argument handling (a third of this call)
-        idx = np.minimum(np.maximum(np.searchsorted(b.knots, times, side="right") - 1, 0), b.last)
+        idx = np.minimum(np.maximum(b.knots.searchsorted(times, side="right") - 1, 0), b.last)
         s = np.minimum(np.maximum((times - b.t0[idx]) / b.dur[idx], 0.0), 1.0)
         return idx, s
 
