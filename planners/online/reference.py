@@ -260,6 +260,13 @@ class ReferenceSelector:
 
         While an impact is still to come, the approach continues past the planned time straight at the
         contact velocity (a late contact is met at full speed, not braked for)."""
+        if current is not None and approaching and (times <= current.pre.t1_s + 1e-9).all():
+            # the whole horizon is on the approach (below, every node would be overwritten): the plan's state
+            # (and the strategy's adjustment of it, which has no side effects) is not needed
+            ref = np.empty((len(times), 4))
+            ref[:, :2] = current.pre.position(times)
+            ref[:, 2:] = current.pre.velocity(times)
+            return ref
         ref = self._plan_state(name, np.minimum(times, self.tf))
         ref[times > self.tf, 2:] = 0.0
         if current is not None and approaching:
