@@ -164,6 +164,8 @@ def _instrument(prof: _Profile, expert) -> None:
     reference_mod.replan_segment = prof.wrap(reference_mod.replan_segment, PARTS[4])
     reference_mod.replan_around_impact = prof.wrap(reference_mod.replan_around_impact, PARTS[4])
     method(PlanSampler, "state", PARTS[5])
+    if hasattr(PlanSampler, "positions"):  # the other robots' paths, positions only (since issue 22's act work)
+        method(PlanSampler, "positions", PARTS[5])
     method(ReferenceSelector, "robot_reference", PARTS[6])
     for name in ("object_keep_off", "robot_keep_off", "boundary_keep_off", "segment_limits"):
         setattr(expert_mod, name, prof.wrap(getattr(expert_mod, name), PARTS[7]))

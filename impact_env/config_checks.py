@@ -39,6 +39,8 @@ def brief(value: Any, width: int = 60) -> str:
 def is_finite_number(value: Any) -> bool:
     """A real number (numpy's included) that is finite: not a bool, not NaN or infinite, not an integer too
     large for a float."""
+    if type(value) is float:  # the common case, without the ABC check (the controllers ask every step)
+        return math.isfinite(value)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         return False
     try:

@@ -23,9 +23,10 @@ def _binomials(degree: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def bernstein(degree: int, s: np.ndarray | float) -> np.ndarray:
     """Bernstein basis values, shape (len(s), degree + 1): C(d, b) (1 - s)^(d - b) s^b (Eq. 8)."""
-    s = np.atleast_1d(np.asarray(s, dtype=float))
+    s = np.asarray(s, dtype=float)
+    s = s.reshape(-1, 1) if s.ndim <= 1 else s[:, None]  # np.atleast_1d(s)[:, None], with less dispatch
     b, rest, coef = _binomials(degree)
-    return coef * (1.0 - s[:, None]) ** rest * s[:, None] ** b
+    return coef * (1.0 - s) ** rest * s ** b
 
 
 def evaluate(control_points: np.ndarray, s: np.ndarray | float) -> np.ndarray:
@@ -40,7 +41,7 @@ def derivative(control_points: np.ndarray) -> np.ndarray:
     d = len(cp) - 1
     if d == 0:
         return np.zeros_like(cp)
-    return d * np.diff(cp, axis=0)
+    return d * (cp[1:] - cp[:-1])  # np.diff(cp, axis=0), the same numbers
 
 
 def bounding_box(control_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -193,9 +193,11 @@ class Expert:
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}
         self._cache: tuple[int, np.ndarray] | None = None
         self._cache_obs: np.ndarray | None = None  # the observation the cached action is for
+        self._step_objects: tuple[int, np.ndarray, dict[str, np.ndarray]] | None = None
         # per-episode constants of every step: the horizon's node offsets (s); per robot, how far it can get
         # within a replanned segment (m, at its velocity bound) and its largest acceleration (m/s^2)
-        self._node_offsets = self.dt * np.arange(self.mpc_config.horizon + 1)
+        self._node_index = np.arange(self.mpc_config.horizon + 1)
+        self._node_offsets = self.dt * self._node_index
         self._segment_reach = {r.name: float(np.hypot(*(r.velocity_bound_mps or (1.0, 1.0))))
                                * self.grid_dt * (cfg.replan_intervals + 1) for r in self.robots}
         self._a_max = {r.name: float(np.hypot(*r.wrench_limits[:2])) / r.mass_kg for r in self.robots}
@@ -230,7 +232,9 @@ class Expert:
             return self._cache[1].copy()  # the same observation again (e.g. PettingZoo agents, then act)
         t = step * self.dt
         rows = obs[:-1].reshape(len(self.names), OBS_PER_BODY)
-        states = np.column_stack([rows[:, 0:2], np.arctan2(rows[:, 5], rows[:, 4]), rows[:, 2:4], rows[:, 6]])
+        states = np.empty((len(self.names), 6))  # [x, y, theta, vx, vy, omega] per body
+        states[:, 0:2], states[:, 2], states[:, 3:5], states[:, 5] = \
+            rows[:, 0:2], np.arctan2(rows[:, 5], rows[:, 4]), rows[:, 2:4], rows[:, 6]
         events = (info or {}).get("impacts", [])
         completed = self.book.observe(events, self._robot_names, self._object_names)
         if self.config.identification is not None:
@@ -241,7 +245,7 @@ class Expert:
                 plan, done = new
                 self._set_plan(plan, done)
         actions = [self._robot_action(i, robot, t, step, states) for i, robot in enumerate(self.robots)]
-        action = np.clip(np.concatenate(actions), -1.0, 1.0).astype(np.float32)
+        action = np.minimum(np.maximum(np.concatenate(actions), -1.0), 1.0).astype(np.float32)  # np.clip
         self._cache = (step, action)
         self._cache_obs = obs
         self.stats.replans = self.selector.replans
@@ -272,6 +276,7 @@ class Expert:
         self.selector.set_plan(plan)
         self._impacts_by_robot = {r.name: [(k, i) for k, i in enumerate(plan.impacts) if i.robot == r.name]
                                   for r in self.robots}
+        self._impact_times_of = {o.name: [i.time_s for i in plan.impacts_of(o.name)] for o in self.objects}
 
     def _safe_box(self, robot: Body) -> tuple[float, float, float, float]:
         """The box a robot's centre stays in: the world box shrunk by its radius and the wall margin."""
@@ -287,12 +292,15 @@ class Expert:
         return sc.restitution, (sc.body(robot).mass_kg, sc.body(obj).mass_kg)
 
     def _object_prediction(self, states: np.ndarray, t: float):
-        plan, sampler = self.plan, self.selector.sampler
+        plan, sampler, impact_times = self.plan, self.selector.sampler, self._impact_times_of
 
         def predict(name: str, t_target: float) -> tuple[np.ndarray, np.ndarray]:
             """Object position and velocity at ``t_target``: free flight from the observation, unless another
             planned impact on it comes first, in which case the plan's state just before ``t_target``."""
-            if any(t < i.time_s < t_target - 1e-9 for i in plan.impacts_of(name)):
+            times = impact_times.get(name)
+            if times is None:
+                times = [i.time_s for i in plan.impacts_of(name)]
+            if any(t < time_s < t_target - 1e-9 for time_s in times):
                 return sampler.position(name, t_target), sampler.velocity(name, t_target - 1e-6)
             s = states[self._index[name]]
             return s[:2] + s[3:5] * (t_target - t), s[3:5].copy()
@@ -319,7 +327,7 @@ class Expert:
                                     2 * robot.radius_m + cfg.robot_margin_m, reach)
         ref = self.selector.robot_reference(robot, self.scenario.body, t, state, nxt, past, times,
                                             self._object_prediction(states, t), self._model, limits)
-        object_states = {o.name: states[self._index[o.name]][[0, 1, 3, 4]] for o in self.objects}
+        object_states = self._object_states(step, states)
         keep_off: list[AvoidSpec | HalfPlaneSpec | None] = [
             object_keep_off(robot, self.objects, t, times, state[:2], object_states, self.plan.impacts,
                             ref.approaching, cfg.object_margin_m, cfg.contact_window_s)]
@@ -345,6 +353,13 @@ class Expert:
             self.stats.mpc_failures += 1
         return np.asarray(result.wrench, float) / self.limits[index]
 
+    def _object_states(self, step: int, states: np.ndarray) -> dict[str, np.ndarray]:
+        """name -> [x, y, vx, vy] of every object at this step (the same for every robot: made once)."""
+        if self._step_objects is None or self._step_objects[0] != step or self._step_objects[1] is not states:
+            self._step_objects = (step, states, {o.name: states[self._index[o.name]][[0, 1, 3, 4]]
+                                                 for o in self.objects})
+        return self._step_objects[2]
+
     def _contact_beyond(self, wall, name: str, ref) -> bool:
         """True if the robot approaches a contact that ``wall`` (a keep-off half-plane) would keep it from: an
         impact-robust plan's copy for an object state near a wall can put the disc's contact within its
@@ -359,16 +374,24 @@ class Expert:
 
     def _planned_path(self, name: str):
         """Callable times -> (N, 2): robot ``name``'s planned centres, with its replanned segments."""
-        sampler, replanned = self.selector.sampler, self.selector.replanned
+        sampler, replanned, tf = self.selector.sampler, self.selector.replanned, self.selector.tf
+        # the replanner can ask twice for the same times (the closed form's check, then the QP's rows about the
+        # same curve); the path is fixed while this step's other robot is planned, so answers are kept
+        seen: dict[bytes, np.ndarray] = {}
 
         def path(times: np.ndarray) -> np.ndarray:
-            out = sampler.state(name, np.minimum(times, self.selector.tf))[:, :2]
+            key = times.tobytes()
+            out = seen.get(key)
+            if out is not None:
+                return out
+            out = sampler.positions(name, np.minimum(times, tf))
             current = replanned.get(name)
             if current is not None:
                 for seg in (current.pre, current.post):
                     mask = (times >= seg.t0_s) & (times <= seg.t1_s)
-                    if np.any(mask):
+                    if mask.any():
                         out[mask] = seg.position(times[mask])
+            seen[key] = out
             return out
 
         return path
@@ -379,7 +402,7 @@ class Expert:
         if name in self._predicted:
             at, pred = self._predicted[name]
             shift = step - at
-            idx = np.minimum(np.maximum(np.arange(n + 1) + shift, 0), len(pred) - 1)
+            idx = np.minimum(np.maximum(self._node_index[:n + 1] + shift, 0), len(pred) - 1)
             return pred[idx]
         return np.tile(states[self._index[name]][:2], (n + 1, 1))
 

@@ -33,7 +33,8 @@ def object_keep_off(robot: Body, objects: list[Body], t: float, times: np.ndarra
     the impact is the planned one, not the free flight). ``object_states``: name -> [x, y, vx, vy]."""
     if not objects:
         return None
-    obj = min(objects, key=lambda o: float(np.hypot(*(object_states[o.name][:2] - position))))
+    obj = objects[0] if len(objects) == 1 else \
+        min(objects, key=lambda o: float(np.hypot(*(object_states[o.name][:2] - position))))
     s = object_states[obj.name]
     centers = s[:2] + np.outer(times - t, s[2:4])
     active = np.ones(len(times), dtype=bool)
@@ -61,7 +62,9 @@ def boundary_keep_off(scenario: Scenario, robot: Body, position: np.ndarray, n_n
     # inward normals of the walls: n . p >= offset keeps the centre r inside
     candidates = [(p[0] - xmin, _BOX_NORMALS[0], xmin + r), (xmax - p[0], _BOX_NORMALS[1], -xmax + r),
                   (p[1] - ymin, _BOX_NORMALS[2], ymin + r), (ymax - p[1], _BOX_NORMALS[3], -ymax + r)]
-    for n, b in obstacle_half_planes([o.polygon for o in scenario.obstacles], p, robot.radius_m, reach_m):
+    faces = obstacle_half_planes([o.polygon for o in scenario.obstacles], p, robot.radius_m, reach_m) \
+        if scenario.obstacles else []
+    for n, b in faces:
         candidates.append((float(n @ p - b) + robot.radius_m, n, b + margin_m))
     dist, normal, offset = min(candidates, key=lambda c: c[0])
     if dist > reach_m + robot.radius_m:
@@ -75,6 +78,7 @@ def segment_limits(scenario: Scenario, robot: Body, position: np.ndarray, others
     ``times -> (N, 2)`` of the other robots' planned centres."""
     xmin, xmax, ymin, ymax = scenario.world_box
     r = robot.radius_m
-    half_planes = obstacle_half_planes([o.polygon for o in scenario.obstacles], position, r, reach_m)
+    half_planes = obstacle_half_planes([o.polygon for o in scenario.obstacles], position, r, reach_m) \
+        if scenario.obstacles else []
     return SegmentLimits(box=(xmin + r, xmax - r, ymin + r, ymax - r), half_planes=half_planes, others=others,
                          separation_m=separation_m)

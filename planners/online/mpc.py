@@ -84,6 +84,8 @@ class FreeflyerMPC:
         self._lam_x = self._in["lam_x0"]
         self._lam_g = self._in["lam_g0"]
         self._calls: dict[str, _SolverCall] = {}
+        self._off_normals = np.zeros((self.horizon + 1, self._nka, 2))
+        self._off_normals[:, :, 0] = 1.0
         self._cold_multipliers()
 
     # ------------------------------------------------------------------------------------- building
@@ -176,6 +178,7 @@ class FreeflyerMPC:
         self._shift_w = self._shift_map(self._vblocks, self._nw)
         self._shift_g = self._shift_map(self._gblocks, self._ng)
         self._x_idx = np.array([np.arange(self._nw)[self._vblocks[("x", k)]] for k in range(1, n + 1)])
+        self._xy_idx = self._x_idx[:, 0:2].copy()
         self._avoid_rows = np.array([[self._gblocks[("path", k)].start + 4 + j for j in range(nk)]
                                      for k in range(1, n + 1)])  # (N, nk)
         self._slack_idx = np.concatenate([np.arange(self._nw)[self._vblocks[("s", k)]] for k in range(1, n + 1)])
@@ -272,7 +275,7 @@ class FreeflyerMPC:
         p[ps["x0"]] = x0
         p[ps["ref"]] = ref.ravel()
         two_pi = 2.0 * math.pi
-        p[ps["heading"]] = self.heading_ref + two_pi * round((x0[2] - self.heading_ref) / two_pi)
+        p[ps["heading"]] = self.heading_ref + two_pi * round((float(x0[2]) - self.heading_ref) / two_pi)
         p[ps["select"]] = 0.0
         p[ps["v_after"]] = 0.0
         lbg, ubg = self._in["lbg"], self._in["ubg"]
@@ -289,15 +292,14 @@ class FreeflyerMPC:
                 lbg[row:row + 4] = ubg[row:row + 4] = np.r_[impact.position, impact.velocity_before]
         specs = self._avoid_specs(avoid)
         guess = self._initial_guess(x0, ref) if self._guess is None else self._guess
-        normals = np.zeros((n + 1, self._nka, 2))
-        normals[:, :, 0] = 1.0  # rows that are off still need a finite normal
+        normals = self._off_normals.copy()  # rows that are off still need a finite normal: +x
         for j, spec in enumerate(specs):
             if isinstance(spec, AvoidSpec):
                 normals[:, j] = self._normals(guess, x0, ref, spec.centers)
                 offsets = np.einsum("kd,kd->k", normals[:, j], spec.centers) + spec.min_distance
             else:
                 normals[:, j], offsets = spec.normals, spec.offsets
-            active = np.flatnonzero(spec.active[1:])
+            active = spec.active[1:]
             lbg[self._avoid_rows[active, j]] = offsets[1:][active]  # n . p + sigma >= offset
         p[ps["normals"]] = normals.ravel()
         self._in["x0"][:] = guess
@@ -330,7 +332,8 @@ class FreeflyerMPC:
             node = predicted[impact.step]
             result.impact_error = float(np.max(np.abs(np.r_[node[0:2] - impact.position,
                                                             node[3:5] - impact.velocity_before])))
-        clearances = [spec.clearance(predicted[:, 0:2]) for spec in specs if spec.active[1:].any()]
+        positions = predicted[:, 0:2]
+        clearances = [spec.clearance(positions) for spec in specs if spec.active[1:].any()]
         if clearances:
             result.min_clearance_m = float(min(clearances))
         result.solve_ms = (time.perf_counter() - start) * 1e3
@@ -355,10 +358,10 @@ class FreeflyerMPC:
         """Unit normals (N+1, 2) of the keep-off half-planes: from each centre towards the planned position
         (previous solution shifted), else the current position, else the reference, else +x."""
         planned = np.empty((self.horizon + 1, 2))
-        planned[0], planned[1:] = x0[0:2], guess[self._x_idx[:, 0:2]]
+        planned[0], planned[1:] = x0[0:2], guess[self._xy_idx]
         v = planned - centers
         norm = np.hypot(v[:, 0], v[:, 1])
-        if np.all(norm > 1e-9):  # the usual case: every node has a planned position off the centre
+        if (norm > 1e-9).all():  # the usual case: every node has a planned position off the centre
             return v / norm[:, None]
         out = np.tile([1.0, 0.0], (self.horizon + 1, 1))
         todo = np.ones(self.horizon + 1, dtype=bool)

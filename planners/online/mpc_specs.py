@@ -76,7 +76,7 @@ def _vector(value: object, shape: tuple[int, ...], name: str) -> np.ndarray:
         raise MPCInputError(f"{name} must be numbers of shape {shape}, got {value!r}") from None
     if arr.shape != shape:
         raise MPCInputError(f"{name} must have shape {shape}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise MPCInputError(f"{name} contains NaN or infinite values: {arr.tolist()}")
     return arr
 
@@ -151,9 +151,12 @@ class HalfPlaneSpec:
     def check(self, horizon: int) -> None:
         shape = (horizon + 1,)
         normals = np.asarray(self.normals, dtype=float)
-        if normals.shape == (2,):
-            normals = np.tile(normals, (horizon + 1, 1))
-        self.normals = _vector(normals, (horizon + 1, 2), "HalfPlaneSpec.normals")
+        one = normals.shape == (2,)  # one normal for every node (a wall): checked once, then repeated
+        normals = _vector(normals, (2,) if one else (horizon + 1, 2), "HalfPlaneSpec.normals")
+        flat = normals.reshape(-1, 2)
+        if (np.abs(np.hypot(flat[:, 0], flat[:, 1]) - 1.0) > 1e-6).any():
+            raise MPCInputError("HalfPlaneSpec.normals must be unit vectors")
+        self.normals = np.tile(normals, (horizon + 1, 1)) if one else normals
         offsets = np.asarray(self.offsets, dtype=float)
         if offsets.shape == ():
             offsets = np.full(shape, float(offsets))
@@ -161,9 +164,6 @@ class HalfPlaneSpec:
         self.active = np.asarray(self.active, dtype=bool)
         if self.active.shape != shape:
             raise MPCInputError(f"HalfPlaneSpec.active must have shape {shape}, got {self.active.shape}")
-        norms = np.hypot(self.normals[:, 0], self.normals[:, 1])
-        if np.any(np.abs(norms - 1.0) > 1e-6):
-            raise MPCInputError("HalfPlaneSpec.normals must be unit vectors")
 
     def clearance(self, positions: np.ndarray) -> float:
         """min over active nodes 1..N of normal . p - offset (m)."""

@@ -234,15 +234,15 @@ class ReferenceSelector:
         if size < 1e-6 or window_start - t_a < self.grid_dt:
             return
         offset = -(robot.radius_m + obj.radius_m) * dv / size
-        u = np.clip((times - t_a) / (window_start - t_a), 0.0, 1.0)
+        u = np.minimum(np.maximum((times - t_a) / (window_start - t_a), 0.0), 1.0)  # np.clip, less dispatch
         s = u ** 3 * (10.0 - 15.0 * u + 6.0 * u ** 2)
         ds = 30.0 * u ** 2 * (1.0 - u) ** 2 / (window_start - t_a)
         ref[:, :2] += np.outer(s, offset)
         ref[:, 2:] += np.outer(ds, offset)
         if self.box is not None:
             x0, x1, y0, y1 = self.box(robot)
-            np.clip(ref[:, 0], x0, x1, out=ref[:, 0])
-            np.clip(ref[:, 1], y0, y1, out=ref[:, 1])
+            np.minimum(np.maximum(ref[:, 0], x0), x1, out=ref[:, 0])
+            np.minimum(np.maximum(ref[:, 1], y0), y1, out=ref[:, 1])
 
     def _plan_state(self, name: str, times: np.ndarray) -> np.ndarray:
         """[x, y, vx, vy] of the plan for robot ``name`` at ``times``, as the strategy adjusts it (an
@@ -260,6 +260,13 @@ class ReferenceSelector:
 
         While an impact is still to come, the approach continues past the planned time straight at the
         contact velocity (a late contact is met at full speed, not braked for)."""
+        if current is not None and approaching and (times <= current.pre.t1_s + 1e-9).all():
+            # the whole horizon is on the approach (below, every node would be overwritten): the plan's state
+            # (and the strategy's adjustment of it, which has no side effects) is not needed
+            ref = np.empty((len(times), 4))
+            ref[:, :2] = current.pre.position(times)
+            ref[:, 2:] = current.pre.velocity(times)
+            return ref
         ref = self._plan_state(name, np.minimum(times, self.tf))
         ref[times > self.tf, 2:] = 0.0
         if current is not None and approaching:

@@ -38,12 +38,13 @@ def within_bounds(segment: Segment, velocity_bound, acceleration_bound=None) -> 
     if d == 0:
         return velocity_bound is None or bool((0.0 <= np.asarray(velocity_bound) + 1e-9).all())
     # the control points of Segment.velocity_control_points / acceleration_control_points, computed alike
-    first = d * np.diff(cp, axis=0)
+    # (a[1:] - a[:-1] is np.diff without its argument handling: the same numbers)
+    first = d * (cp[1:] - cp[:-1])
     if velocity_bound is not None and \
             not (np.abs(first / segment.duration_s) <= np.asarray(velocity_bound) + 1e-9).all():
         return False
     if acceleration_bound is not None and d > 1 and \
-            not (np.abs((d - 1) * np.diff(first, axis=0) / segment.duration_s ** 2)
+            not (np.abs((d - 1) * (first[1:] - first[:-1]) / segment.duration_s ** 2)
                  <= np.asarray(acceleration_bound) + 1e-9).all():
         return False
     return True
@@ -60,11 +61,11 @@ def respects(segment: Segment, velocity_bound, limits: SegmentLimits | None, tol
     cp = segment.control_points
     if limits.box is not None:
         x0, x1, y0, y1 = limits.box
-        if cp[:, 0].min() < x0 - tol or cp[:, 0].max() > x1 + tol or cp[:, 1].min() < y0 - tol \
-                or cp[:, 1].max() > y1 + tol:
+        (xlo, ylo), (xhi, yhi) = cp.min(axis=0), cp.max(axis=0)
+        if xlo < x0 - tol or xhi > x1 + tol or ylo < y0 - tol or yhi > y1 + tol:
             return False
     for n, b in limits.half_planes:
-        if np.min(cp @ n) < b - tol:
+        if (cp @ n).min() < b - tol:
             return False
     rows = separation_rows(segment, limits)
     if not rows:
@@ -107,7 +108,9 @@ def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
     if acc is not None:
         attempts.append((None, acc))
     for lim, bound in attempts:
-        qp = bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound, limits=lim, acceleration_bound=bound)
+        # the separation rows are linearised about the closed form: ``segment`` is that curve, made once
+        qp = bounded_segment(p0, v0, p1, v1, t0, t1, velocity_bound, limits=lim, around=segment,
+                             acceleration_bound=bound)
         if qp is not None:
             return qp
     if within_bounds(segment, velocity_bound):

@@ -19,7 +19,7 @@ from planners.plan import BodyPlan, Plan
 
 
 class _Body:
-    __slots__ = ("knots", "t0", "dur", "cp", "dcp", "coef", "dcoef", "degree")
+    __slots__ = ("knots", "t0", "dur", "cp", "dcp", "coef", "dcoef", "degree", "powers", "dpowers", "last")
 
     def __init__(self, body: BodyPlan) -> None:
         degree = max(len(s.control_points) - 1 for s in body.segments)
@@ -37,11 +37,16 @@ class _Body:
         self.dcp = degree * np.diff(self.cp, axis=1) / self.dur[:, None, None]  # real velocity (m/s)
         self.coef = np.array([comb(degree, k) for k in range(degree + 1)], float)
         self.dcoef = np.array([comb(degree - 1, k) for k in range(degree)], float)
+        # the exponents (k, d - k) of the two bases, looked up once rather than per call
+        self.powers = bezier._binomials(degree)[:2]
+        self.dpowers = bezier._binomials(max(degree - 1, 0))[:2]
+        self.last = len(self.t0) - 1
 
 
-def _basis(coef: np.ndarray, s: np.ndarray) -> np.ndarray:
-    k, rest, _ = bezier._binomials(len(coef) - 1)
-    return coef * (1.0 - s[:, None]) ** rest * s[:, None] ** k
+def _basis(coef: np.ndarray, powers: tuple[np.ndarray, np.ndarray], s: np.ndarray, rest_s: np.ndarray) -> np.ndarray:
+    """C(d, k) (1 - s)^(d - k) s^k, with ``s`` and ``rest_s`` = 1 - s given as columns (n, 1)."""
+    k, rest = powers
+    return coef * rest_s ** rest * s ** k
 
 
 class PlanSampler:
@@ -54,7 +59,7 @@ class PlanSampler:
 
     def _locate(self, b: _Body, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         # np.minimum(np.maximum(...)) is np.clip without its argument handling (a third of this call)
-        idx = np.minimum(np.maximum(np.searchsorted(b.knots, times, side="right") - 1, 0), len(b.t0) - 1)
+        idx = np.minimum(np.maximum(b.knots.searchsorted(times, side="right") - 1, 0), b.last)
         s = np.minimum(np.maximum((times - b.t0[idx]) / b.dur[idx], 0.0), 1.0)
         return idx, s
 
@@ -63,13 +68,23 @@ class PlanSampler:
         b = self._bodies[name]
         times = np.asarray(times, float)
         idx, s = self._locate(b, times)
+        s = s[:, None]
+        rest_s = 1.0 - s
         out = np.empty((len(times), 4))
-        out[:, :2] = np.einsum("nk,nkd->nd", _basis(b.coef, s), b.cp[idx])
+        out[:, :2] = np.einsum("nk,nkd->nd", _basis(b.coef, b.powers, s, rest_s), b.cp[idx])
         if b.degree == 0:
             out[:, 2:] = 0.0
         else:
-            out[:, 2:] = np.einsum("nk,nkd->nd", _basis(b.dcoef, s), b.dcp[idx])
+            out[:, 2:] = np.einsum("nk,nkd->nd", _basis(b.dcoef, b.dpowers, s, rest_s), b.dcp[idx])
         return out
+
+    def positions(self, name: str, times: np.ndarray) -> np.ndarray:
+        """[x, y] (m) of body ``name`` at each time, shape (len(times), 2): ``state(name, times)[:, :2]``
+        without the velocities (the other robots' paths in the safe-segment limits need only these)."""
+        b = self._bodies[name]
+        idx, s = self._locate(b, np.asarray(times, float))
+        s = s[:, None]
+        return np.einsum("nk,nkd->nd", _basis(b.coef, b.powers, s, 1.0 - s), b.cp[idx])
 
     def position(self, name: str, t: float) -> np.ndarray:
         return self.state(name, np.array([float(t)]))[0, :2]

@@ -77,10 +77,10 @@ def separation_rows(segment: Segment, limits: SegmentLimits) -> list[tuple[np.nd
     for other in limits.others:
         q = np.asarray(other(times), float)
         d = mine - q
-        dist = np.hypot(d[:, 0], d[:, 1])
-        near = np.flatnonzero(dist < limits.separation_m + 0.05)
-        if not len(near):
+        close = np.hypot(d[:, 0], d[:, 1]) < limits.separation_m + 0.05
+        if not close.any():
             continue
+        near = np.flatnonzero(close)
         motion = np.gradient(d, axis=0) if len(d) > 1 else np.tile(chord, (len(d), 1))
         for k in near:
             u = motion[k] if np.hypot(*motion[k]) > 1e-9 else chord
@@ -257,7 +257,7 @@ def bounded_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound, degree
     if not qp.solve():  # infeasible, or an answer that breaks what was asked (see _SegmentQP.answer_holds)
         return None
     x = buf["x"]
-    return Segment(t0, t1, np.column_stack([x[:n], x[n:]]))
+    return Segment(t0, t1, x.reshape(2, n).T.copy())  # [x_0..x_d, y_0..y_d] as (d + 1, 2) points
 
 
 def _linspace(start: float, stop: float, ramp: np.ndarray) -> np.ndarray:
