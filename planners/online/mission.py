@@ -38,6 +38,7 @@ from impact_env.config_checks import (
     check_value,
     moved_into,
 )
+from impact_env.geometry import ConvexPolygon
 from impact_env.stl import progress, robustness, without_constants
 from impact_env.transport.scenario import Body, Scenario
 from planners.errors import PlannerError, PlanTimeoutError
@@ -51,6 +52,7 @@ from planners.online.reachability import (
     contact_reachable,
     next_contacts,
 )
+from planners.online.reference import final_aim
 from planners.online.sampling import PlanSampler
 from planners.online.side_switch import SideSwitch, side_switches, unflyable_side_switches, unflyable_ways_round
 from planners.online.splicing import initial_state, resample_plan, splice, without_end_states
@@ -91,15 +93,18 @@ class MissionConfig:
     """Branch-and-bound nodes of the planner's second stage in a re-plan (0 skips it)."""
     max_replans: int = 3
     """Accepted re-plans per episode."""
-    max_attempts: int = 8
-    """Re-plan attempts per episode, accepted or not (the compute bound: each is a solve). A re-plan that is
-    refused (no better, not flyable, no plan) does not use one of ``max_replans``: one_robot_two_objects seed 5 at
-    0.02 m/s used its three on a kept attempt and two re-plans by 21.2 s and had none left when R1 missed the
-    impact at 30.9 s."""
-    replan_on_miss: bool = True
+    max_attempts: int = 3
+    """Re-plan attempts per episode, accepted or not (the compute bound: each is a solve); with ``max_replans``
+    3 and this 3, every attempt spends one of both (the budget before the two were apart). Measured on
+    one_robot_two_objects at 0.02 m/s, 50 seeds: 8 attempts (a refused re-plan spends no accepted one) deliver
+    37 episodes against 38: the extra attempts rescue none and one of them (seed 22, at 23.2 s) replaces a plan
+    that delivered by one whose new impacts took the noise (docs/robustness.md)."""
+    replan_on_miss: bool = False
     """A planned impact whose time (and ``late_grace_s``) passed without its contact triggers a re-plan attempt
     at the next check whatever the prediction says: the plan's later impacts assumed a state the object is not
-    in. False: only the prediction's test."""
+    in. Off by default: on the same 50 episodes it changes nothing the attempt budget allows (with 8 attempts,
+    one_robot_two_objects seed 7's missed impact at 40.6 s was re-planned and delivered, but the way-round test
+    now keeps that episode from missing it)."""
     min_remaining_s: float = 2.0
     """No re-plan closer than this to the end (s)."""
     quiet_s: float = 1.0
@@ -219,13 +224,17 @@ class MissionPlanner:
             reachability.
         identified: whether the expert identifies restitution online (``ExpertConfig.identification``): station
             keeping plans impact-robust trims only then (:class:`~planners.online.station_keeping.StationKeeper`).
+        held: object -> the region of its goal held to the end, where the reference selection aims the object
+            after its last impact (:func:`planners.online.reference.final_aim`; ``ExpertConfig.aim_held_goal_center``).
     """
 
     def __init__(self, scenario: Scenario, plan: Plan, config: MissionConfig | None = None,
                  planner_config: PlannerConfig | None = None, aim_final_position: bool = False,
-                 late_grace_s: float = 0.5, identified: bool = True) -> None:
+                 late_grace_s: float = 0.5, identified: bool = True,
+                 held: dict[str, ConvexPolygon] | None = None) -> None:
         self.scenario = scenario
         self.aim_final_position = aim_final_position
+        self.held = held or {}
         self.late_grace_s = float(late_grace_s)
         self.config = config or MissionConfig()
         self.planner_config = planner_config or PlannerConfig()
@@ -282,7 +291,8 @@ class MissionPlanner:
             out.append(contact_reachable(t, first, plan, self.scenario.body(first.robot), states[index[first.robot]],
                                          body, states[index[body.name]], restitution, masses,
                                          self.aim_final_position, self.config.reach_tolerance_m,
-                                         self.config.reach_tolerance_mps, self.late_grace_s, thrust_scale))
+                                         self.config.reach_tolerance_mps, self.late_grace_s, thrust_scale,
+                                         held=self.held))
         return out
 
     def predicted_trace(self, t: float, states: np.ndarray, index: dict[str, int], plan: Plan,
@@ -323,7 +333,7 @@ class MissionPlanner:
                     v = np.asarray(first.object_velocity_after, float)
                     left = plan.tf_s - first.time_s
                     if self.aim_final_position and left > 1e-6:  # what the local layer will ask for
-                        v = v + (sampler.position(body.name, plan.tf_s) - (hit + v * left)) / left
+                        v = v + (final_aim(plan, body.name, self.held) - (hit + v * left)) / left
                     pos[after] = hit + np.outer(times[after] - first.time_s, v)
             out[body.name] = pos
         return out
@@ -579,7 +589,8 @@ class MissionPlanner:
                                    f"{impact.time_s:.1f} s, {need}, has {impact.time_s - t:.1f} s")
         chosen = [r for r in sc.robots if robots is None or r.name in robots]
         for verdict in next_contacts(t, plan, chosen, sc.body, by_name, model, self.aim_final_position,
-                                     cfg.flyability_margin, cfg.reach_tolerance_m, cfg.reach_tolerance_mps):
+                                     cfg.flyability_margin, cfg.reach_tolerance_m, cfg.reach_tolerance_mps,
+                                     self.held):
             if not verdict.reachable:
                 reasons.append(f"next contact {verdict.impact.robot}-{verdict.impact.object} at "
                                f"{verdict.impact.time_s:.2f} s out of reach with {100 * cfg.flyability_margin:g} % "

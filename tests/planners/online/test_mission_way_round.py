@@ -113,3 +113,4 @@ def test_the_full_expert_delivers_the_regression_episode():
     result = run_episode(TransportEnv(scenario, impact_velocity_noise_mps=0.02), expert, seed=5)
     assert result.success, result.robustness
     assert any("way round" in " ".join(r["rejected"]) for r in expert.report()["mission"]["records"])
+
