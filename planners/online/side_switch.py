@@ -13,7 +13,9 @@ is at least ``1 + margin`` times the least time getting round takes at the robot
 offline planner's ``HandoverConfig.margin``. So the mission never refuses a re-plan that the planner's
 hand-over repair has passed, on the same model; what it adds is the test from the observed state once the
 robot is on its way round, and the expert's model of the pair (its identified restitution). A robot that hits
-another object in between makes no side switch (its velocity changes there, so the least time does not hold).
+another object in between makes no side switch (its velocity changes there, so the least time does not hold);
+once that impact is past, its next contact may still be on the far side of the object, and
+:func:`unflyable_ways_round` tests it from the observed states the same way (one robot serving two objects).
 """
 
 from __future__ import annotations
