@@ -10,8 +10,8 @@ states as the local layer will fly it, without the impacts the robot provably ca
 with the task progressed to now; an impact-robust plan with the impact-robust planner) and the new plan is
 spliced after the executed part, unless it is no better than the prediction or the robots cannot fly it with
 a margin (next contacts, and the way round the object to them; side switches, on the offline planner's own
-hand-over test and margin: :mod:`planners.online.side_switch`). Once no planned impact is pending, a predicted success is kept: the
-objects fly freely and new impacts would only add post-impact noise. A stopped object drifting out
+hand-over test and margin: :mod:`planners.online.side_switch`). Once no planned impact is pending, a predicted
+success is kept: the objects fly freely and new impacts would only add post-impact noise. A stopped object drifting out
 of a held goal is trimmed by a smaller re-plan (:mod:`planners.online.station_keeping`).
 
 The compute budget is a node count and the solver's threads are pinned (``MissionConfig.solver_options``), so

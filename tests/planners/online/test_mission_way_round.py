@@ -114,3 +114,41 @@ def test_the_full_expert_delivers_the_regression_episode():
     assert result.success, result.robustness
     assert any("way round" in " ".join(r["rejected"]) for r in expert.report()["mission"]["records"])
 
+
+
+# ------------------------------------------------------------------------------------------- the budget
+def check_twice(max_replans: int, max_attempts: int) -> list[str]:
+    """The two_objects regression state of tests/planners/online/test_mission_side_switch.py checked at 10.1 s
+    and 13.1 s: each check's re-plan has a side switch R2 cannot fly and is kept. The statuses of the attempts."""
+    import json
+
+    from planners.offline.config import PlannerConfig
+    from planners.online.bookkeeping import ImpactBook
+
+    case = json.loads((DATA / "two_objects_replan_at_10s.json").read_text())
+    scenario = load_scenario(case["scenario"])
+    plan = Plan.from_dict(case["plan"])
+    index = {n: i for i, n in enumerate(case["bodies"])}
+    states = np.array(case["states"])
+    mission = MissionPlanner(scenario, plan, MissionConfig(max_replans=max_replans, max_attempts=max_attempts),
+                             PlannerConfig(handover=None), aim_final_position=True)
+    mission.trace = list(np.array(case["trace_m"])[:-1])
+    book = ImpactBook(plan.impacts, tolerance_s=2.0)
+    book.done = {0}
+    for t in (case["time_s"], case["time_s"] + 3.0):  # (its impact at 12 s: not within quiet_s of a check)
+        assert mission.step(t, states, index, plan, book, True, None) is None
+    return [r.status for r in mission.records]
+
+
+def test_a_kept_attempt_spends_an_attempt_not_a_replan():
+    """``max_replans`` counts accepted re-plans, ``max_attempts`` every attempt: with one of each the refused
+    re-plan at 10.1 s leaves no attempt for 13.1 s; with two attempts the check at 13.1 s tries again, although
+    the one re-plan allowed was never spent."""
+    assert len(check_twice(max_replans=1, max_attempts=1)) == 1
+    statuses = check_twice(max_replans=1, max_attempts=2)
+    assert len(statuses) == 2 and all(s.startswith("kept: side switch") for s in statuses)
+
+
+def test_max_attempts_must_be_a_count():
+    with pytest.raises(PlannerError, match="MissionConfig.max_attempts"):
+        MissionConfig(max_attempts=-1)
