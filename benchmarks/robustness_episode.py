@@ -420,13 +420,14 @@ def fly(scenario_name: str, stack: str, axis: str, level: float, seed: int, plan
     from impact_env.transport.scenario import load_scenario
     from planners.expert import Expert
     from planners.online.bookkeeping import ImpactBook
-    from planners.online.reference import PlanContact
+    from planners.online.reference import PlanContact, held_goal_regions
     from planners.plan import Plan
 
     scenario = load_scenario(scenario_name)
     plan = Plan.load(plan_file or plan_path(RESULTS, scenario.name))
     config = config or expert_config(stack)
-    strategy = RecordingStrategy(PlanContact(aim_final_position=config.aim_final_position))
+    held = held_goal_regions(scenario) if config.aim_final_position and config.aim_held_goal_center else {}
+    strategy = RecordingStrategy(PlanContact(aim_final_position=config.aim_final_position, held=held))
     expert = Expert(scenario, plan=plan, config=config, strategy=strategy)
     expert.book = recording_book(ImpactBook)(expert.book.impacts, expert.book.tolerance_s)
     options = env_options(scenario, axis, level, seed)

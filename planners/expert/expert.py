@@ -40,7 +40,7 @@ from planners.online.keep_off import boundary_keep_off, object_keep_off, robot_k
 from planners.online.mission import MissionConfig, MissionPlanner
 from planners.online.mpc import FreeflyerMPC, MPCConfig
 from planners.online.mpc_specs import AvoidSpec, HalfPlaneSpec
-from planners.online.reference import ContactStrategy, PlanContact, ReferenceSelector
+from planners.online.reference import ContactStrategy, PlanContact, ReferenceSelector, held_goal_regions
 from planners.plan import Plan
 
 if TYPE_CHECKING:
@@ -68,6 +68,10 @@ class ExpertConfig:
     aim_final_position: bool = True
     """After an object's last planned impact, send it to its planned end position rather than only at its
     planned velocity (:class:`~planners.online.reference.PlanContact`)."""
+    aim_held_goal_center: bool = True
+    """With ``aim_final_position``: an object whose planned end position lies in the region of a goal held to
+    the end of the task is aimed at the region's middle instead (:func:`planners.online.reference.final_aim`),
+    so the drift its last impact's noise leaves has the region's half-width to use, not the plan's margin."""
     disc_offset: bool = True
     """Before each approach, fly the plan shifted to where a disc (not the planner's point) meets the object
     (:meth:`~planners.online.reference.ReferenceSelector._offset_toward`)."""
@@ -93,7 +97,7 @@ class ExpertConfig:
     def paper(cls, **overrides: Any) -> ExpertConfig:
         """The paper's stack: local replanning at planned impacts only; ``overrides`` switch parts on."""
         return cls(**{"identification": None, "mission": None, "safe_segments": False, "aim_final_position": False,
-                      "disc_offset": False, **overrides})
+                      "aim_held_goal_center": False, "disc_offset": False, **overrides})
 
     def __post_init__(self, identification_config: Any, mission_replanning: Any) -> None:
         if isinstance(self.identification, bool):
@@ -117,7 +121,7 @@ class ExpertConfig:
         check_instance(self, "identification", PlannerError, IdentificationConfig, what="an IdentificationConfig",
                        none="off")
         check_instance(self, "mission", PlannerError, MissionConfig, what="a MissionConfig", none="off")
-        for name in ("safe_segments", "aim_final_position", "disc_offset"):
+        for name in ("safe_segments", "aim_final_position", "aim_held_goal_center", "disc_offset"):
             check_flag(self, name, PlannerError)
         for name in ("object_margin_m", "robot_margin_m", "wall_margin_m", "contact_window_s", "late_grace_s"):
             check_number(self, name, PlannerError, low=0)
@@ -179,7 +183,8 @@ class Expert:
                                            cfg.identification or IdentificationConfig(),
                                            {r.name: float(np.hypot(*r.wrench_limits[:2])) / r.mass_kg
                                             for r in self.robots})
-        strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position)
+        held = (held_goal_regions(sc) if cfg.aim_final_position and cfg.aim_held_goal_center else {})
+        strategy = strategy or PlanContact(aim_final_position=cfg.aim_final_position, held=held)
         if plan.planner == "ir" and isinstance(strategy, PlanContact):
             from planners.online.contingency import CopyContact
 
@@ -187,7 +192,7 @@ class Expert:
         self.selector = ReferenceSelector(plan, self.grid_dt, self.dt, strategy, cfg.replan_intervals,
                                           disc_offset=cfg.disc_offset, box=self._safe_box)
         self.mission = (MissionPlanner(sc, plan, cfg.mission, planner_config, cfg.aim_final_position,
-                                       cfg.late_grace_s, identified=cfg.identification is not None)
+                                       cfg.late_grace_s, identified=cfg.identification is not None, held=held)
                         if cfg.mission is not None else None)
         self.stats = ExpertStats()
         self._predicted: dict[str, tuple[int, np.ndarray]] = {}
@@ -425,6 +430,7 @@ class Expert:
                        "mission_replanning": self.config.mission is not None,
                        "safe_segments": self.config.safe_segments,
                        "aim_final_position": self.config.aim_final_position,
+                       "aim_held_goal_center": self.config.aim_held_goal_center,
                        "disc_offset": self.config.disc_offset},
         }
         if self.offline_plan.planner == "ir":

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from impact_env.config_checks import check_value
+from impact_env.geometry import ConvexPolygon
 from impact_env.transport.scenario import Body
 from planners.errors import ReplanInputError
 from planners.online.impact_model import ContactPlan
@@ -112,7 +113,8 @@ def contact_reachable(t: float, impact: PlannedImpact, plan: Plan, robot: Body, 
                       object_state, restitution: float, masses: tuple[float, float],
                       aim_final_position: bool = False, position_tolerance_m: float = POSITION_TOLERANCE_M,
                       velocity_tolerance_mps: float = VELOCITY_TOLERANCE_MPS, late_s: float = 0.0,
-                      thrust_scale: float = 1.0, speed_limited: bool = False) -> Reachability:
+                      thrust_scale: float = 1.0, speed_limited: bool = False,
+                      held: dict[str, ConvexPolygon] | None = None) -> Reachability:
     """Whether ``robot`` can still make the contact of ``impact`` on ``obj`` (see the module docstring).
 
     ``robot_state`` / ``object_state``: observed at time ``t`` (s), ``[x, y, theta, vx, vy, omega]`` (m, rad,
@@ -132,14 +134,15 @@ def contact_reachable(t: float, impact: PlannedImpact, plan: Plan, robot: Body, 
     share of the thrust, and the robot's velocity bound kept on the way (raised, per axis, to its observed
     speed or the contact's where either is faster: a contact that is only too fast for the bound is flown,
     ``docs/background.md#online``); above 1, whether a contact is out of reach by more than a margin (the
-    mission layer's decisive drop)."""
+    mission layer's decisive drop). ``held``: as the contact strategy's (the final aim in a held goal's region).
+    """
     if impact.time_s - t <= 0.0:
         return Reachability(t, impact, True)
     check_value("late_s", late_s, ReplanInputError, low=0)
     check_value("thrust_scale", thrust_scale, ReplanInputError, low=0, low_open=True)
     robot_state, object_state = np.asarray(robot_state, float), np.asarray(object_state, float)
     v_o = object_state[3:5]
-    strategy = PlanContact(aim_final_position)
+    strategy = PlanContact(aim_final_position, held)
     acceleration = thrust_scale * np.asarray(robot_acceleration_bound(robot, float(robot_state[2])))
     speed = None
     if speed_limited and robot.velocity_bound_mps is not None:
@@ -169,7 +172,7 @@ def contact_reachable(t: float, impact: PlannedImpact, plan: Plan, robot: Body, 
 
 def next_contacts(t: float, plan: Plan, robots, bodies, states: dict[str, np.ndarray], model,
                   aim_final_position: bool, thrust_fraction: float, position_tolerance_m: float,
-                  velocity_tolerance_mps: float) -> list[Reachability]:
+                  velocity_tolerance_mps: float, held: dict[str, ConvexPolygon] | None = None) -> list[Reachability]:
     """The stricter verdict (``thrust_fraction``, speed-limited) on each robot's first impact after ``t`` in
     ``plan``: can every robot fly its next segment of a plan about to be flown? The object's state at the
     impact is its free flight from its observed state, or the plan's when another impact on it comes first.
@@ -189,7 +192,7 @@ def next_contacts(t: float, plan: Plan, robots, bodies, states: dict[str, np.nda
         restitution, masses = model(robot.name, first.object)
         out.append(contact_reachable(t, first, plan, robot, states[robot.name], bodies(first.object), object_state,
                                      restitution, masses, aim_final_position, position_tolerance_m,
-                                     velocity_tolerance_mps, 0.0, thrust_fraction, speed_limited=True))
+                                     velocity_tolerance_mps, 0.0, thrust_fraction, speed_limited=True, held=held))
     return out
 
 

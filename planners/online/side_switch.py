@@ -13,7 +13,9 @@ is at least ``1 + margin`` times the least time getting round takes at the robot
 offline planner's ``HandoverConfig.margin``. So the mission never refuses a re-plan that the planner's
 hand-over repair has passed, on the same model; what it adds is the test from the observed state once the
 robot is on its way round, and the expert's model of the pair (its identified restitution). A robot that hits
-another object in between makes no side switch (its velocity changes there, so the least time does not hold).
+another object in between makes no side switch (its velocity changes there, so the least time does not hold);
+once that impact is past, its next contact may still be on the far side of the object, and
+:func:`unflyable_ways_round` tests it from the observed states the same way (one robot serving two objects).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from planners.plan.handover import (
     handovers,
     least_time_round_s,
 )
+from planners.plan.types import PlannedImpact
 
 SideSwitch = Handover
 """The mission layer's name for a hand-over (:class:`planners.plan.handover.Handover`)."""
@@ -68,7 +71,9 @@ def unflyable_side_switches(plan: Plan, scenario: Scenario, after_s: float = -ma
     for sw in side_switches(plan, scenario, after_s, model):
         m = margin
         if sw.t1_s < after_s:
-            needed = _needed_from_state_s(sw, scenario, states, model)
+            needed = (sw.needed_s if sw.second is None or states is None or sw.robot not in states
+                      or sw.object not in states else
+                      needed_from_state_s(sw.robot, sw.object, sw.second, scenario, states, model))
             if needed is None:
                 continue
             sw = dataclasses.replace(sw, from_s=after_s, needed_s=needed)
@@ -79,31 +84,54 @@ def unflyable_side_switches(plan: Plan, scenario: Scenario, after_s: float = -ma
     return out
 
 
-def _needed_from_state_s(sw: SideSwitch, scenario: Scenario, states: dict[str, np.ndarray] | None,
-                         model: PairModel | None) -> float | None:
-    """The least time from the observed states to the second contact (the whole hand-over's without them);
-    None if the robot is already round: the segment to the contact stays outside the disc, i.e. the robot is
-    beyond the disc's tangent at the contact (``r . r_contact >= d^2``)."""
-    if states is None or sw.robot not in states or sw.object not in states:
-        return sw.needed_s
-    robot, obj = scenario.body(sw.robot), scenario.body(sw.object)
-    r_state, o_state = np.asarray(states[sw.robot], float), np.asarray(states[sw.object], float)
+def needed_from_state_s(robot_name: str, object_name: str, contact: PlannedImpact, scenario: Scenario,
+                        states: dict[str, np.ndarray], model: PairModel | None) -> float | None:
+    """The least time (s) from the observed states (name -> ``[x, y, theta, vx, vy, omega]``) to the robot's
+    contact at impact ``contact`` on the object, round the object's disc (:func:`least_time_round_s`, the object
+    flying freely until then); None if the robot is already round: the segment to the contact stays outside
+    the disc, i.e. the robot is beyond the disc's tangent at the contact (``r . r_contact >= d^2``)."""
+    robot, obj = scenario.body(robot_name), scenario.body(object_name)
+    r_state, o_state = np.asarray(states[robot_name], float), np.asarray(states[object_name], float)
     v_obj = o_state[3:5]
-    second = sw.second
-    if second is None:  # a hand-over made without its impacts: nothing observed to test it from
-        return sw.needed_s
-    change = np.subtract(second.object_velocity_after, v_obj)  # what the local layer will ask of the contact
+    change = np.subtract(contact.object_velocity_after, v_obj)  # what the local layer will ask of the contact
     size = float(np.linalg.norm(change))
     if size <= 1e-6:
         return 0.0
-    law = model(sw.robot, sw.object) if model is not None else (
+    law = model(robot_name, object_name) if model is not None else (
         scenario.restitution, (robot.mass_kg, obj.mass_kg))
-    u_end = contact_relative_velocity(v_obj, second.object_velocity_after, *law)[0]
+    u_end = contact_relative_velocity(v_obj, contact.object_velocity_after, *law)[0]
     d = robot.radius_m + obj.radius_m
-    here, contact = r_state[:2] - o_state[:2], -d * change / size
-    if float(here @ contact) >= d * d:
+    here, at = r_state[:2] - o_state[:2], -d * change / size
+    if float(here @ at) >= d * d:
         return None
-    return least_time_round_s(robot, v_obj, d, here, r_state[3:5] - v_obj, contact, u_end)
+    return least_time_round_s(robot, v_obj, d, here, r_state[3:5] - v_obj, at, u_end)
 
 
-__all__ = ["DEFAULT_MARGIN", "SideSwitch", "side_switches", "unflyable_side_switches"]
+def unflyable_ways_round(plan: Plan, scenario: Scenario, after_s: float, states: dict[str, np.ndarray],
+                         model: PairModel | None, margin: float,
+                         robots: set[str] | None = None) -> list[tuple[PlannedImpact, float]]:
+    """Each robot's next contact (its first impact after ``after_s``) that it must get round the object to
+    make and has less than ``1 + margin`` times the least time for, from the observed ``states``: (impact,
+    least time s). A side switch whose first impact is past is the case where the robot's previous impact was
+    on the same object; the same holds after an impact on another object, or none (one robot serving two
+    objects: a trim from the front of an object it pushed earlier, after pushing another in between). The
+    test is skipped when another impact on the object comes first (its velocity is the plan's then)."""
+    out = []
+    for name in sorted({i.robot for i in plan.impacts}):
+        if (robots is not None and name not in robots) or name not in states:
+            continue
+        mine = [i for i in plan.impacts if i.robot == name and i.time_s > after_s + 1e-9]
+        if not mine:
+            continue
+        nxt = min(mine, key=lambda i: i.time_s)
+        if nxt.object not in states or any(i.object == nxt.object and after_s + 1e-9 < i.time_s < nxt.time_s - 1e-9
+                                           for i in plan.impacts):
+            continue
+        needed = needed_from_state_s(name, nxt.object, nxt, scenario, states, model)
+        if needed is not None and nxt.time_s - after_s < (1.0 + margin) * needed - 1e-9:
+            out.append((nxt, needed))
+    return out
+
+
+__all__ = ["DEFAULT_MARGIN", "SideSwitch", "needed_from_state_s", "side_switches", "unflyable_side_switches",
+           "unflyable_ways_round"]

@@ -1,5 +1,9 @@
 """Station keeping (planners/online/station_keeping.py): a held goal's drift predicted in closed form, and the
-trim the mission layer flies when the drift would leave the goal before its window ends."""
+trim the mission layer flies when the drift would leave the goal before its window ends.
+
+The episodes are flown with ``ExpertConfig(aim_held_goal_center=False)``: the stops they trim were aimed at the
+plan's rest point. Aimed at the held goal's middle (the default since), several of these drifts stay in the
+goal and need no trim, so the trims these tests pin would not be asked for."""
 
 from __future__ import annotations
 
@@ -58,7 +62,7 @@ def _held_drift_episode(shipped_plans, seed: int, keeping, keep_settled: bool = 
     from planners.expert import Expert, ExpertConfig
 
     scenario = load_scenario("held_drift")
-    config = ExpertConfig()
+    config = ExpertConfig(aim_held_goal_center=False)  # the drifts measured (module docstring)
     if keeping != "default":
         config = dataclasses.replace(config, mission=dataclasses.replace(config.mission, station_keeping=keeping))
     config = dataclasses.replace(config, mission=dataclasses.replace(config.mission, keep_settled=keep_settled))
@@ -132,7 +136,7 @@ def test_timed_visits_seed_3_holds_its_goal_with_a_trim_flown_round_the_object()
         result = run_episode(TransportEnv(scenario, impact_velocity_noise_mps=0.02), expert, seed=3)
         return result, expert.mission.station.records
 
-    config = ExpertConfig()
+    config = ExpertConfig(aim_held_goal_center=False)  # the drifts measured (module docstring)
     result, trims = fly(config)
     assert result.success and trims[0].status == "accepted" and trims[0].robot == "R1"
     planner_margin = dataclasses.replace(config, mission=dataclasses.replace(config.mission,
@@ -154,7 +158,7 @@ def _timed_visits(seed: int, mission=None):
     from tests.paths import DATA
 
     scenario = load_scenario("timed_visits")
-    config = ExpertConfig()
+    config = ExpertConfig(aim_held_goal_center=False)  # the drifts measured (module docstring)
     if mission is not None:
         config = dataclasses.replace(config, mission=mission(config.mission))
     expert = Expert(scenario, plan=Plan.load(DATA / "plans" / "robustness" / "timed_visits.json"), config=config)
