@@ -123,7 +123,7 @@ class TaskObservation:
         ``columns`` and its time left to ``time_column``; each ``(j, slot, cx, cy)`` of ``centres`` writes the
         region centre relative to object ``slot`` at columns ``j, j + 1``."""
         base = self._static.copy()
-        columns = []
+        columns: list[int] = []
         for start in self._rows:
             base[start - 1] = 1.0
             columns.extend(range(start, start + OBS_PER_BODY))

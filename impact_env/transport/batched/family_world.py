@@ -153,10 +153,13 @@ class TaskFamilyWorld:
             raise EnvConfigError(f"actions must have shape ({self.num_envs}, {self.action_size}) (the family's padded "
                                  f"action), got {tuple(a.shape)}")
         active = self._mask(active)
-        results = [world.step(part[:, :ACTION_PER_ROBOT * world.n_robots], on)
-                   for world, part, on in zip(self.worlds, self._parts(a), self._parts(active))]
+        n = self.envs_per_task
+        results = [world.step(a[k * n:(k + 1) * n, :ACTION_PER_ROBOT * world.n_robots], on)
+                   for k, (world, on) in enumerate(zip(self.worlds, self._parts(active)))]
         obs = torch.cat([self._pad(k, r[0]) for k, r in enumerate(results)])
-        reward, terminated, truncated = (torch.cat([r[i] for r in results]) for i in (1, 2, 3))
+        reward = torch.cat([r[1] for r in results])
+        terminated = torch.cat([r[2] for r in results])
+        truncated = torch.cat([r[3] for r in results])
         info = {key: torch.cat([r[4][key] for r in results]) for key in results[0][4]}
         info["task_index"] = self.task_index
         self._obs = obs

@@ -94,8 +94,8 @@ class TransportSB3VecEnv(VecEnv):
                   "fuel_Ns": float(host["fuel_Ns"][i]), "time_s": float(host["time_s"][i]),
                   "impacts": int(host["impacts"][i])} for i in range(self.num_envs)]
         if "task_index" in host:  # a TaskFamilyWorld: which of its tasks each env runs
-            for i, k in enumerate(host["task_index"].tolist()):
-                infos[i]["task_index"] = k
+            for info_of_env, task in zip(infos, host["task_index"].tolist()):
+                info_of_env["task_index"] = int(task)
         done_np = done.cpu().numpy()
         if done_np.any():
             truncated_np = (truncated & ~terminated).cpu().numpy()
