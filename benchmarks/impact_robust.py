@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.robustness import (
+    add_restamp_arguments,
     fingerprint,
     fingerprinted_config,
     identification_error,
@@ -95,11 +96,11 @@ def expert_only_fingerprint(stack: str) -> str:
     return fingerprint(dataclasses.asdict(expert_config(stack)))
 
 
-def restamp(store, stacks) -> list[dict]:
+def restamp(store: CellStore, stacks, before: CellStore | None = None) -> list[dict]:
     """:func:`benchmarks.robustness.restamp_expert_only` with this benchmark's stacks: a cell without a config
     (flown before 0.4) is not restamped (it counts as another config here)."""
     return restamp_expert_only(store, stacks, config_fingerprint, expert_only_fingerprint,
-                               flown=lambda cell: cell.get("config"))
+                               flown=lambda cell: cell.get("config"), before=before)
 
 
 def plan_path(out: Path, name: str, planner: str) -> Path:
@@ -205,9 +206,10 @@ def cell_store(out: Path) -> CellStore:
 def run(scenarios, stacks, seeds: int, out: Path, workers: int, factors=None, planners=PLANNERS,
         stale: tuple[str, ...] = ()) -> None:
     """Fly the cells not done (``factors``: only those noise cells; ``planners``: only those plans). A cell with
-    fewer episodes than asked gets the missing seeds flown and added (an episode depends on its seed only). For
-    the stacks in ``stale``, a cell flown with another config than the stack's current one (or none recorded)
-    is flown again whole."""
+    fewer episodes than asked gets the missing seeds flown and added (an episode depends on its seed only). A
+    cell flown with another plan than the cached one (:func:`plan_fingerprint`, recorded as ``plan``) is flown
+    again whole; so is, for the stacks in ``stale``, a cell flown with another config than the stack's current
+    one (or none recorded)."""
     out.mkdir(parents=True, exist_ok=True)
     store = cell_store(out)
     fingerprints = {stack: config_fingerprint(stack) for stack in stacks}
@@ -216,12 +218,15 @@ def run(scenarios, stacks, seeds: int, out: Path, workers: int, factors=None, pl
         for name in scenarios:
             plans = plans_for(name, out)
             delta = plans["ir"]["delta_mps"]
+            flown = {planner: plan_fingerprint(plans[planner]) for planner in planners}
             for axis, level, n in conditions(delta, seeds, factors):
                 for stack in stacks:
                     for planner in planners:
                         done = store.get(cell_key(name, planner, stack, axis, level))
                         if done is not None and stack in stale and done.get("config") != fingerprints[stack]:
                             done = None
+                        if done is not None and done.get("plan", flown[planner]) != flown[planner]:
+                            done = None  # another plan with the same delta
                         if done is not None and done["episodes_requested"] >= n:
                             continue
                         kept = [] if done is None else done["episodes"][:n]  # a cell asked for more seeds
@@ -231,7 +236,7 @@ def run(scenarios, stacks, seeds: int, out: Path, workers: int, factors=None, pl
                         wall = time.perf_counter() - start + (0.0 if done is None else done["wall_s"])
                         cell = {"scenario": name, "planner": planner, "stack": stack, "axis": axis, "level": level,
                                 "delta": delta, "episodes_requested": n, "episodes": episodes, "wall_s": wall,
-                                "config": fingerprints[stack]}
+                                "config": fingerprints[stack], "plan": flown[planner]}
                         store.put(cell)
                         print(row(cell), flush=True)
                         write_table(out, store.cells())
@@ -245,14 +250,15 @@ def label(cell: dict) -> str:
     return f"e {cell['level']:+g}"
 
 
-def row(cell: dict, delta: float | None = None) -> str:
-    """A cell's table row; ``delta``: the scenario's IR plan's delta now (a cell flown at another, with an
-    earlier plan, is marked with a dagger)."""
+def row(cell: dict, delta: float | None = None, plan: str | None = None) -> str:
+    """A cell's table row; ``delta``: the scenario's IR plan's delta now, ``plan``: the fingerprint of the plan
+    the cell's planner has now (a cell flown at another delta, or with another plan where it recorded one, is
+    marked with a dagger)."""
     eps = cell["episodes"]
     rho = [e["robustness"] for e in eps]
     speed = [e["final_speed"] for e in eps]
     stack = cell["stack"] if cell.get("config") == config_fingerprint(cell["stack"]) else f"{cell['stack']} *"
-    if delta is not None and not np.isclose(cell["delta"], delta, rtol=1e-9, atol=0.0):
+    if (delta is not None and cell["delta"] != delta) or (plan is not None and cell.get("plan", plan) != plan):
         stack += " †"
     return (f"| {cell['scenario']} | {label(cell)} | {stack} | {cell['planner']} | {len(eps)} | "
             f"{100 * np.mean([e['success'] for e in eps]):.0f}% | {np.mean(rho):+.3f} ({min(rho):+.3f}) | "
@@ -273,19 +279,21 @@ def all_scenarios(cells: list[dict]) -> list[str]:
     return list(SHIPPED) + [n for n in dict.fromkeys(c["scenario"] for c in cells) if n not in SHIPPED]
 
 
-def table(cells: list[dict], scenarios, deltas: dict[str, float] | None = None) -> str:
-    """The cells' table; ``deltas``: per scenario, its IR plan's delta now (:func:`plan_deltas`)."""
+def table(cells: list[dict], scenarios, deltas: dict[str, float] | None = None,
+          plans: dict[tuple[str, str], str] | None = None) -> str:
+    """The cells' table; ``deltas``: per scenario, its IR plan's delta now (:func:`plan_deltas`); ``plans``: per
+    (scenario, planner), the fingerprint of its plan now (:func:`plan_fingerprints`)."""
     cells = sort_cells(cells, scenarios)
-    deltas = deltas or {}
+    deltas, plans = deltas or {}, plans or {}
     lines = ["| scenario | simulator | stack | plan | episodes | success | robustness mean (min) | "
              "final speed m/s mean (max) | in final box | mission replans / ep | e error mean / max |",
              "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
-    rows = [row(c, deltas.get(c["scenario"])) for c in cells]
+    rows = [row(c, deltas.get(c["scenario"]), plans.get((c["scenario"], c["planner"]))) for c in cells]
     note = (["", "\\* flown with an earlier config of the stack, or before cells recorded theirs (`--stale STACK` "
              "flies it again)"] if any(" * " in r for r in rows) else [])
     if any(" † |" in r for r in rows):
-        note += ["", "† flown with an earlier plan of the scenario (another IR delta; the plans in `plans/` are "
-                 "today's): not what today's plans do"]
+        note += ["", "† flown with an earlier plan of the scenario (another IR delta, or another plan where the cell "
+                 "recorded it; the plans in `plans/` are today's): not what today's plans do"]
     return "\n".join(lines + rows + note)
 
 
@@ -295,9 +303,26 @@ def plan_deltas(out: Path) -> dict[str, float]:
     return {path.stem: json.loads(path.read_text())["delta_mps"] for path in paths}
 
 
+def plan_fingerprint(plan: dict) -> str:
+    """12 hex digits naming a plan file's content (curves, impacts, copies, funnels, delta), not its solve
+    times and stats: what a cell records as the ``plan`` it flew."""
+    import hashlib
+
+    text = json.dumps({k: v for k, v in plan.items() if k not in ("solve_time_s", "build_time_s", "stats")},
+                      sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def plan_fingerprints(out: Path) -> dict[tuple[str, str], str]:
+    """Per (scenario, planner) with a cached plan in ``out``/plans/, its :func:`plan_fingerprint`."""
+    return {(path.stem, planner): plan_fingerprint(json.loads(path.read_text()))
+            for planner in PLANNERS for path in sorted((out / "plans" / planner).glob("*.json"))}
+
+
 def write_table(out: Path, cells: list[dict]) -> Path:
     """``out``/table.md: the table of every cell (atomically, as the cells), cells of an earlier plan marked."""
-    return write_atomic(out / "table.md", table(cells, all_scenarios(cells), plan_deltas(out)) + "\n")
+    text = table(cells, all_scenarios(cells), plan_deltas(out), plan_fingerprints(out))
+    return write_atomic(out / "table.md", text + "\n")
 
 
 def estimate(scenarios, stacks, seeds: int) -> float:
@@ -333,6 +358,7 @@ def main() -> None:
                         help="stamp the cells of these stacks flown with today's config under the fingerprint "
                              "before the planner defaults joined it with today's fingerprint, and stop "
                              "(docs/robustness.md#config-fingerprints)")
+    add_restamp_arguments(parser)
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true",
                         help="print the table of the cells done (and rewrite table.md); fly nothing")
@@ -353,7 +379,8 @@ def main() -> None:
         restamped = tuple(st for st in args.restamp.split(",") if st)
         if any(st not in STACKS for st in restamped):
             parser.error(f"--restamp takes {', '.join(STACKS)}, got {args.restamp!r}")
-        print(restamp_report(restamp(cell_store(out), restamped), out))
+        before = None if args.flown_after is None else CellStore(args.flown_after, key_of)
+        print(restamp_report(restamp(cell_store(out), restamped, before), out))
         return
     if args.estimate:
         seconds = estimate(scenarios, stacks, args.seeds)
@@ -365,7 +392,7 @@ def main() -> None:
     cells = cell_store(out).cells()
     if cells:
         write_table(out, cells)
-    print(table(cells, scenarios, plan_deltas(out)))
+    print(table(cells, scenarios, plan_deltas(out), plan_fingerprints(out)))
 
 
 if __name__ == "__main__":

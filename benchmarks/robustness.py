@@ -234,35 +234,44 @@ def expert_only_fingerprint(stack: str) -> str:
     return fingerprint(dataclasses.asdict(expert_config(stack)))
 
 
-def restamp(store: CellStore, fingerprints: dict[str, tuple[str, str]], flown=None) -> list[dict]:
+def restamp(store: CellStore, fingerprints: dict[str, tuple[str, str]], flown=None,
+            before: CellStore | None = None) -> list[dict]:
     """Give the cells of ``store`` whose config is a stack's old fingerprint its new one, in one atomic rewrite.
 
     ``fingerprints`` maps a stack to ``(old, new)``; a cell of that stack flown with ``old`` (``flown(cell)``,
     default :func:`flown_with`: a cell without a ``config`` counts as flown with :data:`UNSTAMPED_CONFIG`'s) is
-    stamped ``new``, and records the ``old`` one as ``restamped_from``. Other cells are left byte for byte. Returns the cells
-    changed. This asserts that those cells were flown under what ``new`` names: run it only when the part of
-    the config that ``old`` does not name is the same now as when they were flown, and while nothing else
-    writes the file."""
+    stamped ``new``, and records the ``old`` one as ``restamped_from``. Other cells are left byte for byte.
+    Returns the cells changed.
+
+    This asserts that those cells were flown under what ``new`` names, so the part of the config ``old`` does
+    not name must be the same now as when they were flown. ``before``: the cells as they were when that part
+    last changed (e.g. the file at that commit); a cell whose first episode is the one it had there was
+    flown, at least in part, before the change, and is left as it is. Run it while nothing else writes the
+    file."""
     flown = flown or flown_with
     changed = []
     for cell in store.cells():
         pair = fingerprints.get(cell["stack"])
         if pair is None or pair[0] == pair[1] or flown(cell) != pair[0]:
             continue
+        earlier = None if before is None else before.get(store.key(cell))
+        if earlier is not None and earlier["episodes"][:1] == cell["episodes"][:1]:
+            continue
         changed.append({**cell, "config": pair[1], "restamped_from": pair[0]})
     store.put_many(changed)
     return changed
 
 
-def restamp_expert_only(store: CellStore, stacks, new_of=None, old_of=None, flown=None) -> list[dict]:
+def restamp_expert_only(store: CellStore, stacks, new_of=None, old_of=None, flown=None,
+                        before: CellStore | None = None) -> list[dict]:
     """:func:`restamp` from the formula before the planner defaults joined the fingerprint to today's: the cells
     of ``stacks`` flown with the stack's config of today under the old formula (the ``ExpertConfig`` alone)
-    get its fingerprint under today's (the planner defaults of today: valid for cells flown since those last
-    changed). ``new_of`` / ``old_of`` / ``flown``: the benchmark's own fingerprint functions of a stack and of a
-    cell (default: this module's)."""
+    get its fingerprint under today's, but for those ``before`` holds already (flown before the planner
+    defaults last changed). ``new_of`` / ``old_of`` / ``flown``: the benchmark's own fingerprint functions of a
+    stack and of a cell (default: this module's)."""
     new_of = new_of or config_fingerprint
     old_of = old_of or expert_only_fingerprint
-    return restamp(store, {stack: (old_of(stack), new_of(stack)) for stack in stacks}, flown)
+    return restamp(store, {stack: (old_of(stack), new_of(stack)) for stack in stacks}, flown, before)
 
 
 def cell_key(scenario: str, stack: str, axis: str, level: float) -> tuple[str, str, str, str]:
@@ -347,6 +356,14 @@ def run(scenarios, stacks, axes, seeds_shipped, seeds_new, out: Path, engine: En
                                "config": fingerprints[stack]})
                     print(row(store.get(cell_key(name, stack, axis, level))), flush=True)
                     write_table(out, store.cells())
+
+
+def add_restamp_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--flown-after``, which ``--restamp`` reads (both benchmarks)."""
+    parser.add_argument("--flown-after", type=Path, metavar="CELLS_JSONL",
+                        help="with --restamp: the cells file as it was when the planner defaults last changed "
+                             "(e.g. git show COMMIT:results/robustness/cells.jsonl); its cells not flown again "
+                             "since are not restamped")
 
 
 def restamp_report(changed: list[dict], out: Path) -> str:
@@ -517,6 +534,7 @@ def main() -> None:
                         help="stamp the cells of these stacks flown with today's config under the fingerprint "
                              "before the planner defaults joined it with today's fingerprint, and stop "
                              "(docs/robustness.md#config-fingerprints)")
+    add_restamp_arguments(parser)
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true",
                         help="print the table of the cells done (and rewrite table.md); fly nothing")
@@ -529,7 +547,8 @@ def main() -> None:
             restamped = tuple(_stack_name(st) for st in args.restamp.split(",") if st)
         except argparse.ArgumentTypeError as err:
             parser.error(f"--restamp: {err}")
-        print(restamp_report(restamp_expert_only(cell_store(out), restamped), out))
+        before = None if args.flown_after is None else CellStore(args.flown_after, key_of)
+        print(restamp_report(restamp_expert_only(cell_store(out), restamped, before=before), out))
         return
     levels = parse_levels(args.levels, axes)
     if args.estimate:

@@ -15,6 +15,7 @@ import pytest
 
 from benchmarks import convert_cells, impact_robust, robustness
 from benchmarks.git_tree import run_in_tree
+from impact_env.results_store import CellStore
 from tests.paths import DATA, ROOT
 
 BEFORE = DATA / "cells_before"  # per-cell files as the benchmarks wrote them before cells.jsonl (same bytes)
@@ -243,6 +244,18 @@ def test_an_impact_robust_cell_of_a_plan_with_a_delta_that_moved_little_is_not_t
     cells = impact_robust.cell_store(out).cells()
     assert sorted(c["level"] for c in cells) == [delta, earlier]  # and the earlier plan's is kept beside it
     assert " † |" in impact_robust.table(cells, ["throw_and_catch_exp"], impact_robust.plan_deltas(out))
+    flown = impact_robust.cell_store(out).get(impact_robust.cell_key("throw_and_catch_exp", "ir", "all", "noise",
+                                                                     delta))
+    assert flown["plan"] == impact_robust.plan_fingerprint(json.loads(
+        (out / "plans" / "ir" / "throw_and_catch_exp.json").read_text()))
+    # another plan with the very same delta (corridor's, planned again with the obstacle rows): flown again whole
+    impact_robust.cell_store(out).put({**flown, "plan": "0123456789ab", "episodes": [episode]})
+    here = (impact_robust.plan_deltas(out), impact_robust.plan_fingerprints(out))
+    assert "| all † | ir |" in impact_robust.table(impact_robust.cell_store(out).cells(), ["throw_and_catch_exp"], *here)
+    impact_robust.run(["throw_and_catch_exp"], ["all"], 1, out, 1, factors=(1.0,), planners=("ir",))
+    assert [(j[5], j[6]) for j in FakePool.last.jobs] == [(delta, 0)]
+    rows = impact_robust.table(impact_robust.cell_store(out).cells(), ["throw_and_catch_exp"], *here).splitlines()
+    assert [r.split(" | ")[2] for r in rows[2:4]] == ["all", "all †"]  # today's plan's cell, the earlier one's
 
 
 def test_the_fingerprint_names_the_planner_defaults_of_the_stacks_that_re_plan(monkeypatch):
@@ -279,19 +292,23 @@ def test_restamp_stamps_the_cells_of_todays_config_under_the_old_formula_and_not
     cells = [cell("all", 0.05, config=old_all), cell("all", 0.1, config="0123456789ab"), cell("all", 0.15),
              cell("paper", 0.05, config="3720cb004e2e"), cell("paper", 0.1),
              cell("+mission", 0.05, config=robustness.expert_only_fingerprint("+mission"))]
+    cells.append(cell("all", 0.2, config=old_all))  # flown before the planner defaults last changed
+    before = CellStore(tmp_path / "before.jsonl", robustness.key_of)
+    before.put_many([cells[-1], {**cells[0], "episodes": [{**episodes[0], "robustness": 0.4}]}])  # 0.05: since
     store = robustness.cell_store(out)
     for c in cells:
         store.put(c)
     lines = (out / "cells.jsonl").read_text().splitlines()
-    changed = robustness.restamp_expert_only(store, ["all", "paper"])
+    changed = robustness.restamp_expert_only(store, ["all", "paper"], before=before)
     assert [(c["stack"], c["level"]) for c in changed] == [("all", 0.05)]
     again = (out / "cells.jsonl").read_text().splitlines()
     assert again[1:] == lines[1:]  # the others byte for byte
     first = robustness.cell_store(out).get(robustness.cell_key("relay", "all", "offset", 0.05))
     assert first == {**cells[0], "config": robustness.config_fingerprint("all"), "restamped_from": old_all}
     assert "| relay | start within 5 cm | all |" in robustness.table(robustness.cell_store(out).cells(), ["relay"])
-    assert robustness.restamp_expert_only(robustness.cell_store(out), ["all", "paper"]) == []  # done once
-    monkeypatch.setattr(sys, "argv", ["robustness", "--restamp", "+mission", "--out", str(out)])
+    assert robustness.restamp_expert_only(robustness.cell_store(out), ["all", "paper"], before=before) == []
+    monkeypatch.setattr(sys, "argv", ["robustness", "--restamp", "+mission", "--out", str(out), "--flown-after",
+                                      str(tmp_path / "before.jsonl")])
     robustness.main()
     assert robustness.cell_store(out).get(robustness.cell_key("relay", "+mission", "offset", 0.05))["config"] == \
         robustness.config_fingerprint("+mission") != robustness.expert_only_fingerprint("+mission")
