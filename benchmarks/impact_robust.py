@@ -27,7 +27,9 @@ episodes recorded it; :func:`benchmarks.robustness.identification_record`). Ever
 ``--workers`` spawned processes. A cell records the fingerprint of its
 stack's config (``config``, as in :mod:`benchmarks.robustness`; a cell without one was flown before 0.4), and
 ``--stale STACKS`` flies those cells again whose config is not the stack's current one; ``--factors`` and
-``--planners`` fly a part of the grid. From the repository root:
+``--planners`` fly a part of the grid. A cell records the plan it flew (``plan``, :func:`plan_fingerprint`);
+a cell of another plan than the cached one is flown again, and marked in the table. ``--restamp STACKS``
+moves cells to today's fingerprint formula (docs/robustness.md#config-fingerprints). From the repository root:
 
     python -m benchmarks.impact_robust --estimate
     python -m benchmarks.impact_robust [--scenarios a,b] [--stacks all,paper,all+sig] [--seeds 50] [--workers 2]

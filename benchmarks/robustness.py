@@ -28,6 +28,7 @@ size. From the repository root:
     python -m benchmarks.robustness [--scenarios a,b] [--stacks paper,all] [--axes combined,e] [--seeds 50]
     python -m benchmarks.robustness --axes e,offset --levels e=0.4,0.5 --levels offset=0.2,0.25   # beyond
     python -m benchmarks.robustness --table-only --plot docs/img/robustness.png
+    python -m benchmarks.robustness --restamp all,+mission --flown-after OLD_CELLS   # docs/robustness.md
 """
 
 from __future__ import annotations

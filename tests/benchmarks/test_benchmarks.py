@@ -251,7 +251,8 @@ def test_an_impact_robust_cell_of_a_plan_with_a_delta_that_moved_little_is_not_t
     # another plan with the very same delta (corridor's, planned again with the obstacle rows): flown again whole
     impact_robust.cell_store(out).put({**flown, "plan": "0123456789ab", "episodes": [episode]})
     here = (impact_robust.plan_deltas(out), impact_robust.plan_fingerprints(out))
-    assert "| all † | ir |" in impact_robust.table(impact_robust.cell_store(out).cells(), ["throw_and_catch_exp"], *here)
+    text = impact_robust.table(impact_robust.cell_store(out).cells(), ["throw_and_catch_exp"], *here)
+    assert "| all † | ir |" in text
     impact_robust.run(["throw_and_catch_exp"], ["all"], 1, out, 1, factors=(1.0,), planners=("ir",))
     assert [(j[5], j[6]) for j in FakePool.last.jobs] == [(delta, 0)]
     rows = impact_robust.table(impact_robust.cell_store(out).cells(), ["throw_and_catch_exp"], *here).splitlines()

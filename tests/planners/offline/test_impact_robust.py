@@ -15,7 +15,7 @@ from planners.errors import InfeasiblePlanError, PlanCheckError
 from planners.offline.guarantee import rollout, worst_case_errors
 from planners.offline.impact_robust import IRPlannerConfig, plan_impact_robust
 from planners.plan import Plan
-from tests.shipped_plans import IR_SCENARIOS, objective
+from tests.shipped_plans import IR_INFEASIBLE, IR_SCENARIOS, objective
 from tests.shipped_plans import plan as plan_now
 
 
@@ -274,6 +274,15 @@ def test_other_scenarios_plan_and_keep_the_guarantee(shipped_plans, name):
     rng = np.random.default_rng(3)
     d = plan.delta_mps
     assert all(rollout(plan, scenario, rng.uniform(-d, d, (len(plan.impacts), 2))).ok for _ in range(300))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", IR_INFEASIBLE)
+def test_no_ir_plan_where_the_docs_say_so(name):
+    """one_robot_two_objects and timed_visits have no impact-robust plan (docs/robustness.md#the-guarantee-on-
+    the-newer-scenarios quotes the answer): the planner proves it, naming the robot copies among the groups."""
+    with pytest.raises(InfeasiblePlanError, match="'robot copies'"):
+        plan_now("ir", name)
 
 
 @pytest.mark.slow
