@@ -356,10 +356,6 @@ def main() -> None:
     parser.add_argument("--stale", default="", metavar="STACKS",
                         help="comma-separated stacks whose cells flown with another config than the stack's "
                              "current one (or before cells recorded it) are flown again")
-    parser.add_argument("--restamp", default="", metavar="STACKS",
-                        help="stamp the cells of these stacks flown with today's config under the fingerprint "
-                             "before the planner defaults joined it with today's fingerprint, and stop "
-                             "(docs/robustness.md#config-fingerprints)")
     add_restamp_arguments(parser)
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true",

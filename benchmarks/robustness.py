@@ -360,7 +360,11 @@ def run(scenarios, stacks, axes, seeds_shipped, seeds_new, out: Path, engine: En
 
 
 def add_restamp_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--flown-after``, which ``--restamp`` reads (both benchmarks)."""
+    """``--restamp STACKS`` and ``--flown-after CELLS_JSONL`` (both benchmarks; :func:`restamp`)."""
+    parser.add_argument("--restamp", default="", metavar="STACKS",
+                        help="stamp the cells of these stacks flown with today's config under the fingerprint "
+                             "before the planner defaults joined it with today's fingerprint, and stop "
+                             "(docs/robustness.md#config-fingerprints)")
     parser.add_argument("--flown-after", type=Path, metavar="CELLS_JSONL",
                         help="with --restamp: the cells file as it was when the planner defaults last changed "
                              "(e.g. git show COMMIT:results/robustness/cells.jsonl); its cells not flown again "
@@ -531,10 +535,6 @@ def main() -> None:
     parser.add_argument("--stale", default="", metavar="STACKS",
                         help="comma-separated stacks whose cells flown with another config than the stack's "
                              "current one are flown again (e.g. after a default changed)")
-    parser.add_argument("--restamp", default="", metavar="STACKS",
-                        help="stamp the cells of these stacks flown with today's config under the fingerprint "
-                             "before the planner defaults joined it with today's fingerprint, and stop "
-                             "(docs/robustness.md#config-fingerprints)")
     add_restamp_arguments(parser)
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true",
