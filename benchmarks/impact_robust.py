@@ -27,7 +27,9 @@ episodes recorded it; :func:`benchmarks.robustness.identification_record`). Ever
 ``--workers`` spawned processes. A cell records the fingerprint of its
 stack's config (``config``, as in :mod:`benchmarks.robustness`; a cell without one was flown before 0.4), and
 ``--stale STACKS`` flies those cells again whose config is not the stack's current one; ``--factors`` and
-``--planners`` fly a part of the grid. From the repository root:
+``--planners`` fly a part of the grid. A cell records the plan it flew (``plan``, :func:`plan_fingerprint`);
+a cell of another plan than the cached one is flown again, and marked in the table. ``--restamp STACKS``
+moves cells to today's fingerprint formula (docs/robustness.md#config-fingerprints). From the repository root:
 
     python -m benchmarks.impact_robust --estimate
     python -m benchmarks.impact_robust [--scenarios a,b] [--stacks all,paper,all+sig] [--seeds 50] [--workers 2]
@@ -47,14 +49,24 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.robustness import identification_error, identification_record
+from benchmarks.robustness import (
+    add_restamp_arguments,
+    fingerprint,
+    fingerprinted_config,
+    identification_error,
+    identification_record,
+    restamp_expert_only,
+    restamp_report,
+)
 from impact_env.results_store import CellStore, atomic_path, write_atomic
 
 RESULTS = Path(__file__).resolve().parents[1] / "results" / "impact_robust"  # cells.jsonl, table.md, plans/
-# the paper's scenarios and their kin where the impact-robust planner finds delta > 0 (ping_pong_stop, relay and
-# two_objects since min_robustness_m); the newer scenarios of benchmarks.robustness are not planned IR here
+# every shipped scenario where the impact-robust planner finds delta > 0: the paper's and their kin (ping_pong_stop,
+# relay and two_objects since min_robustness_m), and the newer ones of benchmarks.robustness (wall_start,
+# narrow_gap, held_drift, four_robots); one_robot_two_objects and timed_visits have none
+# (docs/robustness.md#the-guarantee-on-the-newer-scenarios)
 SHIPPED = ("corridor", "obstacle_avoidance", "throw_and_catch_exp", "long_throw_trim", "ping_pong_stop", "relay",
-           "two_objects")
+           "two_objects", "wall_start", "narrow_gap", "held_drift", "four_robots")
 PLANNERS = ("sr", "ir")
 STACKS = ("all", "paper", "all+sig")
 DEFAULT_STACKS = ("all", "paper")
@@ -72,13 +84,25 @@ def expert_config(stack: str):
 
 
 def config_fingerprint(stack: str) -> str:
-    """12 hex digits naming the stack's ``ExpertConfig`` as it is now (:func:`benchmarks.robustness.config_fingerprint`
-    of the same config): a cell records the one it was flown with."""
-    import dataclasses
-    import hashlib
+    """12 hex digits naming the stack's config as it is now (:func:`benchmarks.robustness.config_fingerprint`
+    of the same config: the ``ExpertConfig`` and the planner defaults its re-plans use): a cell records the
+    one it was flown with."""
+    return fingerprint(fingerprinted_config(expert_config(stack)))
 
-    text = json.dumps(dataclasses.asdict(expert_config(stack)), sort_keys=True, default=repr)
-    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+def expert_only_fingerprint(stack: str) -> str:
+    """The stack's fingerprint under the formula before the planner defaults joined it (the cells flown before
+    then recorded it; :func:`benchmarks.robustness.restamp`)."""
+    import dataclasses
+
+    return fingerprint(dataclasses.asdict(expert_config(stack)))
+
+
+def restamp(store: CellStore, stacks, before: CellStore | None = None) -> list[dict]:
+    """:func:`benchmarks.robustness.restamp_expert_only` with this benchmark's stacks: a cell without a config
+    (flown before 0.4) is not restamped (it counts as another config here)."""
+    return restamp_expert_only(store, stacks, config_fingerprint, expert_only_fingerprint,
+                               flown=lambda cell: cell.get("config"), before=before)
 
 
 def plan_path(out: Path, name: str, planner: str) -> Path:
@@ -160,8 +184,10 @@ def _episode(args: tuple) -> dict:
 
 
 def cell_key(name: str, planner: str, stack: str, axis: str, level: float) -> tuple[str, str, str, str, str]:
-    """What names a cell: the level to 4 decimals (the name of the per-cell file a cell had before)."""
-    return name, planner, stack, axis, f"{level:+.4f}"
+    """What names a cell: the level exactly (``repr`` of the float, -0.0 as 0.0). A noise level is a multiple
+    of the plan's delta, so two plans whose deltas differ by less than 5e-5 m/s (the 4 decimals of the
+    per-cell file names the key kept before) would share a key: the new plan's cell would be taken as done."""
+    return name, planner, stack, axis, repr(float(level) + 0.0)
 
 
 def key_of(cell: dict) -> tuple[str, str, str, str, str]:
@@ -182,9 +208,10 @@ def cell_store(out: Path) -> CellStore:
 def run(scenarios, stacks, seeds: int, out: Path, workers: int, factors=None, planners=PLANNERS,
         stale: tuple[str, ...] = ()) -> None:
     """Fly the cells not done (``factors``: only those noise cells; ``planners``: only those plans). A cell with
-    fewer episodes than asked gets the missing seeds flown and added (an episode depends on its seed only). For
-    the stacks in ``stale``, a cell flown with another config than the stack's current one (or none recorded)
-    is flown again whole."""
+    fewer episodes than asked gets the missing seeds flown and added (an episode depends on its seed only). A
+    cell flown with another plan than the cached one (:func:`plan_fingerprint`, recorded as ``plan``) is flown
+    again whole; so is, for the stacks in ``stale``, a cell flown with another config than the stack's current
+    one (or none recorded)."""
     out.mkdir(parents=True, exist_ok=True)
     store = cell_store(out)
     fingerprints = {stack: config_fingerprint(stack) for stack in stacks}
@@ -193,12 +220,15 @@ def run(scenarios, stacks, seeds: int, out: Path, workers: int, factors=None, pl
         for name in scenarios:
             plans = plans_for(name, out)
             delta = plans["ir"]["delta_mps"]
+            flown = {planner: plan_fingerprint(plans[planner]) for planner in planners}
             for axis, level, n in conditions(delta, seeds, factors):
                 for stack in stacks:
                     for planner in planners:
                         done = store.get(cell_key(name, planner, stack, axis, level))
                         if done is not None and stack in stale and done.get("config") != fingerprints[stack]:
                             done = None
+                        if done is not None and done.get("plan", flown[planner]) != flown[planner]:
+                            done = None  # another plan with the same delta
                         if done is not None and done["episodes_requested"] >= n:
                             continue
                         kept = [] if done is None else done["episodes"][:n]  # a cell asked for more seeds
@@ -208,7 +238,7 @@ def run(scenarios, stacks, seeds: int, out: Path, workers: int, factors=None, pl
                         wall = time.perf_counter() - start + (0.0 if done is None else done["wall_s"])
                         cell = {"scenario": name, "planner": planner, "stack": stack, "axis": axis, "level": level,
                                 "delta": delta, "episodes_requested": n, "episodes": episodes, "wall_s": wall,
-                                "config": fingerprints[stack]}
+                                "config": fingerprints[stack], "plan": flown[planner]}
                         store.put(cell)
                         print(row(cell), flush=True)
                         write_table(out, store.cells())
@@ -222,14 +252,15 @@ def label(cell: dict) -> str:
     return f"e {cell['level']:+g}"
 
 
-def row(cell: dict, delta: float | None = None) -> str:
-    """A cell's table row; ``delta``: the scenario's IR plan's delta now (a cell flown at another, with an
-    earlier plan, is marked with a dagger)."""
+def row(cell: dict, delta: float | None = None, plan: str | None = None) -> str:
+    """A cell's table row; ``delta``: the scenario's IR plan's delta now, ``plan``: the fingerprint of the plan
+    the cell's planner has now (a cell flown at another delta, or with another plan where it recorded one, is
+    marked with a dagger)."""
     eps = cell["episodes"]
     rho = [e["robustness"] for e in eps]
     speed = [e["final_speed"] for e in eps]
     stack = cell["stack"] if cell.get("config") == config_fingerprint(cell["stack"]) else f"{cell['stack']} *"
-    if delta is not None and not np.isclose(cell["delta"], delta, rtol=1e-9, atol=0.0):
+    if (delta is not None and cell["delta"] != delta) or (plan is not None and cell.get("plan", plan) != plan):
         stack += " †"
     return (f"| {cell['scenario']} | {label(cell)} | {stack} | {cell['planner']} | {len(eps)} | "
             f"{100 * np.mean([e['success'] for e in eps]):.0f}% | {np.mean(rho):+.3f} ({min(rho):+.3f}) | "
@@ -250,19 +281,21 @@ def all_scenarios(cells: list[dict]) -> list[str]:
     return list(SHIPPED) + [n for n in dict.fromkeys(c["scenario"] for c in cells) if n not in SHIPPED]
 
 
-def table(cells: list[dict], scenarios, deltas: dict[str, float] | None = None) -> str:
-    """The cells' table; ``deltas``: per scenario, its IR plan's delta now (:func:`plan_deltas`)."""
+def table(cells: list[dict], scenarios, deltas: dict[str, float] | None = None,
+          plans: dict[tuple[str, str], str] | None = None) -> str:
+    """The cells' table; ``deltas``: per scenario, its IR plan's delta now (:func:`plan_deltas`); ``plans``: per
+    (scenario, planner), the fingerprint of its plan now (:func:`plan_fingerprints`)."""
     cells = sort_cells(cells, scenarios)
-    deltas = deltas or {}
+    deltas, plans = deltas or {}, plans or {}
     lines = ["| scenario | simulator | stack | plan | episodes | success | robustness mean (min) | "
              "final speed m/s mean (max) | in final box | mission replans / ep | e error mean / max |",
              "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
-    rows = [row(c, deltas.get(c["scenario"])) for c in cells]
+    rows = [row(c, deltas.get(c["scenario"]), plans.get((c["scenario"], c["planner"]))) for c in cells]
     note = (["", "\\* flown with an earlier config of the stack, or before cells recorded theirs (`--stale STACK` "
              "flies it again)"] if any(" * " in r for r in rows) else [])
     if any(" † |" in r for r in rows):
-        note += ["", "† flown with an earlier plan of the scenario (another IR delta; the plans in `plans/` are "
-                 "today's): not what today's plans do"]
+        note += ["", "† flown with an earlier plan of the scenario (another IR delta, or another plan where the cell "
+                 "recorded it; the plans in `plans/` are today's): not what today's plans do"]
     return "\n".join(lines + rows + note)
 
 
@@ -272,9 +305,26 @@ def plan_deltas(out: Path) -> dict[str, float]:
     return {path.stem: json.loads(path.read_text())["delta_mps"] for path in paths}
 
 
+def plan_fingerprint(plan: dict) -> str:
+    """12 hex digits naming a plan file's content (curves, impacts, copies, funnels, delta), not its solve
+    times and stats: what a cell records as the ``plan`` it flew."""
+    import hashlib
+
+    text = json.dumps({k: v for k, v in plan.items() if k not in ("solve_time_s", "build_time_s", "stats")},
+                      sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def plan_fingerprints(out: Path) -> dict[tuple[str, str], str]:
+    """Per (scenario, planner) with a cached plan in ``out``/plans/, its :func:`plan_fingerprint`."""
+    return {(path.stem, planner): plan_fingerprint(json.loads(path.read_text()))
+            for planner in PLANNERS for path in sorted((out / "plans" / planner).glob("*.json"))}
+
+
 def write_table(out: Path, cells: list[dict]) -> Path:
     """``out``/table.md: the table of every cell (atomically, as the cells), cells of an earlier plan marked."""
-    return write_atomic(out / "table.md", table(cells, all_scenarios(cells), plan_deltas(out)) + "\n")
+    text = table(cells, all_scenarios(cells), plan_deltas(out), plan_fingerprints(out))
+    return write_atomic(out / "table.md", text + "\n")
 
 
 def estimate(scenarios, stacks, seeds: int) -> float:
@@ -306,6 +356,7 @@ def main() -> None:
     parser.add_argument("--stale", default="", metavar="STACKS",
                         help="comma-separated stacks whose cells flown with another config than the stack's "
                              "current one (or before cells recorded it) are flown again")
+    add_restamp_arguments(parser)
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true",
                         help="print the table of the cells done (and rewrite table.md); fly nothing")
@@ -322,6 +373,13 @@ def main() -> None:
     except ValueError:
         parser.error(f"--factors takes comma-separated numbers (multiples of delta), got {args.factors!r}")
     out = Path(args.out)
+    if args.restamp:
+        restamped = tuple(st for st in args.restamp.split(",") if st)
+        if any(st not in STACKS for st in restamped):
+            parser.error(f"--restamp takes {', '.join(STACKS)}, got {args.restamp!r}")
+        before = None if args.flown_after is None else CellStore(args.flown_after, key_of)
+        print(restamp_report(restamp(cell_store(out), restamped, before), out))
+        return
     if args.estimate:
         seconds = estimate(scenarios, stacks, args.seeds)
         print(f"about {seconds / 3600:.1f} h of one worker, {seconds / 3600 / args.workers:.1f} h with "
@@ -332,7 +390,7 @@ def main() -> None:
     cells = cell_store(out).cells()
     if cells:
         write_table(out, cells)
-    print(table(cells, scenarios, plan_deltas(out)))
+    print(table(cells, scenarios, plan_deltas(out), plan_fingerprints(out)))
 
 
 if __name__ == "__main__":

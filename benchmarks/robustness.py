@@ -28,6 +28,7 @@ size. From the repository root:
     python -m benchmarks.robustness [--scenarios a,b] [--stacks paper,all] [--axes combined,e] [--seeds 50]
     python -m benchmarks.robustness --axes e,offset --levels e=0.4,0.5 --levels offset=0.2,0.25   # beyond
     python -m benchmarks.robustness --table-only --plot docs/img/robustness.png
+    python -m benchmarks.robustness --restamp all,+mission --flown-after OLD_CELLS   # docs/robustness.md
 """
 
 from __future__ import annotations
@@ -193,15 +194,85 @@ def identification_record(expert, simulated: float) -> dict | None:
             for r in expert.scenario.robots for o in expert.scenario.objects}
 
 
-def config_fingerprint(stack: str) -> str:
-    """12 hex digits naming the stack's ``ExpertConfig`` as it is now (every field, nested configs included):
-    a cell records the one it was flown with (``config``), and ``--stale`` re-flies the cells whose config
-    differs. It names the options, not the code: a change of code under the same options keeps it."""
+def fingerprinted_config(config) -> dict:
+    """What a config fingerprint names: every field of the ``ExpertConfig`` (nested configs included) and, for a
+    stack that re-plans the mission, the planner configs its online layer builds with their defaults (mission
+    re-plans and station-keeping trims: ``PlannerConfig()``, the ``IRPlannerConfig`` of an impact-robust
+    re-plan, the ``HandoverConfig`` inside it), which ``ExpertConfig`` does not hold. A stack without mission
+    re-plans plans nothing online, so its record is its ``ExpertConfig`` alone, as before that was added."""
     import dataclasses
+
+    record = dataclasses.asdict(config)
+    if config.mission is not None:
+        from planners.offline.config import IRPlannerConfig, PlannerConfig
+
+        record["planner_defaults"] = {"PlannerConfig": dataclasses.asdict(PlannerConfig()),
+                                      "IRPlannerConfig": dataclasses.asdict(IRPlannerConfig())}
+    return record
+
+
+def fingerprint(record: dict) -> str:
+    """12 hex digits of a JSON record (keys sorted; anything JSON lacks by its ``repr``)."""
     import hashlib
 
-    text = json.dumps(dataclasses.asdict(expert_config(stack)), sort_keys=True, default=repr)
+    text = json.dumps(record, sort_keys=True, default=repr)
     return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def config_fingerprint(stack: str) -> str:
+    """12 hex digits naming the stack's config as it is now (:func:`fingerprinted_config`: the ``ExpertConfig``
+    and the planner defaults its re-plans use): a cell records the one it was flown with (``config``), and
+    ``--stale`` re-flies the cells whose config differs. It names the options, not the code: a change of code
+    under the same options keeps it."""
+    return fingerprint(fingerprinted_config(expert_config(stack)))
+
+
+def expert_only_fingerprint(stack: str) -> str:
+    """The fingerprint the stack's config has under the formula before the planner defaults were added to it
+    (the ``ExpertConfig`` alone): what the cells flown before then recorded. :func:`restamp` reads it."""
+    import dataclasses
+
+    return fingerprint(dataclasses.asdict(expert_config(stack)))
+
+
+def restamp(store: CellStore, fingerprints: dict[str, tuple[str, str]], flown=None,
+            before: CellStore | None = None) -> list[dict]:
+    """Give the cells of ``store`` whose config is a stack's old fingerprint its new one, in one atomic rewrite.
+
+    ``fingerprints`` maps a stack to ``(old, new)``; a cell of that stack flown with ``old`` (``flown(cell)``,
+    default :func:`flown_with`: a cell without a ``config`` counts as flown with :data:`UNSTAMPED_CONFIG`'s) is
+    stamped ``new``, and records the ``old`` one as ``restamped_from``. Other cells are left byte for byte.
+    Returns the cells changed.
+
+    This asserts that those cells were flown under what ``new`` names, so the part of the config ``old`` does
+    not name must be the same now as when they were flown. ``before``: the cells as they were when that part
+    last changed (e.g. the file at that commit); a cell whose first episode is the one it had there was
+    flown, at least in part, before the change, and is left as it is. Run it while nothing else writes the
+    file."""
+    flown = flown or flown_with
+    changed = []
+    for cell in store.cells():
+        pair = fingerprints.get(cell["stack"])
+        if pair is None or pair[0] == pair[1] or flown(cell) != pair[0]:
+            continue
+        earlier = None if before is None else before.get(store.key(cell))
+        if earlier is not None and earlier["episodes"][:1] == cell["episodes"][:1]:
+            continue
+        changed.append({**cell, "config": pair[1], "restamped_from": pair[0]})
+    store.put_many(changed)
+    return changed
+
+
+def restamp_expert_only(store: CellStore, stacks, new_of=None, old_of=None, flown=None,
+                        before: CellStore | None = None) -> list[dict]:
+    """:func:`restamp` from the formula before the planner defaults joined the fingerprint to today's: the cells
+    of ``stacks`` flown with the stack's config of today under the old formula (the ``ExpertConfig`` alone)
+    get its fingerprint under today's, but for those ``before`` holds already (flown before the planner
+    defaults last changed). ``new_of`` / ``old_of`` / ``flown``: the benchmark's own fingerprint functions of a
+    stack and of a cell (default: this module's)."""
+    new_of = new_of or config_fingerprint
+    old_of = old_of or expert_only_fingerprint
+    return restamp(store, {stack: (old_of(stack), new_of(stack)) for stack in stacks}, flown, before)
 
 
 def cell_key(scenario: str, stack: str, axis: str, level: float) -> tuple[str, str, str, str]:
@@ -286,6 +357,28 @@ def run(scenarios, stacks, axes, seeds_shipped, seeds_new, out: Path, engine: En
                                "config": fingerprints[stack]})
                     print(row(store.get(cell_key(name, stack, axis, level))), flush=True)
                     write_table(out, store.cells())
+
+
+def add_restamp_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--restamp STACKS`` and ``--flown-after CELLS_JSONL`` (both benchmarks; :func:`restamp`)."""
+    parser.add_argument("--restamp", default="", metavar="STACKS",
+                        help="stamp the cells of these stacks flown with today's config under the fingerprint "
+                             "before the planner defaults joined it with today's fingerprint, and stop "
+                             "(docs/robustness.md#config-fingerprints)")
+    parser.add_argument("--flown-after", type=Path, metavar="CELLS_JSONL",
+                        help="with --restamp: the cells file as it was when the planner defaults last changed "
+                             "(e.g. git show COMMIT:results/robustness/cells.jsonl); its cells not flown again "
+                             "since are not restamped")
+
+
+def restamp_report(changed: list[dict], out: Path) -> str:
+    """What :func:`restamp` did, per stack and old -> new fingerprint."""
+    counts: dict[tuple[str, str, str], int] = {}
+    for cell in changed:
+        key = (cell["stack"], cell["restamped_from"], cell["config"])
+        counts[key] = counts.get(key, 0) + 1
+    lines = [f"{n} cells of {stack}: {old} -> {new}" for (stack, old, new), n in counts.items()]
+    return "\n".join(lines + [f"restamped {len(changed)} cells of {out / 'cells.jsonl'}"])
 
 
 def flown_with(cell: dict) -> str | None:
@@ -442,6 +535,7 @@ def main() -> None:
     parser.add_argument("--stale", default="", metavar="STACKS",
                         help="comma-separated stacks whose cells flown with another config than the stack's "
                              "current one are flown again (e.g. after a default changed)")
+    add_restamp_arguments(parser)
     parser.add_argument("--estimate", action="store_true", help="print the estimated time and stop")
     parser.add_argument("--table-only", action="store_true",
                         help="print the table of the cells done (and rewrite table.md); fly nothing")
@@ -449,6 +543,14 @@ def main() -> None:
     args = parser.parse_args()
     scenarios, stacks, axes = args.scenarios.split(","), args.stacks.split(","), args.axes.split(",")
     out = Path(args.out)
+    if args.restamp:
+        try:
+            restamped = tuple(_stack_name(st) for st in args.restamp.split(",") if st)
+        except argparse.ArgumentTypeError as err:
+            parser.error(f"--restamp: {err}")
+        before = None if args.flown_after is None else CellStore(args.flown_after, key_of)
+        print(restamp_report(restamp_expert_only(cell_store(out), restamped, before=before), out))
+        return
     levels = parse_levels(args.levels, axes)
     if args.estimate:
         seconds = estimate(scenarios, stacks, axes, args.seeds, args.seeds_new, levels)

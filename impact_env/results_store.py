@@ -236,10 +236,16 @@ class CellStore:
 
     def put(self, cell: dict) -> None:
         """Replace the cell with ``cell``'s key (in place) or append it, and rewrite the file atomically."""
-        line = json.dumps(cell)  # one line: json.dumps escapes every newline inside strings
+        self.put_many([cell])
+
+    def put_many(self, cells: list[dict]) -> None:
+        """:meth:`put` of several cells in one atomic rewrite (nothing written when ``cells`` is empty)."""
+        if not cells:
+            return
         lines = self._loaded()
-        key = self.key(json.loads(line))  # the key a reader of the file will compute
-        lines[key] = line
+        for cell in cells:
+            line = json.dumps(cell)  # one line: json.dumps escapes every newline inside strings
+            lines[self.key(json.loads(line))] = line  # the key a reader of the file will compute
         write_atomic(self.path, "".join(text + "\n" for text in lines.values()))
 
     def keys(self) -> list[Hashable]:

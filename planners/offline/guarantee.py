@@ -22,6 +22,7 @@ import numpy as np
 
 from impact_env.transport.scenario import Scenario
 from planners.impact_law import mass_fractions
+from planners.offline.milp.contact_room import obstacle_bounds
 from planners.plan import BodyPlan, Plan, Segment
 from planners.plan.funnels import box_coordinates
 
@@ -32,8 +33,9 @@ class Outcome:
     final_position_error_m / final_velocity_error_mps: per object, |state(tf) - plan(tf)| per axis;
     in_final_box: every object's final state within its final box; max_box_coordinate: the largest |xi|
     of an object's state at an impact (> 1: it left the box the copies cover); contact_room_m: the smallest
-    distance (m) of the disc robot's centre at an impact inside the world shrunk by its radius (< 0: the
-    robot would have to be beyond a wall; :func:`contact_room`)."""
+    distance (m) of the disc robot's centre at an impact inside the world shrunk by its radius and outside
+    the obstacles grown by it (< 0: the robot would have to be beyond a wall or in an obstacle;
+    :func:`contact_room`)."""
 
     robustness: float
     final_position_error_m: dict[str, np.ndarray]
@@ -55,14 +57,20 @@ class Outcome:
 def contact_room(scenario: Scenario, robot: str, obj: str, position: np.ndarray, push: np.ndarray) -> float:
     """Room (m) of the disc robot that gives the object at ``position`` the velocity change ``push`` (m/s):
     its centre is r_R + r_O behind the object's, against the push; the smallest distance of that centre
-    inside the world box shrunk by r_R (< 0: beyond a wall). A zero push leaves the side open: inf."""
+    inside the world box shrunk by r_R and outside every obstacle's bounding box grown by r_R (< 0: beyond a
+    wall, or in an obstacle, as the planner's rows have it: :mod:`planners.offline.milp.contact_room`). A zero
+    push leaves the side open: inf."""
     norm = float(np.hypot(*push))
     if norm <= 1e-12:
         return float("inf")
     r = scenario.body(robot).radius_m
     centre = np.asarray(position, float) - (r + scenario.body(obj).radius_m) * np.asarray(push, float) / norm
     xmin, xmax, ymin, ymax = scenario.world_box
-    return float(min(centre[0] - xmin - r, xmax - r - centre[0], centre[1] - ymin - r, ymax - r - centre[1]))
+    room = min(centre[0] - xmin - r, xmax - r - centre[0], centre[1] - ymin - r, ymax - r - centre[1])
+    for obstacle in scenario.obstacles:
+        x0, x1, y0, y1 = obstacle_bounds(obstacle)
+        room = min(room, max(x0 - r - centre[0], centre[0] - x1 - r, y0 - r - centre[1], centre[1] - y1 - r))
+    return float(room)
 
 
 def rollout(plan: Plan, scenario: Scenario, errors: Sequence[np.ndarray] | np.ndarray) -> Outcome:

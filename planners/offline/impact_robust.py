@@ -28,7 +28,7 @@ from planners.offline.common import add_obstacle_clearance, check_common_options
 from planners.offline.config import DEFAULT_COPY_INTERVALS, DEFAULT_FINAL_BOX, IRPlannerConfig, PlannerConfig
 from planners.offline.milp.boxes import ObjectBox
 from planners.offline.milp.collisions import add_robot_separation
-from planners.offline.milp.contact_room import add_contact_room
+from planners.offline.milp.contact_room import add_contact_room, obstacle_bounds
 from planners.offline.milp.copies import SIGNS, RobotCopies, add_copy_impacts
 from planners.offline.milp.impacts import ImpactVars, add_object_smoothness, impact_binaries
 from planners.offline.milp.model import LinExpr, Model
@@ -102,7 +102,8 @@ def build_ir_model(scenario: Scenario, config: IRPlannerConfig) -> IRModel:
         raise PlannerError(f"copy_intervals must be in 1..{n // 2} (half the grid's {n} intervals), got {window}")
     resets = add_copy_impacts(model, robots, boxes, impacts, scenario.restitution, scenario.world_box, window)
     if config.contact_cones is not None:
-        add_contact_room(model, robots, boxes, impacts, scenario.world_box, config.contact_cones)
+        add_contact_room(model, robots, boxes, impacts, scenario.world_box, config.contact_cones,
+                         [obstacle_bounds(ob) for ob in scenario.obstacles])
     for box in boxes:
         box.add_propagation(model, impacts, resets[box.spec.name], disjunctive=config.disjunctive_resets)
         box.add_bounds(model)

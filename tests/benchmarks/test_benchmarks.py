@@ -15,6 +15,7 @@ import pytest
 
 from benchmarks import convert_cells, impact_robust, robustness
 from benchmarks.git_tree import run_in_tree
+from impact_env.results_store import CellStore
 from tests.paths import DATA, ROOT
 
 BEFORE = DATA / "cells_before"  # per-cell files as the benchmarks wrote them before cells.jsonl (same bytes)
@@ -61,8 +62,10 @@ def test_converted_impact_robust_cells_and_plans(tmp_path):
     assert (folder / "plans" / "ir" / "corridor.json").read_bytes() == (folder / "corridor__ir_plan.json").read_bytes()
     store = impact_robust.cell_store(folder)
     assert sorted(json.dumps(c) for c in store) == sorted(texts.values())
-    noise = store.get(impact_robust.cell_key("throw_and_catch_exp", "ir", "paper", "noise", 0.05))
-    assert noise is not None and noise["level"] != 0.05  # keyed to 4 decimals, as the file names were
+    level = json.loads(texts["throw_and_catch_exp__ir__paper__noise_+0.0500.json"])["level"]
+    noise = store.get(impact_robust.cell_key("throw_and_catch_exp", "ir", "paper", "noise", level))
+    assert noise is not None and level != 0.05  # keyed by the level itself, not its 4 decimals in the file name
+    assert store.get(impact_robust.cell_key("throw_and_catch_exp", "ir", "paper", "noise", 0.05)) is None
     assert store.get(impact_robust.cell_key("corridor", "sr", "all", "e", 0.1))["episodes"][0]["robustness"] == \
         json.loads(texts["corridor__sr__all__e_+0.1000.json"])["episodes"][0]["robustness"]
     with pytest.raises(SystemExit, match="exists already"):
@@ -211,6 +214,115 @@ def test_the_impact_robust_benchmark_flies_a_part_of_the_grid_and_again_the_cell
                                        for e in cell["episodes"]]}
     assert impact_robust.row(identified).endswith("| 0.00 | 0.030 / 0.030 |")  # the estimates' error column
     assert impact_robust.row(cell).endswith("| 0.00 | - |")  # none recorded
+
+
+def test_an_impact_robust_cell_of_a_plan_with_a_delta_that_moved_little_is_not_taken_as_done(tmp_path,
+                                                                                                monkeypatch):
+    """obstacle_avoidance's IR plan moved from delta 0.0249998 to 0.0249948 m/s: the same 4 decimals, which the
+    key was, so the new plan's 1 x delta cell was found done (the old plan's) and never flown."""
+    old_delta, new_delta = 0.024999800000000003, 0.024994800000000015
+    assert impact_robust.cell_key("o", "ir", "all", "noise", old_delta) != \
+        impact_robust.cell_key("o", "ir", "all", "noise", new_delta)
+    assert impact_robust.cell_key("o", "ir", "all", "noise", -0.0) == impact_robust.cell_key("o", "ir", "all",
+                                                                                             "noise", 0.0)
+    out = tmp_path / "ir"
+    for planner, source in (("sr", DATA / "plans" / "bench"), ("ir", DATA / "plans" / "ir")):
+        (out / "plans" / planner).mkdir(parents=True)
+        shutil.copy(source / "throw_and_catch_exp.json", out / "plans" / planner)  # no planning
+    delta = json.loads((out / "plans" / "ir" / "throw_and_catch_exp.json").read_text())["delta_mps"]
+    earlier = delta + 2e-5  # another plan's delta, equal to 4 decimals
+    assert f"{earlier:+.4f}" == f"{delta:+.4f}"
+    episode = {"seed": 0, "success": False, "robustness": -0.1, "impacts": 2, "final_speed": 0.01,
+               "in_final_box": False, "mission_replans": 0, "wall_s": 0.0}
+    impact_robust.cell_store(out).put({"scenario": "throw_and_catch_exp", "planner": "ir", "stack": "all",
+                                       "axis": "noise", "level": earlier, "delta": earlier, "episodes_requested": 1,
+                                       "episodes": [episode], "wall_s": 0.0,
+                                       "config": impact_robust.config_fingerprint("all")})
+    monkeypatch.setattr(impact_robust, "ProcessPoolExecutor", FakePool)
+    impact_robust.run(["throw_and_catch_exp"], ["all"], 1, out, 1, factors=(1.0,), planners=("ir",))
+    assert [(j[5], j[6]) for j in FakePool.last.jobs] == [(delta, 0)]  # today's plan's cell is flown
+    cells = impact_robust.cell_store(out).cells()
+    assert sorted(c["level"] for c in cells) == [delta, earlier]  # and the earlier plan's is kept beside it
+    assert " † |" in impact_robust.table(cells, ["throw_and_catch_exp"], impact_robust.plan_deltas(out))
+    flown = impact_robust.cell_store(out).get(impact_robust.cell_key("throw_and_catch_exp", "ir", "all", "noise",
+                                                                     delta))
+    assert flown["plan"] == impact_robust.plan_fingerprint(json.loads(
+        (out / "plans" / "ir" / "throw_and_catch_exp.json").read_text()))
+    # another plan with the very same delta (corridor's, planned again with the obstacle rows): flown again whole
+    impact_robust.cell_store(out).put({**flown, "plan": "0123456789ab", "episodes": [episode]})
+    here = (impact_robust.plan_deltas(out), impact_robust.plan_fingerprints(out))
+    text = impact_robust.table(impact_robust.cell_store(out).cells(), ["throw_and_catch_exp"], *here)
+    assert "| all † | ir |" in text
+    impact_robust.run(["throw_and_catch_exp"], ["all"], 1, out, 1, factors=(1.0,), planners=("ir",))
+    assert [(j[5], j[6]) for j in FakePool.last.jobs] == [(delta, 0)]
+    rows = impact_robust.table(impact_robust.cell_store(out).cells(), ["throw_and_catch_exp"], *here).splitlines()
+    assert [r.split(" | ")[2] for r in rows[2:4]] == ["all", "all †"]  # today's plan's cell, the earlier one's
+
+
+def test_the_fingerprint_names_the_planner_defaults_of_the_stacks_that_re_plan(monkeypatch):
+    """A mission re-plan and a station-keeping trim build PlannerConfig() and an IRPlannerConfig with their
+    defaults: a change of those marks the cells of the stacks that re-plan stale, not the others'."""
+    from planners.offline import config
+
+    before = {stack: robustness.config_fingerprint(stack) for stack in robustness.STACKS}
+    before_ir = {stack: impact_robust.config_fingerprint(stack) for stack in impact_robust.STACKS}
+    assert before["paper"] == robustness.expert_only_fingerprint("paper") == "3720cb004e2e"  # unchanged
+    assert before["all"] != robustness.expert_only_fingerprint("all")
+    assert before_ir["all"] == before["all"]
+    monkeypatch.setattr(config, "DEFAULT_IR_NODE_BUDGET", config.DEFAULT_IR_NODE_BUDGET + 1)
+    after = {stack: robustness.config_fingerprint(stack) for stack in robustness.STACKS}
+    assert [s for s in robustness.STACKS if after[s] != before[s]] == ["+mission", "all"]
+    assert {s for s in impact_robust.STACKS if impact_robust.config_fingerprint(s) != before_ir[s]} == {
+        "all", "all+sig"}
+    monkeypatch.undo()
+    monkeypatch.setattr(config, "DEFAULT_NODE_BUDGET", config.DEFAULT_NODE_BUDGET + 1)  # the SR re-plans'
+    assert robustness.config_fingerprint("all") != before["all"]
+    assert robustness.config_fingerprint("paper") == before["paper"]
+
+
+def test_restamp_stamps_the_cells_of_todays_config_under_the_old_formula_and_nothing_else(tmp_path, monkeypatch):
+    out = tmp_path / "rob"
+    episodes = [{"seed": 0, "success": True, "robustness": 0.5, "robot_contacts": 0, "mission_replans": 0,
+                 "replan_solve_s": []}]
+    old_all = robustness.expert_only_fingerprint("all")
+
+    def cell(stack, level, **extra):
+        return {"scenario": "relay", "stack": stack, "axis": "offset", "level": level, "episodes_requested": 1,
+                "episodes": episodes, "wall_s": 1.0, **extra}
+
+    cells = [cell("all", 0.05, config=old_all), cell("all", 0.1, config="0123456789ab"), cell("all", 0.15),
+             cell("paper", 0.05, config="3720cb004e2e"), cell("paper", 0.1),
+             cell("+mission", 0.05, config=robustness.expert_only_fingerprint("+mission"))]
+    cells.append(cell("all", 0.2, config=old_all))  # flown before the planner defaults last changed
+    before = CellStore(tmp_path / "before.jsonl", robustness.key_of)
+    before.put_many([cells[-1], {**cells[0], "episodes": [{**episodes[0], "robustness": 0.4}]}])  # 0.05: since
+    store = robustness.cell_store(out)
+    for c in cells:
+        store.put(c)
+    lines = (out / "cells.jsonl").read_text().splitlines()
+    changed = robustness.restamp_expert_only(store, ["all", "paper"], before=before)
+    assert [(c["stack"], c["level"]) for c in changed] == [("all", 0.05)]
+    again = (out / "cells.jsonl").read_text().splitlines()
+    assert again[1:] == lines[1:]  # the others byte for byte
+    first = robustness.cell_store(out).get(robustness.cell_key("relay", "all", "offset", 0.05))
+    assert first == {**cells[0], "config": robustness.config_fingerprint("all"), "restamped_from": old_all}
+    assert "| relay | start within 5 cm | all |" in robustness.table(robustness.cell_store(out).cells(), ["relay"])
+    assert robustness.restamp_expert_only(robustness.cell_store(out), ["all", "paper"], before=before) == []
+    monkeypatch.setattr(sys, "argv", ["robustness", "--restamp", "+mission", "--out", str(out), "--flown-after",
+                                      str(tmp_path / "before.jsonl")])
+    robustness.main()
+    assert robustness.cell_store(out).get(robustness.cell_key("relay", "+mission", "offset", 0.05))["config"] == \
+        robustness.config_fingerprint("+mission") != robustness.expert_only_fingerprint("+mission")
+    # the impact-robust benchmark's: a cell without a config is not today's there, so it stays unstamped
+    ir_out = tmp_path / "ir"
+    ir_store = impact_robust.cell_store(ir_out)
+    base = {"scenario": "corridor", "planner": "ir", "axis": "noise", "delta": 0.025, "episodes_requested": 1,
+            "episodes": [], "wall_s": 0.0}
+    ir_store.put({**base, "stack": "all", "level": 0.025, "config": impact_robust.expert_only_fingerprint("all")})
+    ir_store.put({**base, "stack": "all", "level": 0.05})
+    assert [c["level"] for c in impact_robust.restamp(ir_store, ["all", "paper"])] == [0.025]
+    assert [c.get("config") for c in impact_robust.cell_store(ir_out).cells()] == [
+        impact_robust.config_fingerprint("all"), None]
 
 
 def test_benchmarks_run_as_modules(tmp_path):

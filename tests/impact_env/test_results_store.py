@@ -71,6 +71,19 @@ def test_lines_already_in_the_file_are_rewritten_byte_for_byte(tmp_path):
     assert path.read_text().splitlines()[0] == '{"scenario":"corridor","level":0.1,   "x": 1.10}'
 
 
+def test_put_many_replaces_and_appends_in_one_write(tmp_path, monkeypatch):
+    path = tmp_path / "cells.jsonl"
+    store = CellStore(path, by_name)
+    store.put(cell("corridor", 0.1))
+    store.put(cell("relay", 0.3))
+    writes = []
+    monkeypatch.setattr("impact_env.results_store.write_atomic", lambda p, text: writes.append(text))
+    store.put_many([cell("relay", 0.3, 0.7), cell("two_objects", 0.2)])
+    store.put_many([])
+    assert writes == ["".join(json.dumps(c) + "\n" for c in (cell("corridor", 0.1), cell("relay", 0.3, 0.7),
+                                                            cell("two_objects", 0.2)))]
+
+
 def test_a_cut_last_line_is_reported_with_its_number_not_dropped(tmp_path):
     path = tmp_path / "cells.jsonl"
     lines = [json.dumps(cell("corridor", 0.1)), json.dumps(cell("relay", 0.3))]

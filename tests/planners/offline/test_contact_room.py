@@ -30,6 +30,15 @@ def near_wall():
     return scenario_from_dict(data)
 
 
+def near_obstacle():
+    """The same, with the wall at x = 3.3 an obstacle instead (a post from x = 3.3 to 3.6 the world's height)."""
+    data = tomllib.loads(resources.files("impact_env.transport.scenarios").joinpath("throw_and_catch_exp.toml")
+                         .read_text())
+    data["obstacles"] = [{"name": "post", "box": [3.3, 3.6, -1.5, 1.5]}]
+    data["robots"][1]["position_m"] = data["robots"][1]["final_position_m"] = [3.05, 0.0]
+    return scenario_from_dict(data)
+
+
 @pytest.fixture(scope="module")
 def plans():
     scenario = near_wall()
@@ -63,6 +72,18 @@ def test_the_disc_has_room_behind_every_contact_for_errors_up_to_delta(plans):
     assert all(o.ok for o in outcomes)
     assert min(o.contact_room_m for o in outcomes) == pytest.approx(0.0, abs=0.02)
     plan.check(scenario, tol=1e-6)
+
+
+def test_the_disc_has_room_behind_every_contact_in_front_of_an_obstacle_too():
+    """An obstacle behind the catch binds as the wall did: without the obstacle rows the catch box is the
+    point-contact one, and R2's centre would have to be up to 0.1 m inside the post."""
+    scenario = near_obstacle()
+    plan = plan_impact_robust(scenario, IRPlannerConfig())
+    outcomes = [rollout(plan, scenario, e) for e in samples(plan)]
+    assert all(o.ok for o in outcomes)
+    assert min(o.contact_room_m for o in outcomes) == pytest.approx(0.0, abs=0.02)
+    # the point contact at the catch box's far side: 0.1 m into the post (grown by R2's radius)
+    assert contact_room(scenario, "R2", "O1", np.array([2.8, 0.0]), np.array([-0.1, 0.0])) == pytest.approx(-0.1)
 
 
 def test_contact_room_is_the_disc_centre_inside_the_shrunk_world():

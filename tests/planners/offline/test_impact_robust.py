@@ -15,7 +15,7 @@ from planners.errors import InfeasiblePlanError, PlanCheckError
 from planners.offline.guarantee import rollout, worst_case_errors
 from planners.offline.impact_robust import IRPlannerConfig, plan_impact_robust
 from planners.plan import Plan
-from tests.shipped_plans import IR_SCENARIOS, objective
+from tests.shipped_plans import IR_INFEASIBLE, IR_SCENARIOS, objective
 from tests.shipped_plans import plan as plan_now
 
 
@@ -259,19 +259,30 @@ def test_cli_rejects_ir_options_for_the_sr_planner(capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["two_objects", "ping_pong_stop", "relay"])
+@pytest.mark.parametrize("name", ["two_objects", "ping_pong_stop", "relay", "wall_start", "narrow_gap", "held_drift",
+                                  "four_robots"])
 def test_other_scenarios_plan_and_keep_the_guarantee(shipped_plans, name):
     """Scenarios the IR planner was not developed on: two objects, short windows with a stop, a relay of five
     impacts by three robots (it found an extraction bug: the velocity box before an impact must stay the one
-    the copies were built for). Each committed plan (test_the_committed_plans_are_the_planners_answer plans
-    them again) is proven optimal, checked, and keeps the guarantee under sampling."""
+    the copies were built for), robots starting at walls, a narrow gap (delta 0.0073 m/s), a held goal, four
+    robots and two objects. Each committed plan (test_the_committed_plans_are_the_planners_answer plans them
+    again) is proven optimal, checked, and keeps the guarantee under sampling."""
     scenario = load_scenario(name)
     plan = shipped_plans.ir(name)
-    assert plan.mip_gap <= 1e-4 and plan.delta_mps > 0.01
+    assert plan.mip_gap <= 1e-4 and plan.delta_mps > 0.005
     plan.check(scenario, tol=1e-6)
     rng = np.random.default_rng(3)
     d = plan.delta_mps
     assert all(rollout(plan, scenario, rng.uniform(-d, d, (len(plan.impacts), 2))).ok for _ in range(300))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", IR_INFEASIBLE)
+def test_no_ir_plan_where_the_docs_say_so(name):
+    """one_robot_two_objects and timed_visits have no impact-robust plan (docs/robustness.md#the-guarantee-on-
+    the-newer-scenarios quotes the answer): the planner proves it, naming the robot copies among the groups."""
+    with pytest.raises(InfeasiblePlanError, match="'robot copies'"):
+        plan_now("ir", name)
 
 
 @pytest.mark.slow
