@@ -83,6 +83,15 @@ def expert_config(stack: str):
             "all+sig": ExpertConfig(identification=IdentificationConfig(significance=3))}[stack]
 
 
+def _counts_as(cell: dict) -> str | None:
+    """The fingerprint whose flights a cell's are (its ``config`` through :data:`benchmarks.robustness.SAME_FLIGHTS`;
+    a cell without one counts as flown with another config)."""
+    from benchmarks.robustness import SAME_FLIGHTS
+
+    flown = cell.get("config")
+    return SAME_FLIGHTS.get(flown, flown) if flown is not None else None
+
+
 def config_fingerprint(stack: str) -> str:
     """12 hex digits naming the stack's config as it is now (:func:`benchmarks.robustness.config_fingerprint`
     of the same config: the ``ExpertConfig`` and the planner defaults its re-plans use): a cell records the
@@ -225,7 +234,7 @@ def run(scenarios, stacks, seeds: int, out: Path, workers: int, factors=None, pl
                 for stack in stacks:
                     for planner in planners:
                         done = store.get(cell_key(name, planner, stack, axis, level))
-                        if done is not None and stack in stale and done.get("config") != fingerprints[stack]:
+                        if done is not None and stack in stale and _counts_as(done) != fingerprints[stack]:
                             done = None
                         if done is not None and done.get("plan", flown[planner]) != flown[planner]:
                             done = None  # another plan with the same delta
@@ -259,7 +268,7 @@ def row(cell: dict, delta: float | None = None, plan: str | None = None) -> str:
     eps = cell["episodes"]
     rho = [e["robustness"] for e in eps]
     speed = [e["final_speed"] for e in eps]
-    stack = cell["stack"] if cell.get("config") == config_fingerprint(cell["stack"]) else f"{cell['stack']} *"
+    stack = cell["stack"] if _counts_as(cell) == config_fingerprint(cell["stack"]) else f"{cell['stack']} *"
     if (delta is not None and cell["delta"] != delta) or (plan is not None and cell.get("plan", plan) != plan):
         stack += " †"
     return (f"| {cell['scenario']} | {label(cell)} | {stack} | {cell['planner']} | {len(eps)} | "

@@ -161,7 +161,10 @@ def test_cells_flown_with_another_config_are_marked():
     text = robustness.table(cells, ["relay"])
     assert "| relay | nominal | paper | 1 |" in text and "| relay | nominal | all * | 1 |" in text
     assert "| relay | nominal | +id | 1 |" in text and text.endswith("flies it again)")
-    assert robustness.flown_with(cells[0]) == robustness.config_fingerprint("paper")
+    # flown with the paper's config of then, whose flights today's config flies too (SAME_FLIGHTS)
+    assert robustness.flown_with(cells[0]) == robustness.UNSTAMPED_CONFIG["paper"]
+    assert robustness.counts_as(cells[0]) == robustness.config_fingerprint("paper")
+    assert robustness.counts_as(cells[1]) == robustness.UNSTAMPED_CONFIG["all"]
 
 
 class FakePool(FakeEngine):

@@ -31,6 +31,7 @@ REQUIRED = {  # valid values of required fields
     "BCConfig": {"scenario": "corridor"},
     "DAggerConfig": {"scenario": "corridor"},
     "Sb3PpoConfig": {"scenario": "corridor"},
+    "FamilyPpoConfig": {"family": "throw_and_catch"},
     "MarlConfig": {"algorithm": "mappo", "task": "corridor"},
     "TaskBCConfig": {"family": "throw_and_catch"},
     "BcRlConfig": {"scenario": "corridor", "policy": "runs/bc_corridor"},
