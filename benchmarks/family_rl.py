@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.task_bc import bootstrap_ci
+from benchmarks.task_bc import EVAL_SEED0, bootstrap_ci, fly_episode
 from benchmarks.task_generator import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,8 +37,6 @@ OUT = ROOT / "results" / "family_rl"
 TASKS = ROOT / "results" / "task_generator"
 PLANS = ROOT / "results" / "robustness" / "plans"
 RUNS = Path("runs/family_rl")
-NOISE = {"thrust_noise": 0.05, "initial_position_noise_m": 0.05}
-EVAL_SEED0 = 1000
 
 
 def _store():
@@ -58,21 +56,6 @@ def heldout(family: str) -> list[tuple]:
     return out
 
 
-def _episode(scenario, controller, seed: int, family: str | None) -> dict:
-    from impact_env.rollout import run_episode
-    from impact_env.transport.generate import FAMILY_LIMITS
-    from impact_env.transport.gym_env import TransportEnv
-    from impact_env.transport.task_observation import TaskConditioned
-
-    env = TransportEnv(scenario, **NOISE)
-    if family is not None:  # the goal-conditioned policy sees the family's padded layout
-        env = TaskConditioned(env, FAMILY_LIMITS[family])
-    result = run_episode(env, controller, seed=seed)
-    env.close()
-    return {"task": scenario.name, "seed": seed, "success": bool(result.success),
-            "robustness_m": float(result.robustness), "ms_per_step": float(np.median(result.controller_ms))}
-
-
 def run_family(family: str, seeds: list[int], tasks: tuple[int, ...], frames: int, envs_per_task: int,
                eval_episodes: int) -> None:
     from baselines.batched.family_ppo import FamilyPpoConfig, FamilyPpoPolicy, run
@@ -83,7 +66,7 @@ def run_family(family: str, seeds: list[int], tasks: tuple[int, ...], frames: in
     names = [sc.name for sc, _ in held]
     if (family, "expert", None) not in store:
         start = time.perf_counter()
-        episodes = [_episode(sc, Expert(sc, plan=plan), EVAL_SEED0 + k, None) for sc, plan in held
+        episodes = [fly_episode(sc, Expert(sc, plan=plan), EVAL_SEED0 + k, None) for sc, plan in held
                     for k in range(eval_episodes)]
         store.put({"family": family, "controller": "expert", "train_seed": None, "heldout_tasks": names,
                    "episodes": episodes, "wall_s": round(time.perf_counter() - start, 1)})
@@ -97,7 +80,7 @@ def run_family(family: str, seeds: list[int], tasks: tuple[int, ...], frames: in
         result = run(FamilyPpoConfig(family, tasks=tasks, envs_per_task=envs_per_task, seed=seed, frames=frames),
                      RUNS / f"{family}_s{seed}")
         policy = FamilyPpoPolicy(RUNS / f"{family}_s{seed}")
-        episodes = [_episode(sc, policy, EVAL_SEED0 + k, family) for sc, _ in held for k in range(eval_episodes)]
+        episodes = [fly_episode(sc, policy, EVAL_SEED0 + k, family) for sc, _ in held for k in range(eval_episodes)]
         store.put({"family": family, "controller": "family_ppo", "train_seed": seed, "heldout_tasks": names,
                    "train_tasks": list(tasks), "env_steps": result["env_steps"], "train_wall_s": result["wall_s"],
                    "env_steps_per_s": result["env_steps_per_s"], "episodes": episodes})

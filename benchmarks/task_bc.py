@@ -26,6 +26,7 @@ import json
 import statistics
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -54,14 +55,16 @@ def bootstrap_ci(by_task: dict[str, list[float]], n: int = 2000, seed: int = 0) 
     return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
 
 
-def _episode(scenario, controller, seed: int, padded: bool, family: str) -> dict:
+def fly_episode(scenario, controller, seed: int, family: str | None) -> dict:
+    """One held-out episode under :data:`NOISE`: the controller on the scenario's env, seen through ``family``'s
+    padded layout when given (a goal-conditioned policy), else the env's own observation (the expert)."""
     from impact_env.rollout import run_episode
     from impact_env.transport.generate import FAMILY_LIMITS
     from impact_env.transport.gym_env import TransportEnv
     from impact_env.transport.task_observation import TaskConditioned
 
-    env = TransportEnv(scenario, **NOISE)
-    if padded:
+    env: Any = TransportEnv(scenario, **NOISE)
+    if family is not None:
         env = TaskConditioned(env, FAMILY_LIMITS[family])
     result = run_episode(env, controller, seed=seed)
     env.close()
@@ -94,7 +97,7 @@ def run_family(family: str, seeds: list[int], eval_episodes: int, episodes_per_t
         episodes = []
         for scenario, plan, _ in held:
             expert = Expert(scenario, plan=plan)
-            episodes += [_episode(scenario, expert, EVAL_SEED0 + k, False, family) for k in range(eval_episodes)]
+            episodes += [fly_episode(scenario, expert, EVAL_SEED0 + k, None) for k in range(eval_episodes)]
         store.put({"family": family, "controller": "expert", "train_seed": None, "train_tasks": len(train_names),
                    "heldout_tasks": held_names, "episodes": episodes})
     for seed in seeds:
@@ -104,7 +107,7 @@ def run_family(family: str, seeds: list[int], eval_episodes: int, episodes_per_t
                                          out=str(RUNS / f"{family}_s{seed}")))
         train = json.loads((run / "train.json").read_text())
         policy = TaskBCPolicy.load(run)
-        episodes = [_episode(sc, policy, EVAL_SEED0 + k, True, family) for sc, _, _ in held
+        episodes = [fly_episode(sc, policy, EVAL_SEED0 + k, family) for sc, _, _ in held
                     for k in range(eval_episodes)]
         store.put({"family": family, "controller": "bc", "train_seed": seed, "train_tasks": len(train_names),
                    "heldout_tasks": held_names, "dataset_steps": train["steps"], "dataset_episodes": train["episodes"],

@@ -31,10 +31,11 @@ from baselines.batched.bc_ppo import BCRegularisedPPO, FrozenStatistics
 from baselines.batched.sb3_ppo import (
     curve_callback,
     evaluate,
+    fix_run_settings,
+    learn_in_chunks,
     make_venv,
-    restore,
+    resume_run,
     save_checkpoint,
-    truncate_curve,
 )
 from impact_env.config_checks import check_choice, check_flag, check_integer, check_number, check_text, fail
 from impact_env.errors import ImpactEnvError
@@ -277,32 +278,11 @@ def run(cfg: BcRlConfig, out: Path, progress: bool = True) -> dict:
     torch.set_num_threads(cfg.threads)
     cfg = cfg.with_horizon(TransportCore(cfg.scenario).horizon_steps)
     out.mkdir(parents=True, exist_ok=True)
-    config_path = out / "config.json"
-    now = json.loads(json.dumps(asdict(cfg)))
-    if config_path.exists():
-        before = json.loads(config_path.read_text(encoding="utf-8"))
-        changed = sorted(k for k in now if k not in FREE and before.get(k) != now[k])
-        if changed:
-            raise ImpactEnvError(f"{out} holds a run with other settings ({', '.join(changed)}: "
-                                 f"{', '.join(f'{before.get(k)!r} -> {now[k]!r}' for k in changed)}); "
-                                 "use another --out or delete the folder")
-    write_atomic(config_path, json.dumps(now, indent=1))
+    fix_run_settings(out, json.loads(json.dumps(asdict(cfg))), FREE)
     curve, updates, state_path = out / "curve.jsonl", out / "updates.jsonl", out / "state.json"
     start = time.perf_counter()
     model, venv = build(cfg, make_venv(cfg))
-    if state_path.exists():
-        state = json.loads(state_path.read_text(encoding="utf-8"))
-        restore(model, venv, out)
-        model.num_timesteps = int(state["frames"])
-        for log in (curve, updates):
-            truncate_curve(log, state["frames"])
-        wall_before = float(state["wall_s"])
-        if progress:
-            print(f"resuming {out} at {state['frames']:,} env-steps", flush=True)
-    else:
-        curve.unlink(missing_ok=True)
-        updates.unlink(missing_ok=True)
-        wall_before = 0.0
+    wall_before = resume_run(model, venv, out, [curve, updates], progress)
     model.updates_log = updates
     init_path = out / "init_evaluation.json"
     if not init_path.exists():  # the BC policy, before any update, on the result's episodes
@@ -317,16 +297,10 @@ def run(cfg: BcRlConfig, out: Path, progress: bool = True) -> dict:
             "bc_half_life_frames": cfg.bc_half_life_frames, "critic_warmup_rollouts": cfg.critic_warmup_rollouts,
             "expert_pairs": len(model.expert_obs)}
     callback = curve_callback(curve, wall_before)
-    while model.num_timesteps < cfg.frames:
-        chunk = min(cfg.chunk_frames, cfg.frames - model.num_timesteps)
-        model.learn(chunk, callback=callback, reset_num_timesteps=False, progress_bar=False)
-        save_checkpoint(model, venv, cfg, out, callback.wall_s(), trainer=TRAINER, meta=meta)
-        if progress:
-            wall = callback.wall_s()
-            print(f"{out.name}: {model.num_timesteps:,} / {cfg.frames:,} env-steps, {wall:.0f} s "
-                  f"({model.num_timesteps / max(wall, 1e-9):,.0f} env-steps/s), BC weight "
-                  f"{cfg.bc_weight_at(model.num_timesteps):.3g}, expert action error "
-                  f"{model.expert_action_mse():.2e}", flush=True)
+    learn_in_chunks(model, cfg, callback,
+                    lambda wall: save_checkpoint(model, venv, cfg, out, wall, trainer=TRAINER, meta=meta), out,
+                    progress, note=lambda: f", BC weight {cfg.bc_weight_at(model.num_timesteps):.3g}, expert action "
+                                           f"error {model.expert_action_mse():.2e}")
     train_wall = json.loads(state_path.read_text(encoding="utf-8"))["wall_s"]
     start = time.perf_counter()
     venv.training = False

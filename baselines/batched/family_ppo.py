@@ -129,10 +129,9 @@ def _save(model, venv, cfg: FamilyPpoConfig, out: Path, wall_s: float) -> None:
 def run(cfg: FamilyPpoConfig, out: Path, progress: bool = True) -> dict:
     """Train (or resume) one run in ``out``; returns its summary (also ``out``/result.json)."""
     import torch
-    from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from baselines.batched.sb3_ppo import curve_callback, restore, truncate_curve
+    from baselines.batched.sb3_ppo import curve_callback, fix_run_settings, learn_in_chunks, ppo_model, resume_run
     from impact_env.transport.batched.family_world import TaskFamilyWorld
     from impact_env.transport.batched.sb3_vec_env import TransportSB3VecEnv
 
@@ -145,45 +144,16 @@ def run(cfg: FamilyPpoConfig, out: Path, progress: bool = True) -> dict:
         result_path.rename(out / f"result_{done['budget_env_steps']}.json")
     torch.set_num_threads(cfg.threads)
     out.mkdir(parents=True, exist_ok=True)
-    config_path = out / "config.json"
     now = json.loads(json.dumps(asdict(cfg)))
-    if config_path.exists():
-        before = json.loads(config_path.read_text(encoding="utf-8"))
-        free = ("frames", "checkpoint_frames", "threads")  # change nothing of the training
-        changed = sorted(k for k in now if k not in free and before.get(k) != now[k])
-        if changed:
-            raise ImpactEnvError(f"{out} holds a run with other settings ({', '.join(changed)}); use another --out "
-                                 "or delete the folder")
-    write_atomic(config_path, json.dumps(now, indent=1))
+    fix_run_settings(out, now, ("frames", "checkpoint_frames", "threads"))
     curve, state_path = out / "curve.jsonl", out / "state.json"
     world = TaskFamilyWorld(cfg.family, list(cfg.tasks), cfg.envs_per_task, **cfg.world_options())
     raw = TransportSB3VecEnv(world=world)
     raw.seed(cfg.seed * 100_000)
     venv = VecNormalize(VecMonitor(raw), gamma=cfg.gamma)
-    model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
-                learning_rate=cfg.lr, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
-                ent_coef=cfg.ent_coef, seed=cfg.seed, device="cpu", verbose=0,
-                policy_kwargs={"net_arch": list(cfg.hidden), "log_std_init": cfg.log_std_init})
-    wall_before = 0.0
-    if state_path.exists():
-        state = json.loads(state_path.read_text(encoding="utf-8"))
-        restore(model, venv, out)
-        model.num_timesteps = int(state["frames"])
-        truncate_curve(curve, state["frames"])
-        wall_before = float(state["wall_s"])
-        if progress:
-            print(f"resuming {out} at {state['frames']:,} env-steps", flush=True)
-    else:
-        curve.unlink(missing_ok=True)
-    callback = curve_callback(curve, wall_before)
-    while model.num_timesteps < cfg.frames:
-        model.learn(min(cfg.chunk_frames, cfg.frames - model.num_timesteps), callback=callback,
-                    reset_num_timesteps=False, progress_bar=False)
-        _save(model, venv, cfg, out, callback.wall_s())
-        if progress:
-            wall = callback.wall_s()
-            print(f"{out.name}: {model.num_timesteps:,} / {cfg.frames:,} env-steps, {wall:.0f} s "
-                  f"({model.num_timesteps / max(wall, 1e-9):,.0f} env-steps/s)", flush=True)
+    model = ppo_model(cfg, venv)
+    callback = curve_callback(curve, resume_run(model, venv, out, [curve], progress))
+    learn_in_chunks(model, cfg, callback, lambda wall: _save(model, venv, cfg, out, wall), out, progress)
     wall = json.loads(state_path.read_text(encoding="utf-8"))["wall_s"]
     result = {"family": cfg.family, "seed": cfg.seed, "env_steps": int(model.num_timesteps),
               "budget_env_steps": cfg.frames, "train_tasks": len(cfg.tasks), "wall_s": wall,

@@ -30,7 +30,7 @@ import json
 import os
 import platform
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -311,9 +311,65 @@ def evaluate(model, obs_rms_venv, cfg: WorldRun, episodes: int, first_seed: int 
 
 
 # -------------------------------------------------------------------------------------------------------- run
+def fix_run_settings(out: Path, settings: dict, free: Sequence[str], error: type[Exception] = ImpactEnvError) -> None:
+    """Refuse a run folder whose ``config.json`` holds other ``settings`` than these (but the ``free`` ones, which
+    change nothing of the training, such as the budget), then write them there. ``settings``: JSON values."""
+    config_path = out / "config.json"
+    if config_path.exists():
+        before = json.loads(config_path.read_text(encoding="utf-8"))
+        changed = sorted(k for k in settings if k not in free and before.get(k) != settings[k])
+        if changed:
+            raise error(f"{out} holds a run with other settings ({', '.join(changed)}: "
+                        f"{', '.join(f'{before.get(k)!r} -> {settings[k]!r}' for k in changed)}); "
+                        "use another --out or delete the folder")
+    write_atomic(config_path, json.dumps(settings, indent=1))
+
+
+def ppo_model(cfg: Any, venv: Any):
+    """SB3's PPO with a run's settings (:class:`Sb3PpoConfig`'s PPO fields) on ``venv``."""
+    from stable_baselines3 import PPO
+
+    return PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+               learning_rate=cfg.lr, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
+               ent_coef=cfg.ent_coef, seed=cfg.seed, device="cpu", verbose=0,
+               policy_kwargs={"net_arch": list(cfg.hidden), "log_std_init": cfg.log_std_init})
+
+
+def resume_run(model, venv, out: Path, logs: Sequence[Path], progress: bool) -> float:
+    """The checkpoint of ``out`` (``state.json`` names its step count) into ``model`` and ``venv``, each of the
+    ``logs`` cut to that step count; without a checkpoint, the logs are removed. Returns the run's training
+    wall clock so far (s)."""
+    state_path = out / "state.json"
+    if not state_path.exists():
+        for log in logs:
+            log.unlink(missing_ok=True)
+        return 0.0
+    state = json.loads(state_path.read_text(encoding="utf-8"))
+    restore(model, venv, out)
+    model.num_timesteps = int(state["frames"])
+    for log in logs:
+        truncate_curve(log, state["frames"])
+    if progress:
+        print(f"resuming {out} at {state['frames']:,} env-steps", flush=True)
+    return float(state["wall_s"])
+
+
+def learn_in_chunks(model, cfg: Any, callback, save: Callable[[float], None], out: Path, progress: bool,
+                    note: Callable[[], str] = lambda: "") -> None:
+    """Train ``model`` up to ``cfg.frames`` in chunks of ``cfg.chunk_frames``, calling ``save(wall_s)`` after
+    each (the checkpoint) and printing a line (``note()`` appended) when ``progress``."""
+    while model.num_timesteps < cfg.frames:
+        model.learn(min(cfg.chunk_frames, cfg.frames - model.num_timesteps), callback=callback,
+                    reset_num_timesteps=False, progress_bar=False)
+        save(callback.wall_s())
+        if progress:
+            wall = callback.wall_s()
+            print(f"{out.name}: {model.num_timesteps:,} / {cfg.frames:,} env-steps, {wall:.0f} s "
+                  f"({model.num_timesteps / max(wall, 1e-9):,.0f} env-steps/s){note()}", flush=True)
+
+
 def run(cfg: Sb3PpoConfig, out: Path, progress: bool = True) -> dict:
     """Train (or resume) one run in ``out``; returns its result (also ``out``/result.json)."""
-    from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
     result_path = out / "result.json"
@@ -321,47 +377,17 @@ def run(cfg: Sb3PpoConfig, out: Path, progress: bool = True) -> dict:
         return json.loads(result_path.read_text(encoding="utf-8"))
     torch.set_num_threads(cfg.threads)
     out.mkdir(parents=True, exist_ok=True)
-    config_path = out / "config.json"
-    if config_path.exists():
-        before = json.loads(config_path.read_text(encoding="utf-8"))
-        now = json.loads(json.dumps(asdict(cfg)))
-        free = ("frames", "checkpoint_frames", "eval_episodes", "threads")  # change nothing of the training
-        changed = sorted(k for k in now if k not in free and before.get(k) != now[k])
-        if changed:
-            raise ValueError(f"{out} holds a run with other settings ({', '.join(changed)}: "
-                             f"{', '.join(f'{before.get(k)!r} -> {now[k]!r}' for k in changed)}); "
-                             "use another --out or delete the folder")
-    write_atomic(config_path, json.dumps(asdict(cfg), indent=1))
+    fix_run_settings(out, json.loads(json.dumps(asdict(cfg))), ("frames", "checkpoint_frames", "eval_episodes",
+                                                                "threads"), error=ValueError)
     curve = out / "curve.jsonl"
     state_path = out / "state.json"
     start = time.perf_counter()
-    monitor = make_venv(cfg)
-    venv = VecNormalize(monitor, gamma=cfg.gamma)
-    model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
-                learning_rate=cfg.lr, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
-                ent_coef=cfg.ent_coef, seed=cfg.seed, device="cpu", verbose=0,
-                policy_kwargs={"net_arch": list(cfg.hidden), "log_std_init": cfg.log_std_init})
-    if state_path.exists():
-        state = json.loads(state_path.read_text(encoding="utf-8"))
-        restore(model, venv, out)
-        model.num_timesteps = int(state["frames"])
-        truncate_curve(curve, state["frames"])
-        wall_before = float(state["wall_s"])
-        if progress:
-            print(f"resuming {out} at {state['frames']:,} env-steps", flush=True)
-    else:
-        curve.unlink(missing_ok=True)
-        wall_before = 0.0
+    venv = VecNormalize(make_venv(cfg), gamma=cfg.gamma)
+    model = ppo_model(cfg, venv)
+    wall_before = resume_run(model, venv, out, [curve], progress)
     setup_s = time.perf_counter() - start
     callback = curve_callback(curve, wall_before)
-    while model.num_timesteps < cfg.frames:
-        chunk = min(cfg.chunk_frames, cfg.frames - model.num_timesteps)
-        model.learn(chunk, callback=callback, reset_num_timesteps=False, progress_bar=False)
-        save_checkpoint(model, venv, cfg, out, callback.wall_s())
-        if progress:
-            wall = callback.wall_s()
-            print(f"{out.name}: {model.num_timesteps:,} / {cfg.frames:,} env-steps, {wall:.0f} s "
-                  f"({model.num_timesteps / max(wall, 1e-9):,.0f} env-steps/s)", flush=True)
+    learn_in_chunks(model, cfg, callback, lambda wall: save_checkpoint(model, venv, cfg, out, wall), out, progress)
     train_wall = callback.wall_s() if model.num_timesteps > 0 else wall_before
     if state_path.exists():
         train_wall = json.loads(state_path.read_text(encoding="utf-8"))["wall_s"]
