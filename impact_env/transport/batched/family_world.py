@@ -120,21 +120,19 @@ class TaskFamilyWorld:
         """As :meth:`BatchedTransportWorld.reset` over the whole batch: an int seed gives env i seed + i (so task
         k's env j gets seed + k * envs_per_task + j), or N seeds; returns obs [N, obs_size] float32."""
         m = self._mask(mask)
-        if seeds is not None and not isinstance(seeds, (int, np.integer)):
+        if isinstance(seeds, (int, np.integer)):
+            seeds = int(seeds) + torch.arange(self.num_envs, device=self.device)
+        elif seeds is not None:
             seeds = torch.as_tensor(seeds, device=self.device)
             if tuple(seeds.shape) != (self.num_envs,):
                 raise EnvConfigError(f"seeds must be an int or {self.num_envs} ints, got shape {tuple(seeds.shape)}")
         outs = []
-        for k, (world, part) in enumerate(zip(self.worlds, self._parts(m))):
-            if part is not None and self._obs is not None and not bool(part.any()):
-                outs.append(self._obs[k * self.envs_per_task:(k + 1) * self.envs_per_task])
-                continue
-            s = seeds
-            if isinstance(seeds, (int, np.integer)):
-                s = int(seeds) + k * self.envs_per_task
-            elif seeds is not None:
-                s = seeds[k * self.envs_per_task:(k + 1) * self.envs_per_task]
-            outs.append(self._pad(k, world.reset(seeds=s, mask=part)))
+        for k, (world, part, own_seeds, before) in enumerate(zip(self.worlds, self._parts(m), self._parts(seeds),
+                                                                  self._parts(self._obs))):
+            if part is not None and before is not None and not bool(part.any()):
+                outs.append(before)  # no env of this task restarts
+            else:
+                outs.append(self._pad(k, world.reset(seeds=own_seeds, mask=part)))
         self._obs = torch.cat(outs)
         return self._obs
 
