@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.task_bc import EVAL_SEED0, bootstrap_ci, fly_episode
+from benchmarks.task_bc import EVAL_SEED0, fly_episode, success_cell
 from benchmarks.task_generator import SHIPPED
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -102,11 +102,7 @@ def table() -> str:
             if not cells:
                 continue
             eps = [e for c in cells for e in c["episodes"]]
-            by_task: dict[str, list[float]] = {}
-            for e in eps:
-                by_task.setdefault(e["task"], []).append(float(e["success"]))
-            lo, hi = bootstrap_ci(by_task)
-            rate = float(np.mean([e["success"] for e in eps]))
+            rate, success = success_cell(eps)
             learned = controller != "expert"
             per_seed = ", ".join(f"{100 * np.mean([e['success'] for e in c['episodes']]):.0f}" for c in cells)
             ratio = f"{rate / expert_rate:.2f}" if learned and expert_rate > 0 else "-"
@@ -115,7 +111,7 @@ def table() -> str:
             wall = f"{statistics.fmean(c['train_wall_s'] for c in cells):.0f}" if learned else "-"
             rows.append(
                 f"| {family} | {controller}{f' ({len(cells)} seeds)' if learned else ''} | "
-                f"{len(cells[0]['heldout_tasks'])} | {100 * rate:.0f} ({100 * lo:.0f}-{100 * hi:.0f}) of {len(eps)} | "
+                f"{len(cells[0]['heldout_tasks'])} | {success} | "
                 f"{per_seed if learned else '-'} | {ratio} | {statistics.fmean(e['robustness_m'] for e in eps):+.3f} | "
                 f"{statistics.median(e['ms_per_step'] for e in eps):.2f} | {budget} | {n_train} | {wall} |")
     return "\n".join(rows) + "\n"

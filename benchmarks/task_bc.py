@@ -55,6 +55,17 @@ def bootstrap_ci(by_task: dict[str, list[float]], n: int = 2000, seed: int = 0) 
     return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
 
 
+def success_cell(episodes: list[dict]) -> tuple[float, str]:
+    """(success rate, ``"95 (82-100) of 40"``): the episodes' success % with its :func:`bootstrap_ci` interval
+    over their tasks, as the held-out tables print it."""
+    by_task: dict[str, list[float]] = {}
+    for e in episodes:
+        by_task.setdefault(e["task"], []).append(float(e["success"]))
+    lo, hi = bootstrap_ci(by_task)
+    rate = float(np.mean([e["success"] for e in episodes]))
+    return rate, f"{100 * rate:.0f} ({100 * lo:.0f}-{100 * hi:.0f}) of {len(episodes)}"
+
+
 def fly_episode(scenario, controller, seed: int, family: str | None) -> dict:
     """One held-out episode under :data:`NOISE`: the controller on the scenario's env, seen through ``family``'s
     padded layout when given (a goal-conditioned policy), else the env's own observation (the expert)."""
@@ -130,17 +141,13 @@ def table() -> str:
             if not cells:
                 continue
             eps = [e for c in cells for e in c["episodes"]]
-            by_task: dict[str, list[float]] = {}
-            for e in eps:
-                by_task.setdefault(e["task"], []).append(float(e["success"]))
-            lo, hi = bootstrap_ci(by_task)
-            rate = np.mean([e["success"] for e in eps])
+            _, success = success_cell(eps)
             per_seed = ", ".join(f"{100 * np.mean([e['success'] for e in c['episodes']]):.0f}" for c in cells)
             bc = controller == "bc"
             wall = f"{statistics.fmean(c['train_wall_s'] for c in cells):.0f}" if bc else "-"
             rows.append(
                 f"| {family} | {controller}{f' ({len(cells)} seeds)' if bc else ''} | {cells[0]['train_tasks']} / "
-                f"{len(cells[0]['heldout_tasks'])} | {100 * rate:.0f} ({100 * lo:.0f}-{100 * hi:.0f}) of {len(eps)} | "
+                f"{len(cells[0]['heldout_tasks'])} | {success} | "
                 f"{per_seed if bc else '-'} | {statistics.fmean(e['robustness_m'] for e in eps):+.3f} | "
                 f"{statistics.median(e['ms_per_step'] for e in eps):.2f} | "
                 f"{cells[0]['dataset_steps'] if bc else '-'} | {cells[0]['epochs'] if bc else '-'} | "
