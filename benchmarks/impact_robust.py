@@ -57,6 +57,7 @@ from benchmarks.robustness import (
     identification_record,
     restamp_expert_only,
     restamp_report,
+    same_flights,
 )
 from impact_env.results_store import CellStore, atomic_path, write_atomic
 
@@ -81,15 +82,6 @@ def expert_config(stack: str):
 
     return {"all": ExpertConfig(), "paper": ExpertConfig.paper(),
             "all+sig": ExpertConfig(identification=IdentificationConfig(significance=3))}[stack]
-
-
-def _counts_as(cell: dict) -> str | None:
-    """The fingerprint whose flights a cell's are (its ``config`` through :data:`benchmarks.robustness.SAME_FLIGHTS`;
-    a cell without one counts as flown with another config)."""
-    from benchmarks.robustness import SAME_FLIGHTS
-
-    flown = cell.get("config")
-    return SAME_FLIGHTS.get(flown, flown) if flown is not None else None
 
 
 def config_fingerprint(stack: str) -> str:
@@ -234,7 +226,8 @@ def run(scenarios, stacks, seeds: int, out: Path, workers: int, factors=None, pl
                 for stack in stacks:
                     for planner in planners:
                         done = store.get(cell_key(name, planner, stack, axis, level))
-                        if done is not None and stack in stale and _counts_as(done) != fingerprints[stack]:
+                        if (done is not None and stack in stale
+                                and same_flights(done.get("config")) != fingerprints[stack]):
                             done = None
                         if done is not None and done.get("plan", flown[planner]) != flown[planner]:
                             done = None  # another plan with the same delta
@@ -268,7 +261,8 @@ def row(cell: dict, delta: float | None = None, plan: str | None = None) -> str:
     eps = cell["episodes"]
     rho = [e["robustness"] for e in eps]
     speed = [e["final_speed"] for e in eps]
-    stack = cell["stack"] if _counts_as(cell) == config_fingerprint(cell["stack"]) else f"{cell['stack']} *"
+    current = same_flights(cell.get("config")) == config_fingerprint(cell["stack"])  # no config: another one's
+    stack = cell["stack"] if current else f"{cell['stack']} *"
     if (delta is not None and cell["delta"] != delta) or (plan is not None and cell.get("plan", plan) != plan):
         stack += " †"
     return (f"| {cell['scenario']} | {label(cell)} | {stack} | {cell['planner']} | {len(eps)} | "

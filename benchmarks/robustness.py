@@ -390,10 +390,14 @@ def flown_with(cell: dict) -> str | None:
     return cell.get("config", UNSTAMPED_CONFIG.get(cell["stack"]))
 
 
+def same_flights(fingerprint: str | None) -> str | None:
+    """The fingerprint whose flights those of ``fingerprint`` are (:data:`SAME_FLIGHTS`; itself if none)."""
+    return SAME_FLIGHTS.get(fingerprint, fingerprint) if fingerprint is not None else None
+
+
 def counts_as(cell: dict) -> str | None:
     """The fingerprint whose flights a cell's are: :func:`flown_with`, through :data:`SAME_FLIGHTS`."""
-    flown = flown_with(cell)
-    return SAME_FLIGHTS.get(flown, flown) if flown is not None else None
+    return same_flights(flown_with(cell))
 
 
 def identification_error(cell: dict) -> str:
