@@ -28,10 +28,11 @@ class InfeasiblePlanError(PlannerError):
 
 
 class UnflyableHandoverError(InfeasiblePlanError):
-    """A plan asks a robot to get round an object between two of its impacts in less time than that takes
-    (:mod:`planners.plan.handover`), and the planner could not repair it. ``handovers`` are the hand-overs
-    (robot, object, impact times, least time needed, time there is); ``plan`` the plan that has them, or None
-    when no plan without them satisfies the task."""
+    """A plan asks a robot to get round an object between two of its impacts (:mod:`planners.plan.handover`)
+    or on its way to its first impact (:mod:`planners.plan.approach`) in less time than that takes, and the
+    planner could not repair it. ``handovers`` are the hand-overs and approaches (robot, object, times, least
+    time needed, time there is); ``plan`` the plan that has them, or None when no plan without them satisfies
+    the task."""
 
     def __init__(self, message: str, handovers: list[Any] | None = None, plan: Any = None,
                  groups: list[str] | None = None) -> None:

@@ -61,15 +61,17 @@ def _ir_budget() -> SolverOptions:
 @dataclass(frozen=True)
 class HandoverConfig:
     """How the offline planners make sure that a robot hitting one object twice in a row from opposite sides
-    has time to get round it in between (:mod:`planners.plan.handover`; why the numbers:
-    ``docs/planner_design.md#hand-overs``). A plan with too little time is repaired: the planner re-solves
-    without that hand-over (the same robot and object at the same two knots, nothing hitting either in
-    between), up to ``repairs`` times, and records what it cut in ``plan.stats["handovers_cut"]``."""
+    has time to get round it in between (:mod:`planners.plan.handover`), and that a robot whose way to its
+    first impact is blocked by the object has time to get round it (:mod:`planners.plan.approach`; why the
+    numbers: ``docs/planner_design.md#hand-overs``). A plan with too little time is repaired: the planner
+    re-solves without that hand-over (the same robot and object at the same two knots, nothing hitting either
+    in between) or that first impact, up to ``repairs`` times in all, and records what it cut in
+    ``plan.stats["handovers_cut"]`` and ``["approaches_cut"]``."""
 
     margin: float = 0.5
-    """The time between the two impacts must be at least (1 + margin) times the least time getting round takes
-    at the robot's thrust limit (a fraction): that least time is a lower bound, and the online layer does not
-    fly a time-optimal way round."""
+    """The time between the two impacts (or up to the first) must be at least (1 + margin) times the least time
+    getting round takes at the robot's thrust limit (a fraction): that least time is a lower bound, and the
+    online layer does not fly a time-optimal way round."""
     repairs: int = 20
     """Re-solves with the unflyable hand-overs cut out before the planner gives up with
     ``UnflyableHandoverError``; 0 refuses such a plan at once. Each cut excludes one pair of knots, so a task

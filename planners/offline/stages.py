@@ -15,7 +15,8 @@ velocity error) and then, keeping it, prefer plans with fewer impacts and less a
 A planner hands its model over as a :class:`StagedModel`; :func:`solve_to_plan` runs the stages and ends the
 planner the same way for both (read the plan back, check it and its hand-overs, report a time limit). A plan
 whose robot has too little time to get round an object between two impacts (:mod:`planners.plan.handover`)
-is re-solved with that hand-over cut out (``config.handover``).
+or on its way to its first impact (:mod:`planners.plan.approach`) is re-solved with that hand-over or
+approach cut out (``config.handover``).
 """
 
 from __future__ import annotations
@@ -34,14 +35,15 @@ from planners.offline.milp.impacts import ImpactVars
 from planners.offline.milp.model import LinExpr, Model
 from planners.offline.solvers import solve
 from planners.offline.solvers.base import SolveResult, SolverOptions, Status
-from planners.plan.handover import handovers
+from planners.plan.approach import Approach, approaches
+from planners.plan.handover import Handover, handovers
 
 if TYPE_CHECKING:
     from impact_env.transport.scenario import Scenario
     from planners.plan import Plan
-    from planners.plan.handover import Handover
 
 HANDOVER_GROUP = "hand-over flyability"  # the constraint group of the cuts (named by an infeasibility diagnosis)
+# (an approach's cut joins the same group: one test, one margin, one repair budget)
 
 DIAGNOSE_NODES = 100  # branch-and-bound nodes per check of the infeasibility diagnosis
 DIAGNOSE_SAFETY_S = 20.0  # and a time limit per check that only a pathological model reaches
@@ -129,18 +131,20 @@ def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario
     """Run the stages (:func:`solve_stages`, reporting to ``config.solver_options.progress``) and end a planner
     with their answer: ``extract(x, solver, solve_time_s, mip_gap)`` reads the plan back, its stages'
     statistics join its stats, and it is checked against the scenario (:meth:`Plan.check`, 1e-6) and for its
-    hand-overs (``config.handover``): one with too little time is cut out of the model (:func:`cut_handover`)
-    and the stages run again, up to ``config.handover.repairs`` times. ``plan.stats["handovers"]`` lists the
-    plan's hand-overs and ``plan.stats["handovers_cut"]`` what was cut (each robot, object, times, least time
-    needed and time there is); the repaired plan is optimal among the plans without those hand-overs.
+    hand-overs and its robots' approaches to their first impacts (``config.handover``, one margin for both):
+    one with too little time is cut out of the model (:func:`cut_handover`, :func:`cut_approach`) and the
+    stages run again, up to ``config.handover.repairs`` times in all. ``plan.stats["handovers"]`` and
+    ``["approaches"]`` list the plan's hand-overs and the approaches that must get round their object,
+    ``plan.stats["handovers_cut"]`` and ``["approaches_cut"]`` what was cut (each robot, object, times, least
+    time needed and time there is); the repaired plan is optimal among the plans without those.
 
-    Raises what :func:`solve_stages` raises; UnflyableHandoverError when a hand-over is still too short after
-    the repairs, or no plan without the cut ones satisfies the task; and PlanTimeoutError when the time limit
-    cut stage 1 after it found a plan: ``.plan`` is that plan, ``.mip_gap`` its gap, and the message ends with
-    ``best(plan)`` (e.g. ``"best robustness 0.1234 m"``).
+    Raises what :func:`solve_stages` raises; UnflyableHandoverError when a hand-over or an approach is still
+    too short after the repairs, or no plan without the cut ones satisfies the task; and PlanTimeoutError when
+    the time limit cut stage 1 after it found a plan: ``.plan`` is that plan, ``.mip_gap`` its gap, and the
+    message ends with ``best(plan)`` (e.g. ``"best robustness 0.1234 m"``).
     """
     handover = config.handover if staged.impacts is not None and staged.grid_dt_s is not None else None
-    cut: list[Handover] = []
+    cut: list[Handover | Approach] = []
     rounds = 0
     while True:
         try:
@@ -150,7 +154,8 @@ def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario
             if not cut or handover is None:  # (something was cut: handover is set)
                 raise
             raise UnflyableHandoverError(
-                f"no plan of {scenario.name!r} satisfies the task without a hand-over its robot cannot fly (cut: "
+                f"no plan of {scenario.name!r} satisfies the task without a hand-over or an approach its robot "
+                f"cannot fly (cut: "
                 + "; ".join(h.describe(handover.margin) for h in cut) + ")", cut,
                 groups=list(dict.fromkeys([*exc.groups, HANDOVER_GROUP]))) from exc
         result = solution.result
@@ -159,22 +164,25 @@ def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario
         plan.check(scenario, tol=1e-6)
         if handover is None:
             break
-        found = handovers(plan, scenario)
-        bad = [h for h in found if not h.flyable(handover.margin)]
+        found, ways = handovers(plan, scenario), approaches(plan, scenario)
+        bad = [h for h in [*found, *ways] if not h.flyable(handover.margin)]
         if not bad:
-            if found:
-                plan.stats["handovers"] = [h.to_dict() for h in found]
-            if cut:
-                plan.stats["handovers_cut"] = [h.to_dict() for h in cut]
+            for key, done in (("handovers", found), ("approaches", ways),
+                              ("handovers_cut", [h for h in cut if isinstance(h, Handover)]),
+                              ("approaches_cut", [a for a in cut if isinstance(a, Approach)])):
+                if done:
+                    plan.stats[key] = [h.to_dict() for h in done]
             break
         if rounds >= handover.repairs:
             what = "refuses it" if handover.repairs == 0 else f"could not repair it in {handover.repairs} re-solves"
+            kinds = " or ".join(k for k, t in (("a hand-over", Handover), ("an approach", Approach))
+                                if any(isinstance(h, t) for h in bad))
             raise UnflyableHandoverError(
-                f"the plan of {scenario.name!r} has a hand-over its robot cannot fly: "
+                f"the plan of {scenario.name!r} has {kinds} its robot cannot fly: "
                 + "; ".join(h.describe(handover.margin) for h in bad) + f" (HandoverConfig(repairs="
                 f"{handover.repairs}) {what})", bad, plan=plan)
         for h in bad:
-            cut_handover(staged, h)
+            (cut_handover if isinstance(h, Handover) else cut_approach)(staged, h)
         cut += bad
         rounds += 1
         warm_start = None  # the last solution has the hand-over that is now cut
@@ -199,6 +207,26 @@ def cut_handover(staged: StagedModel, handover: Handover) -> None:
         if k1 < k < k2 and (robot == handover.robot or obj == handover.object):
             row = row - hit
     staged.model.add(row <= 1, group=HANDOVER_GROUP)
+
+
+def cut_approach(staged: StagedModel, approach: Approach) -> None:
+    """Exclude ``approach`` from ``staged.model``: its robot may not make its first impact on its object at
+    that knot with the object's last flight before it starting where it did (at its start, or at the other
+    robot's impact at its knot), unless the robot hits something before or the object is hit in between (a
+    row of group :data:`HANDOVER_GROUP`). As :func:`cut_handover`, the exact no-good of those knots."""
+    if staged.impacts is None or staged.grid_dt_s is None:
+        raise PlannerError("cut_approach needs a model with impact binaries and its grid (StagedModel.impacts and "
+                           "grid_dt_s): the spatially robust planner's")
+    z, dt = staged.impacts.z, staged.grid_dt_s
+    k1 = round(approach.t1_s / dt)
+    k0 = -1 if approach.by is None else round(approach.t0_s / dt)
+    row = z[(approach.robot, approach.object, k1)]
+    if approach.by is not None:
+        row = row + z[(approach.by, approach.object, k0)]
+    for (robot, obj, k), hit in z.items():
+        if k < k1 and (robot == approach.robot or (obj == approach.object and k > k0)):
+            row = row - hit
+    staged.model.add(row <= (0 if approach.by is None else 1), group=HANDOVER_GROUP)
 
 
 def copy_model(m: Model, name: str, integer: bool = True) -> Model:

@@ -30,7 +30,7 @@ from planners.impact_law import mass_fractions
 from planners.plan.types import PlanLike, PlannedImpact
 
 __all__ = ["DIRECTIONS", "Handover", "handovers", "least_handover_time_s", "least_time_1d_s", "least_time_round_s",
-           "unflyable_handovers", "contact_relative_velocity", "PairModel"]
+           "unflyable_handovers", "contact_relative_velocity", "unit_change", "PairModel"]
 
 _EPS = 1e-9
 
@@ -89,6 +89,12 @@ def _unit(v: np.ndarray) -> np.ndarray | None:
     return None if size <= 1e-6 else v / size
 
 
+def unit_change(impact: PlannedImpact) -> np.ndarray | None:
+    """The impact's contact normal: the direction of the object's velocity change (Eq. 6-7); None if the
+    object's velocity hardly changes."""
+    return _unit(np.subtract(impact.object_velocity_after, impact.object_velocity_before))
+
+
 def handovers(plan: PlanLike, scenario: Scenario, model: PairModel | None = None) -> list[Handover]:
     """The plan's hand-overs (see :class:`Handover`), in time order, with their least times: the robot's
     relative velocities at the contacts are the plan's, or with ``model`` the disc law's inverse (Eq. 6-7) of
@@ -102,8 +108,7 @@ def handovers(plan: PlanLike, scenario: Scenario, model: PairModel | None = None
         if nxt_robot is None or nxt_robot is not nxt_object:
             continue
         second = nxt_robot
-        n1 = _unit(np.subtract(first.object_velocity_after, first.object_velocity_before))
-        n2 = _unit(np.subtract(second.object_velocity_after, second.object_velocity_before))
+        n1, n2 = unit_change(first), unit_change(second)
         if n1 is None or n2 is None or float(n1 @ n2) >= 0.0:
             continue
         robot, obj = scenario.body(first.robot), scenario.body(first.object)
@@ -126,8 +131,7 @@ def least_handover_time_s(robot: Body, obj: Body, first: PlannedImpact, second: 
     is the direction of the object's velocity change (Eq. 6-7); the robot's velocities are the plan's, or with
     ``law`` = (restitution, (m_robot, m_object)) those the disc law needs (:func:`contact_relative_velocity`)."""
     d = robot.radius_m + obj.radius_m
-    n1 = _unit(np.subtract(first.object_velocity_after, first.object_velocity_before))
-    n2 = _unit(np.subtract(second.object_velocity_after, second.object_velocity_before))
+    n1, n2 = unit_change(first), unit_change(second)
     if n1 is None or n2 is None:
         return 0.0
     if law is None:

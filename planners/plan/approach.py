@@ -1,0 +1,112 @@
+"""Approaches: a robot's way to its first impact must get round the object when the object is in the way.
+
+The planners' bodies are points, so a plan may have a robot fly through the object to reach its side of
+contact at its first impact (the corridor's IR plan: R2 starts above O1 and must push it up from below). A
+disc robot has to get round it. This is the hand-over's test (:mod:`planners.plan.handover`) with the way
+starting where the robot is when the object's last flight before the impact starts:
+
+- nothing hits the object before: from the robot's start state, in the frame of the object flying from its
+  start at its start velocity, for the whole time up to the impact;
+- another robot hits it first (the last of those at t_a): from the robot's planned state at t_a (its curve;
+  it has hit nothing yet), in the frame of the object after that impact, for the time from t_a. Before t_a the
+  object is elsewhere, so nothing is known of getting round it then.
+
+The way needs getting round when the straight segment from the robot's relative position to its contact
+point ``-d n`` enters the disc of radius d = r_R + r_O (``r0 . r1 < d^2``); then its least time is
+:func:`least_time_round_s` (a lower bound at the thrust limit), and the plan needs ``1 + margin`` times it,
+the hand-overs' margin (:class:`planners.offline.config.HandoverConfig`). Derivation:
+``docs/planner_design.md#hand-overs``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from impact_env.transport.scenario import Scenario
+from planners.errors import PlanCheckError
+from planners.plan.handover import least_time_round_s, unit_change
+from planners.plan.types import PlanLike, PlannedImpact
+
+__all__ = ["Approach", "approaches", "unflyable_approaches"]
+
+
+@dataclass
+class Approach:
+    """A robot's way to its first impact (on ``object`` at ``t1_s``) that must get round the object, from
+    ``t0_s`` (0: its start; else the impact ``by`` another robot that last sent the object off before).
+
+    ``needed_s``: the least time getting there takes (inf if the object is faster than the robot can be);
+    ``available_s``: ``t1_s - t0_s``; ``impact``: the first impact."""
+
+    robot: str
+    object: str
+    t0_s: float
+    t1_s: float
+    needed_s: float
+    by: str | None = None
+    impact: PlannedImpact | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def available_s(self) -> float:
+        return self.t1_s - self.t0_s
+
+    def flyable(self, margin: float) -> bool:
+        """True if the time there is is at least ``1 + margin`` times the least time (as a hand-over's)."""
+        return self.available_s >= (1.0 + margin) * self.needed_s - 1e-9
+
+    def describe(self, margin: float | None = None) -> str:
+        need = "can never get round (the object is faster than it can be)" if math.isinf(self.needed_s) else (
+            f"needs at least {self.needed_s:.2f} s" + (f" ({(1 + margin) * self.needed_s:.2f} s with the "
+                                                      f"{100 * margin:g} % margin)" if margin else ""))
+        start = "its start" if self.by is None else f"{self.by}'s impact at {self.t0_s:.2f} s"
+        return (f"{self.robot} round {self.object} to its first impact at {self.t1_s:.2f} s from {start}: "
+                f"{need}, has {self.available_s:.2f} s")
+
+    def to_dict(self) -> dict:
+        """For ``plan.stats`` (finite numbers only: an infinite least time is None)."""
+        return {"robot": self.robot, "object": self.object, "t0_s": self.t0_s, "t1_s": self.t1_s, "by": self.by,
+                "needed_s": None if math.isinf(self.needed_s) else self.needed_s, "available_s": self.available_s}
+
+
+def approaches(plan: PlanLike, scenario: Scenario) -> list[Approach]:
+    """The plan's approaches that must get round their object (see :class:`Approach`), one per robot at
+    most, in time order, with their least times (the robot's velocity at the contact is the plan's)."""
+    ordered = sorted(plan.impacts, key=lambda i: i.time_s)
+    out = []
+    for name in dict.fromkeys(i.robot for i in ordered):
+        first = next(i for i in ordered if i.robot == name)
+        normal = unit_change(first)
+        if normal is None:
+            continue
+        robot, obj = scenario.body(name), scenario.body(first.object)
+        before = [i for i in ordered if i.object == first.object and i.time_s < first.time_s - 1e-9]
+        if before:  # the object's last flight starts at another robot's impact
+            last = before[-1]
+            t0, by = last.time_s, last.robot
+            p_obj, v_obj = np.asarray(last.position, float), np.asarray(last.object_velocity_after, float)
+            curve = plan.bodies.get(name)
+            if curve is None:
+                raise PlanCheckError([f"the plan has no curve of {name}: its way to its first impact starts where "
+                                      f"the curve has it when {last.robot} hits {first.object} at {t0:g} s"])
+            p_robot, v_robot = curve.position(t0), curve.velocity(t0)
+        else:
+            t0, by = 0.0, None
+            p_obj, v_obj = np.asarray(obj.position_m, float), np.asarray(obj.velocity_mps, float)
+            p_robot, v_robot = np.asarray(robot.position_m, float), np.asarray(robot.velocity_mps, float)
+        d = robot.radius_m + obj.radius_m
+        r0, u0 = p_robot - p_obj, v_robot - v_obj
+        r1 = -d * normal
+        if float(r0 @ r1) >= d * d - 1e-9:  # the straight way to the contact stays outside the disc
+            continue
+        u1 = np.subtract(first.robot_velocity_before, first.object_velocity_before)
+        needed = least_time_round_s(robot, v_obj, d, r0, u0, r1, u1)
+        out.append(Approach(name, first.object, t0, first.time_s, needed, by, impact=first))
+    return sorted(out, key=lambda a: a.t1_s)
+
+
+def unflyable_approaches(plan: PlanLike, scenario: Scenario, margin: float) -> list[Approach]:
+    """The approaches with less than ``1 + margin`` times their least time."""
+    return [a for a in approaches(plan, scenario) if not a.flyable(margin)]
