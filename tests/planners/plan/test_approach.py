@@ -199,3 +199,33 @@ def test_every_committed_plan_leaves_its_robots_time_to_get_round():
     assert ratios[("relay", "ir", "R2")] == pytest.approx(1.58, abs=0.01)
     assert ratios[("corridor", "ir", "R2")] == pytest.approx(1.86, abs=0.01)
     assert max(ratios.values()) == pytest.approx(4.33, abs=0.01)
+
+
+def test_the_cut_excludes_exactly_that_first_impact_with_that_flight_of_the_object():
+    """``cut_approach``'s row on a bare model of impact binaries z[R, O, k] (knots 2 s apart): from the start,
+    R1's first impact on O1 at knot 3 is cut unless R1 hits something or O1 is hit before; after R2's impact
+    on O1 at knot 1, R1's at knot 4 is cut unless R1 hits something before or O1 is hit in between."""
+    from planners.offline.milp.impacts import ImpactVars
+    from planners.offline.milp.model import LinExpr, Model
+    from planners.offline.stages import HANDOVER_GROUP, StagedModel, cut_approach
+    from planners.plan.approach import Approach
+
+    def model_with(cut):
+        m = Model("cuts")
+        z = {(r, o, k): m.add_binary(f"z_{r}_{o}_{k}") for r in ("R1", "R2") for o in ("O1", "O2") for k in range(6)}
+        staged = StagedModel(m, LinExpr(), "delta", LinExpr(), LinExpr(), 1.0, [], impacts=ImpactVars(z), grid_dt_s=2.0)
+        cut_approach(staged, cut)
+        assert m.row_groups == [HANDOVER_GROUP]
+        names = list(z)
+        return lambda *hits: not m.check(np.array([1.0 if key in hits else 0.0 for key in names]))
+
+    allowed = model_with(Approach("R1", "O1", 0.0, 6.0, 10.0))
+    assert not allowed(("R1", "O1", 3))
+    assert allowed(("R1", "O2", 1), ("R1", "O1", 3)) and allowed(("R2", "O1", 2), ("R1", "O1", 3))
+    assert allowed(("R1", "O1", 4))  # another knot
+    assert not allowed(("R2", "O1", 4), ("R1", "O1", 3))  # what comes after does not change the way there
+    allowed = model_with(Approach("R1", "O1", 2.0, 8.0, 10.0, by="R2"))
+    assert not allowed(("R2", "O1", 1), ("R1", "O1", 4))
+    assert allowed(("R1", "O1", 4)) and allowed(("R2", "O1", 0), ("R1", "O1", 4))  # another flight of O1
+    assert allowed(("R2", "O1", 1), ("R2", "O1", 3), ("R1", "O1", 4))  # hit again in between
+    assert allowed(("R2", "O1", 1), ("R1", "O2", 0), ("R1", "O1", 4))  # not R1's first impact
