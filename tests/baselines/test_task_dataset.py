@@ -96,3 +96,24 @@ def test_a_folder_with_too_few_tasks_is_refused(tmp_path, monkeypatch):
         build_dataset("throw_and_catch", tasks, DatasetConfig(max_tasks=1), out=tmp_path / "ds")
     with pytest.raises(ImpactEnvError, match="unknown task family"):
         build_dataset("nope", tasks, out=tmp_path / "ds")
+
+
+def test_without_flying_the_heldout_side_only_the_training_tasks_are_in_a_dataset(tmp_path, monkeypatch):
+    import minari
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "ds"))
+    tasks = tmp_path / "tasks"
+    shutil.copytree(GENERATED, tasks)
+    config = DatasetConfig(quiet=True, heldout_share=0.5)
+    build_dataset("throw_and_catch", tasks, config, out=tmp_path / "ds")  # both sides, as before
+    train, held = build_dataset("throw_and_catch", tasks, DatasetConfig(quiet=True, heldout_share=0.5,
+                                                                        fly_heldout=False), out=tmp_path / "ds")
+    assert held is None and dataset_ids("throw_and_catch")[1] not in minari.list_local_datasets()  # the old one too
+    split = json.loads((tmp_path / "ds" / "impact_env" / "generated_throw_and_catch" / "split.json").read_text())
+    assert split["fly_heldout"] is False and len(split["heldout"]) == 1
+    assert list(split["episodes"]) == [dataset_ids("throw_and_catch")[0]]
+    held_seed = int(split["heldout"][0].rsplit("_", 1)[1])
+    seeds = {int(s) for ep in train.iterate_episodes() for s in ep.infos["task_seed"]}
+    assert seeds == {int(split["train"][0].rsplit("_", 1)[1])} and held_seed not in seeds
+    with pytest.raises(ImpactEnvError, match="fly_heldout"):
+        DatasetConfig(fly_heldout=1)
