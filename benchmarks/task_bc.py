@@ -14,8 +14,10 @@ For each family, from the kept tasks of ``<--tasks>/<family>/`` (default ``resul
 Reported per family, task folder and controller: success rate over (task, env seed) episodes with a 95 %
 bootstrap interval (resampling tasks, then episodes; for BC pooled over its training seeds, with each seed's own
 rate), BC's success as a share of the expert's on the same held-out tasks (paired bootstrap interval; the issue
-asks for 0.8), mean final robustness, median ms per step of the controller, and for BC the training budget:
-dataset steps (environment steps the expert flew; BC takes no new ones), epochs and wall clock. Cells (one per
+asks for 0.8), mean final robustness, median ms per step of the controller, and for BC its action error (mean
+squared, per action number) on the clean training steps and on the held-out expert's own steps (an open-loop
+error on unseen tasks, measured without flying BC) and the training budget: dataset steps (environment steps
+the expert flew; BC takes no new ones), epochs and wall clock. Cells (one per
 family, task folder, controller and training seed) go to ``results/task_bc/cells.jsonl``, the datasets and runs
 to ``datasets/task_bc`` and ``runs/task_bc``; a rerun skips the cells there. Usage:
 
@@ -105,6 +107,35 @@ def success_cell(episodes: list[dict]) -> tuple[float, str]:
     return rate, f"{100 * rate:.0f} ({100 * lo:.0f}-{100 * hi:.0f}) of {len(episodes)}"
 
 
+class ExpertRecorder:
+    """The expert as a controller that also keeps, in ``family``'s padded layout, each observation it answered
+    and its action: the held-out expert's state-action pairs, on which a BC policy's action error is measured
+    (the regression's error on unseen tasks, apart from the drift of flying it in closed loop)."""
+
+    def __init__(self, expert: Any, scenario: Any, family: str) -> None:
+        from impact_env.transport.generate import FAMILY_LIMITS
+        from impact_env.transport.task_observation import TaskObservation
+
+        self.expert, self.pad = expert, TaskObservation(scenario, FAMILY_LIMITS[family])
+        self.observations: list[np.ndarray] = []
+        self.actions: list[np.ndarray] = []
+
+    def reset(self, env: Any = None, seed: int | None = None) -> None:
+        self.expert.reset(env, seed)
+
+    def act(self, observation: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
+        action = self.expert.act(observation, info)
+        self.observations.append(self.pad(observation))
+        self.actions.append(self.pad.pad_action(action))
+        return action
+
+
+def action_mse(policy: Any, observations: np.ndarray, actions: np.ndarray) -> float:
+    """Mean squared error of ``policy.act`` (a batch of padded observations at once) against ``actions``, per
+    action number (the unit of :func:`baselines.task_bc.train_task_bc`'s loss)."""
+    return float(np.mean((policy.act(observations) - actions) ** 2))
+
+
 def fly_episode(scenario, controller, seed: int, family: str | None) -> dict:
     """One held-out episode under :data:`NOISE`: the controller on the scenario's env, seen through ``family``'s
     padded layout when given (a goal-conditioned policy), else the env's own observation (the expert)."""
@@ -156,12 +187,17 @@ def run_family(family: str, args: argparse.Namespace) -> None:
               flush=True)
     common = {"family": family, "tasks_dir": str(tasks_dir), "train_tasks": len(train_names),
               "heldout_tasks": held_names}
+    pairs_file = datasets / "heldout_expert_pairs.npz"
     if store.get((family, str(tasks_dir), "expert", None)) is None:
         start = time.perf_counter()
-        episodes = []
+        episodes, observations, actions = [], [], []
         for scenario, plan, _ in held:
-            expert = Expert(scenario, plan=plan)
+            expert = ExpertRecorder(Expert(scenario, plan=plan), scenario, family)
             episodes += [fly_episode(scenario, expert, EVAL_SEED0 + k, None) for k in range(args.eval_episodes)]
+            observations += expert.observations
+            actions += expert.actions
+        np.savez(pairs_file, observations=np.stack(observations), actions=np.stack(actions),
+                 tasks=np.asarray(held_names))
         store.put({**common, "controller": "expert", "train_seed": None, "eval_wall_s": time.perf_counter() - start,
                    "episodes": episodes})
         print(f"{family}: expert held-out success {100 * np.mean([e['success'] for e in episodes]):.0f} % "
@@ -180,15 +216,23 @@ def run_family(family: str, args: argparse.Namespace) -> None:
                                          out=str(RUNS / f"{family}_{args.label}_s{seed}")))
         train = json.loads((run / "train.json").read_text())
         policy = TaskBCPolicy.load(run)
+        heldout_mse = None
+        if pairs_file.is_file():
+            pairs = np.load(pairs_file)
+            if sorted(pairs["tasks"].tolist()) == sorted(held_names):
+                heldout_mse = action_mse(policy, pairs["observations"], pairs["actions"])
         start = time.perf_counter()
         episodes = [fly_episode(sc, policy, EVAL_SEED0 + k, family) for sc, _, _ in held
                     for k in range(args.eval_episodes)]
         store.put({**common, "controller": args.label, "train_seed": seed, "settings": settings,
                    "dataset_steps": train["steps"], "dataset_episodes": train["episodes"], "epochs": args.epochs,
-                   "final_loss": train["final_loss"], "train_wall_s": train["wall_s"],
+                   "final_loss": train["final_loss"], "train_mse": train["train_mse"],
+                   "heldout_action_mse": heldout_mse, "train_wall_s": train["wall_s"],
                    "eval_wall_s": time.perf_counter() - start, "episodes": episodes})
         ok = np.mean([e["success"] for e in episodes])
-        print(f"{family}: {args.label} seed {seed}: loss {train['final_loss']:.4f} in {train['wall_s']:.0f} s, "
+        print(f"{family}: {args.label} seed {seed}: action MSE {train['train_mse']:.4f} on the training steps, "
+              f"{heldout_mse if heldout_mse is None else f'{heldout_mse:.4f}'} on the held-out expert's; "
+              f"trained in {train['wall_s']:.0f} s, "
               f"held-out success {100 * ok:.0f} % ({len(episodes)} episodes)", flush=True)
 
 
@@ -198,8 +242,8 @@ def table() -> str:
 
     store = CellStore(OUT / "cells.jsonl", key=cell_key)
     rows = ["| family | controller | train / held-out tasks | held-out success % (95 % CI) | per training seed % | "
-            "share of the expert's success (95 % CI) | robustness m (mean) | ms/step (median) | dataset steps | "
-            "epochs | train wall s |", "|" + "---|" * 11]
+            "share of the expert's success (95 % CI) | robustness m (mean) | ms/step (median) | "
+            "action MSE train / held-out | dataset steps | epochs | train wall s |", "|" + "---|" * 12]
     groups = list(dict.fromkeys(cell_key(c)[:2] for c in store))
     for group in groups:
         cells = [c for c in store if cell_key(c)[:2] == group]
@@ -218,11 +262,15 @@ def table() -> str:
                 ratio, lo, hi = ratio_ci(_by_task(eps), _by_task(expert))
                 share = "-" if np.isnan(ratio) else f"{ratio:.2f} ({lo:.2f}-{hi:.2f})"
             wall = f"{statistics.fmean(c['train_wall_s'] for c in mine):.0f}" if bc else "-"
+            mse = "-"
+            if bc and all(c.get("heldout_action_mse") is not None for c in mine):
+                mse = (f"{statistics.fmean(c['train_mse'] for c in mine):.4f} / "
+                       f"{statistics.fmean(c['heldout_action_mse'] for c in mine):.4f}")
             rows.append(
                 f"| {group[0]} | {label}{f' ({len(mine)} seeds)' if bc else ''} | {mine[0]['train_tasks']} / "
                 f"{len(mine[0]['heldout_tasks'])} | {success} | {per_seed if bc else '-'} | {share} | "
                 f"{statistics.fmean(e['robustness_m'] for e in eps):+.3f} | "
-                f"{statistics.median(e['ms_per_step'] for e in eps):.2f} | "
+                f"{statistics.median(e['ms_per_step'] for e in eps):.2f} | {mse} | "
                 f"{mine[0]['dataset_steps'] if bc else '-'} | {mine[0]['epochs'] if bc else '-'} | {wall} |")
     return "\n".join(rows) + "\n"
 

@@ -78,6 +78,9 @@ def test_build_dataset_writes_both_sides_with_padded_spaces(tmp_path, monkeypatc
     assert train["steps"] == round(generate_task("throw_and_catch", int(split["train"][0].rsplit("_", 1)[1])).tf_s
                                    / 0.1) and train["final_loss"] > 0
     policy = TaskBCPolicy.load(run)
+    steps = next(minari.load_dataset(dataset_ids("throw_and_catch")[0]).iterate_episodes())
+    assert train["train_mse"] == pytest.approx(np.mean((policy.act(steps.observations[:-1]) - steps.actions) ** 2),
+                                               rel=1e-4)  # the clean fit, as the saved policy acts
     obs = minari.load_dataset(dataset_ids("throw_and_catch")[1]).sample_episodes(1)[0].observations[5]
     action = policy.act(obs)
     assert action.shape == (12,) and np.all(np.abs(action) <= 1) and np.array_equal(action, policy.act(obs))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 
 from benchmarks import task_bc, task_generator
@@ -49,6 +50,12 @@ def test_generator_table_counts_kept_dropped_and_flown(tmp_path, monkeypatch):
     assert cells[6] == "10.0 / 30.0" and cells[7].startswith("50 (") and cells[8] == "+0.100"
 
 
+def task_bc_policy(run):
+    from baselines.task_bc import TaskBCPolicy
+
+    return TaskBCPolicy.load(run)
+
+
 def test_bc_table_pools_training_seeds(tmp_path, monkeypatch):
     monkeypatch.setattr(task_bc, "OUT", tmp_path)
     episode = {"task": "gaps_0", "seed": 1000, "robustness_m": 0.1, "ms_per_step": 0.1}
@@ -84,12 +91,14 @@ def test_bc_table_keeps_task_folders_and_labels_apart(tmp_path, monkeypatch):
         {**old, **bc, "controller": "bc", "train_seed": 0, "episodes": [lose]},
         {**new, "controller": "expert", "train_seed": None, "episodes": [win, win]},
         {**new, **bc, "controller": "bc", "train_seed": 0, "episodes": [win, lose]},
-        {**new, **bc, "controller": "bc_wide", "train_seed": 0, "episodes": [win, win]}])
+        {**new, **bc, "controller": "bc_wide", "train_seed": 0, "episodes": [win, win], "train_mse": 0.01,
+         "heldout_action_mse": 0.04}])
     rows = [line for line in task_bc.table().splitlines() if line.startswith("| gaps")]
     assert [r.split("|")[2].strip() for r in rows] == ["expert", "bc (1 seeds)", "expert", "bc (1 seeds)",
                                                         "bc_wide (1 seeds)"]
     assert "| 3 / 1 |" in rows[1] and "| 0.00 (0.00-0.00) |" in rows[1]
     assert "| 30 / 1 |" in rows[3] and "| 0.50 (" in rows[3] and "| 1.00 (1.00-1.00) |" in rows[4]
+    assert "| 0.0100 / 0.0400 |" in rows[4] and rows[3].count("| - |") == 1  # action MSE: only where measured
 
 
 @requires("minari", "torch")
@@ -115,6 +124,16 @@ def test_bc_benchmark_runs_on_a_task_folder_and_never_trains_on_heldout_tasks(tm
                         / "split.json").read_text())
     assert split["heldout"] == held and held[0] not in split["train"]
     assert cells[1]["dataset_episodes"] == 1 and cells[1]["settings"]["hidden"] == [16]
+    # the held-out expert's steps, on which BC's action error is measured: those of its held-out episodes
+    pairs = np.load(tmp_path / "ds" / "throw_and_catch" / "heldout_expert_pairs.npz")
+    from impact_env.transport.generate import generate_task
+
+    steps = round(generate_task("throw_and_catch", int(held[0].rsplit("_", 1)[1])).tf_s / 0.1)  # one episode's
+    assert pairs["tasks"].tolist() == held and pairs["observations"].shape[0] == pairs["actions"].shape[0] == steps
+    policy = task_bc_policy(tmp_path / "runs" / "throw_and_catch_bc_s0")
+    assert cells[1]["heldout_action_mse"] == pytest.approx(
+        np.mean([(policy.act(o) - a) ** 2 for o, a in zip(pairs["observations"], pairs["actions"])]), rel=1e-5)
+    assert 0 < cells[1]["train_mse"] < 1 and 0 < cells[1]["heldout_action_mse"] < 4
     with pytest.raises(ImpactEnvError, match="another --label"):
         task_bc.main(args[:-1] + ["32"])  # other settings under a label already measured
     assert task_bc.main(args[:-2] + ["--hidden", "32", "--label", "bc_32"]) == 0
