@@ -16,7 +16,8 @@ bootstrap interval (resampling tasks, then episodes; for BC pooled over its trai
 rate), BC's success as a share of the expert's on the same held-out tasks (paired bootstrap interval; the issue
 asks for 0.8), mean final robustness, median ms per step of the controller, and for BC its action error (mean
 squared, per action number) on the clean training steps and on the held-out expert's own steps (an open-loop
-error on unseen tasks, measured without flying BC) and the training budget: dataset steps (environment steps
+error on unseen tasks, measured without flying BC; the expert's row gives that of the zero action, the error of
+a policy that learned nothing) and the training budget: dataset steps (environment steps
 the expert flew; BC takes no new ones), epochs and wall clock. Cells (one per
 family, task folder, controller and training seed) go to ``results/task_bc/cells.jsonl``, the datasets and runs
 to ``datasets/task_bc`` and ``runs/task_bc``; a rerun skips the cells there. Usage:
@@ -199,7 +200,7 @@ def run_family(family: str, args: argparse.Namespace) -> None:
         np.savez(pairs_file, observations=np.stack(observations), actions=np.stack(actions),
                  tasks=np.asarray(held_names))
         store.put({**common, "controller": "expert", "train_seed": None, "eval_wall_s": time.perf_counter() - start,
-                   "episodes": episodes})
+                   "heldout_zero_action_mse": float(np.mean(np.square(actions))), "episodes": episodes})
         print(f"{family}: expert held-out success {100 * np.mean([e['success'] for e in episodes]):.0f} % "
               f"({len(episodes)} episodes, {time.perf_counter() - start:.0f} s)", flush=True)
     hidden = tuple(int(w) for w in args.hidden.split(","))
@@ -263,6 +264,8 @@ def table() -> str:
                 share = "-" if np.isnan(ratio) else f"{ratio:.2f} ({lo:.2f}-{hi:.2f})"
             wall = f"{statistics.fmean(c['train_wall_s'] for c in mine):.0f}" if bc else "-"
             mse = "-"
+            if not bc and mine[0].get("heldout_zero_action_mse") is not None:  # the error of always acting 0
+                mse = f"zero action: {mine[0]['heldout_zero_action_mse']:.4f}"
             if bc and all(c.get("heldout_action_mse") is not None for c in mine):
                 mse = (f"{statistics.fmean(c['train_mse'] for c in mine):.4f} / "
                        f"{statistics.fmean(c['heldout_action_mse'] for c in mine):.4f}")

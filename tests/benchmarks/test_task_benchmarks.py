@@ -87,7 +87,7 @@ def test_bc_table_keeps_task_folders_and_labels_apart(tmp_path, monkeypatch):
     old = {"family": "gaps", "train_tasks": 3, "heldout_tasks": ["gaps_0"]}  # no tasks_dir: the default folder
     new = {**old, "tasks_dir": "snap", "train_tasks": 30}
     _write(tmp_path / "cells.jsonl", [
-        {**old, "controller": "expert", "train_seed": None, "episodes": [win]},
+        {**old, "controller": "expert", "train_seed": None, "episodes": [win], "heldout_zero_action_mse": 0.05},
         {**old, **bc, "controller": "bc", "train_seed": 0, "episodes": [lose]},
         {**new, "controller": "expert", "train_seed": None, "episodes": [win, win]},
         {**new, **bc, "controller": "bc", "train_seed": 0, "episodes": [win, lose]},
@@ -96,7 +96,7 @@ def test_bc_table_keeps_task_folders_and_labels_apart(tmp_path, monkeypatch):
     rows = [line for line in task_bc.table().splitlines() if line.startswith("| gaps")]
     assert [r.split("|")[2].strip() for r in rows] == ["expert", "bc (1 seeds)", "expert", "bc (1 seeds)",
                                                         "bc_wide (1 seeds)"]
-    assert "| 3 / 1 |" in rows[1] and "| 0.00 (0.00-0.00) |" in rows[1]
+    assert "| zero action: 0.0500 |" in rows[0] and "| 3 / 1 |" in rows[1] and "| 0.00 (0.00-0.00) |" in rows[1]
     assert "| 30 / 1 |" in rows[3] and "| 0.50 (" in rows[3] and "| 1.00 (1.00-1.00) |" in rows[4]
     assert "| 0.0100 / 0.0400 |" in rows[4] and rows[3].count("| - |") == 1  # action MSE: only where measured
 
@@ -134,6 +134,7 @@ def test_bc_benchmark_runs_on_a_task_folder_and_never_trains_on_heldout_tasks(tm
     assert cells[1]["heldout_action_mse"] == pytest.approx(
         np.mean([(policy.act(o) - a) ** 2 for o, a in zip(pairs["observations"], pairs["actions"])]), rel=1e-5)
     assert 0 < cells[1]["train_mse"] < 1 and 0 < cells[1]["heldout_action_mse"] < 4
+    assert cells[0]["heldout_zero_action_mse"] == pytest.approx(float(np.mean(pairs["actions"] ** 2)))
     with pytest.raises(ImpactEnvError, match="another --label"):
         task_bc.main(args[:-1] + ["32"])  # other settings under a label already measured
     assert task_bc.main(args[:-2] + ["--hidden", "32", "--label", "bc_32"]) == 0
