@@ -17,7 +17,8 @@ gymnasium 0.29 and stable-baselines3 2.2, which this package's gymnasium 1.x exc
 
 ``run/policy.pt`` holds the weights, the normalisation and the layout; ``run/train.json`` the
 configuration, dataset size (its environment steps are the training budget: BC takes no new ones), epochs,
-final training loss and wall time.
+final training loss (the last epoch's, on noisy observations), the fit's mean squared error on the clean
+training steps (``train_mse``) and wall time.
 """
 
 from __future__ import annotations
@@ -132,6 +133,8 @@ def train_task_bc(config: TaskBCConfig) -> Path:
             opt.step()
             total += loss.item() * len(idx)
         loss_value = total / len(x)
+    with torch.no_grad():  # the fit without the training noise, over every step
+        train_mse = float(torch.mean((net(x) - y) ** 2))
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     torch.save({"state_dict": net.state_dict(), "mean": torch.as_tensor(mean), "std": torch.as_tensor(std),
@@ -139,6 +142,7 @@ def train_task_bc(config: TaskBCConfig) -> Path:
                 "family": config.family}, out / "policy.pt")
     (out / "train.json").write_text(json.dumps({
         "config": asdict(config), "episodes": episodes, "steps": int(len(obs)), "final_loss": loss_value,
+        "train_mse": train_mse,
         "wall_s": time.perf_counter() - start}, indent=1))
     return out
 

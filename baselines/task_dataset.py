@@ -55,6 +55,9 @@ class DatasetConfig:
     """Use at most this many kept tasks (in seed order); None: all."""
     env_options: dict[str, Any] | None = None
     """Options of the TransportEnv the expert flies in (e.g. ``{"thrust_noise": 0.05}``); None: nominal."""
+    fly_heldout: bool = True
+    """Fly the held-out tasks into the held-out dataset; False: only write their names in ``split.json`` (a
+    benchmark that flies the expert on them itself, at other env seeds, need not pay for these episodes)."""
 
     def __post_init__(self) -> None:
         check_integer(self, "episodes_per_task", ImpactEnvError, low=1)
@@ -68,6 +71,7 @@ class DatasetConfig:
         check_integer(self, "max_tasks", ImpactEnvError, low=1, none="all")
         check_instance(self, "env_options", ImpactEnvError, dict, what="a dict of TransportEnv options",
                        none="nominal")
+        check_flag(self, "fly_heldout", ImpactEnvError)
 
 
 def dataset_ids(family: str) -> tuple[str, str]:
@@ -143,7 +147,8 @@ def _episodes(family: str, tasks: list, config: DatasetConfig, first_id: int = 0
 def build_dataset(family: str, tasks_dir: str | Path, config: DatasetConfig | None = None,
                   out: str | Path | None = None) -> tuple[Any, Any]:
     """Build the (training, held-out) MinariDatasets of ``family`` from the kept tasks in ``tasks_dir`` (see the
-    module docstring); ``out`` is where datasets go (default: Minari's own folder). Also writes
+    module docstring; the held-out one is None when ``config.fly_heldout`` is False); ``out`` is where datasets
+    go (default: Minari's own folder). Also writes
     ``<out>/impact_env/generated_<family>/split.json``: the names of both sides, the split's settings and the
     expert's per-episode success and robustness."""
     use_datasets_path(out)
@@ -167,7 +172,9 @@ def build_dataset(family: str, tasks_dir: str | Path, config: DatasetConfig | No
     datasets: list[Any] = []  # minari's datasets
     summary: dict[str, Any] = {}
     for dataset_id, names in zip(dataset_ids(family), (train_names, held_names)):
-        if not names:
+        if not names or (dataset_id == dataset_ids(family)[1] and not config.fly_heldout):
+            if dataset_id in minari.list_local_datasets():
+                minari.delete_dataset(dataset_id)  # an older build's episodes of another split would mislead
             datasets.append(None)
             continue
         buffers, episodes = _episodes(family, [t for t in kept if t[0].name in names], config)
@@ -191,6 +198,7 @@ def build_dataset(family: str, tasks_dir: str | Path, config: DatasetConfig | No
     write_atomic(folder / "split.json", json.dumps({
         "family": family, "tasks_dir": str(tasks_dir), "split_seed": config.split_seed,
         "heldout_share": config.heldout_share, "episodes_per_task": config.episodes_per_task,
-        "env_options": config.env_options or {}, "train": train_names, "heldout": held_names,
+        "env_options": config.env_options or {}, "fly_heldout": config.fly_heldout, "train": train_names,
+        "heldout": held_names,
         "episodes": summary}, indent=1))
     return datasets[0], datasets[1]

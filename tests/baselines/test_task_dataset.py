@@ -78,6 +78,9 @@ def test_build_dataset_writes_both_sides_with_padded_spaces(tmp_path, monkeypatc
     assert train["steps"] == round(generate_task("throw_and_catch", int(split["train"][0].rsplit("_", 1)[1])).tf_s
                                    / 0.1) and train["final_loss"] > 0
     policy = TaskBCPolicy.load(run)
+    steps = next(minari.load_dataset(dataset_ids("throw_and_catch")[0]).iterate_episodes())
+    assert train["train_mse"] == pytest.approx(np.mean((policy.act(steps.observations[:-1]) - steps.actions) ** 2),
+                                               rel=1e-4)  # the clean fit, as the saved policy acts
     obs = minari.load_dataset(dataset_ids("throw_and_catch")[1]).sample_episodes(1)[0].observations[5]
     action = policy.act(obs)
     assert action.shape == (12,) and np.all(np.abs(action) <= 1) and np.array_equal(action, policy.act(obs))
@@ -96,3 +99,24 @@ def test_a_folder_with_too_few_tasks_is_refused(tmp_path, monkeypatch):
         build_dataset("throw_and_catch", tasks, DatasetConfig(max_tasks=1), out=tmp_path / "ds")
     with pytest.raises(ImpactEnvError, match="unknown task family"):
         build_dataset("nope", tasks, out=tmp_path / "ds")
+
+
+def test_without_flying_the_heldout_side_only_the_training_tasks_are_in_a_dataset(tmp_path, monkeypatch):
+    import minari
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "ds"))
+    tasks = tmp_path / "tasks"
+    shutil.copytree(GENERATED, tasks)
+    config = DatasetConfig(quiet=True, heldout_share=0.5)
+    build_dataset("throw_and_catch", tasks, config, out=tmp_path / "ds")  # both sides, as before
+    train, held = build_dataset("throw_and_catch", tasks, DatasetConfig(quiet=True, heldout_share=0.5,
+                                                                        fly_heldout=False), out=tmp_path / "ds")
+    assert held is None and dataset_ids("throw_and_catch")[1] not in minari.list_local_datasets()  # the old one too
+    split = json.loads((tmp_path / "ds" / "impact_env" / "generated_throw_and_catch" / "split.json").read_text())
+    assert split["fly_heldout"] is False and len(split["heldout"]) == 1
+    assert list(split["episodes"]) == [dataset_ids("throw_and_catch")[0]]
+    held_seed = int(split["heldout"][0].rsplit("_", 1)[1])
+    seeds = {int(s) for ep in train.iterate_episodes() for s in ep.infos["task_seed"]}
+    assert seeds == {int(split["train"][0].rsplit("_", 1)[1])} and held_seed not in seeds
+    with pytest.raises(ImpactEnvError, match="fly_heldout"):
+        DatasetConfig(fly_heldout=1)
