@@ -45,6 +45,17 @@ def object_keep_off(robot: Body, objects: list[Body], t: float, times: np.ndarra
                      velocity, braking_mps2)
 
 
+def objects_keep_off(robot: Body, objects: list[Body], count: int, t: float, times: np.ndarray,
+                     position: np.ndarray, object_states: dict[str, np.ndarray], impacts: list[PlannedImpact],
+                     pending: PlannedImpact | None, margin_m: float, contact_window_s: float,
+                     velocity: np.ndarray | None = None, braking_mps2: float | None = None) -> list[AvoidSpec]:
+    """:func:`object_keep_off` for each of the ``count`` objects nearest the robot (nearest first): a robot on
+    its way to one object between two can meet the one it is not nearest to."""
+    near = sorted(objects, key=lambda o: float(np.hypot(*(object_states[o.name][:2] - position))))[:count]
+    return [_keep_off(robot, obj, t, times, position, object_states, impacts, pending, margin_m, contact_window_s,
+                      velocity, braking_mps2) for obj in near]
+
+
 def braking_margin(position: np.ndarray, velocity: np.ndarray, object_state: np.ndarray, braking_mps2: float) -> float:
     """The robot's stopping distance (m) at its closing speed on an object: v_c^2 / (2 a), v_c the relative
     velocity along the line from the robot to the object's centre (0 when moving apart); ``object_state``:
