@@ -93,9 +93,10 @@ class ExpertConfig:
     on the object of the impact it approaches, only from above the plan's relative speed there): its horizon
     (1 s) is shorter than the time to stop from the top speed, and a robot on its way round an object or past
     another met it at up to 0.4 m/s (one_robot_two_objects seeds 23 and 47 at 0.02 m/s). None (the radii and
-    ``object_margin_m`` alone), measured: at 1.0 that cell's seeds 50-149 delivered 73 episodes against 71, its
-    seeds 0-49 36 against 38 (0.5: worse; from any closing speed, 41 and 75, and obstacle_avoidance's pushes
-    came slower: seed 31 lost; docs/robustness.md). Not a gain the noise of 150 episodes tells apart."""
+    ``object_margin_m`` alone), measured with ``MissionConfig.finer_grid_retry``: at 1.0 that cell's seeds 0-49
+    delivered 36 episodes against 38 without, its seeds 50-149 73 against 71 (with ``kept_off_objects`` 2);
+    from any closing speed 41 and 75, but obstacle_avoidance's pushes came slower (seed 31 lost; 0.5: worse;
+    docs/robustness.md). Not a gain the noise of 150 episodes tells apart."""
     kept_off_objects: int = 1
     """The MPC keeps off this many of the objects nearest the robot (:func:`planners.online.keep_off.objects_keep_off`,
     one keep-off row each). A robot on its way to one object past another can be nearer the one it is not
