@@ -167,7 +167,7 @@ def _instrument(prof: _Profile, expert) -> None:
     if hasattr(PlanSampler, "positions"):  # the other robots' paths, positions only (since issue 22's act work)
         method(PlanSampler, "positions", PARTS[5])
     method(ReferenceSelector, "robot_reference", PARTS[6])
-    for name in ("object_keep_off", "robot_keep_off", "boundary_keep_off", "segment_limits"):
+    for name in ("objects_keep_off", "robot_keep_off", "boundary_keep_off", "segment_limits"):
         setattr(expert_mod, name, prof.wrap(getattr(expert_mod, name), PARTS[7]))
     method(expert_mod.Expert, "_other_centers", PARTS[7])
     method(MissionPlanner, "step", PARTS[8])

@@ -62,7 +62,9 @@ UNSTAMPED_CONFIG = {"paper": "3720cb004e2e", "+id": "3d61b070a04a", "+mission": 
 # a fingerprint whose flights are those of a later one of its stack, bit for bit: a cell flown with the first counts
 # as flown with the second. Issue 22's held-goal aim, way-round test and attempt budget added ExpertConfig and
 # MissionConfig fields that the paper's stack sets off or has no mission layer for, so its flights did not move
-SAME_FLIGHTS = {"3720cb004e2e": "e0cb7260bd3c"}
+# (3720cb004e2e -> e0cb7260bd3c); then the finer re-plan grid and the keep-off options (off in ``paper`` and
+# ``+id``, and neither has a mission layer) moved ``paper`` and ``+id`` again
+SAME_FLIGHTS = {"3720cb004e2e": "5275d5c9b93d", "e0cb7260bd3c": "5275d5c9b93d", "fc3c6319afa8": "476b7a8562a8"}
 _WORKER: dict = {}
 
 

@@ -27,14 +27,53 @@ _BOX_NORMALS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 
 def object_keep_off(robot: Body, objects: list[Body], t: float, times: np.ndarray, position: np.ndarray,
                     object_states: dict[str, np.ndarray], impacts: list[PlannedImpact],
-                    pending: PlannedImpact | None, margin_m: float, contact_window_s: float) -> AvoidSpec | None:
+                    pending: PlannedImpact | None, margin_m: float, contact_window_s: float,
+                    velocity: np.ndarray | None = None, braking_mps2: float | None = None) -> AvoidSpec | None:
     """Keep off the nearest object's predicted (free-flight) path, except around this robot's planned
     impacts on it and, while an impact is pending, from shortly before it on (the object's motion after
-    the impact is the planned one, not the free flight). ``object_states``: name -> [x, y, vx, vy]."""
+    the impact is the planned one, not the free flight). ``object_states``: name -> [x, y, vx, vy].
+
+    With the robot's ``velocity`` and a deceleration ``braking_mps2`` (m/s^2), the keep-off distance grows by
+    the robot's stopping distance at its closing speed on the object, v^2 / (2 a): the MPC's horizon (1 s) is
+    shorter than the time to stop from the robot's top speed (0.3 m/s per axis at 0.17 m/s^2), so a keep-off of
+    the radii alone is seen too late to brake for (:func:`braking_margin`). On the object of the impact the
+    robot approaches (``pending``), only the distance to slow to the plan's relative speed at that impact."""
     if not objects:
         return None
     obj = objects[0] if len(objects) == 1 else \
         min(objects, key=lambda o: float(np.hypot(*(object_states[o.name][:2] - position))))
+    return _keep_off(robot, obj, t, times, position, object_states, impacts, pending, margin_m, contact_window_s,
+                     velocity, braking_mps2)
+
+
+def objects_keep_off(robot: Body, objects: list[Body], count: int, t: float, times: np.ndarray,
+                     position: np.ndarray, object_states: dict[str, np.ndarray], impacts: list[PlannedImpact],
+                     pending: PlannedImpact | None, margin_m: float, contact_window_s: float,
+                     velocity: np.ndarray | None = None, braking_mps2: float | None = None) -> list[AvoidSpec]:
+    """:func:`object_keep_off` for each of the ``count`` objects nearest the robot (nearest first): a robot on
+    its way to one object between two can meet the one it is not nearest to."""
+    near = sorted(objects, key=lambda o: float(np.hypot(*(object_states[o.name][:2] - position))))[:count]
+    return [_keep_off(robot, obj, t, times, position, object_states, impacts, pending, margin_m, contact_window_s,
+                      velocity, braking_mps2) for obj in near]
+
+
+def braking_margin(position: np.ndarray, velocity: np.ndarray, object_state: np.ndarray, braking_mps2: float,
+                   allowed_mps: float = 0.0) -> float:
+    """The distance (m) the robot needs to slow from its closing speed on an object to ``allowed_mps``:
+    (v_c^2 - v_allowed^2) / (2 a), v_c the relative velocity along the line from the robot to the object's
+    centre; 0 when moving apart or closing no faster than allowed. ``object_state``: [x, y, vx, vy]."""
+    d = np.asarray(object_state[:2], float) - np.asarray(position, float)
+    dist = float(np.hypot(*d))
+    if dist < 1e-9:
+        return 0.0
+    closing = max(0.0, float(d @ (np.asarray(velocity, float) - np.asarray(object_state[2:4], float))) / dist)
+    return max(0.0, closing * closing - allowed_mps * allowed_mps) / (2.0 * braking_mps2)
+
+
+def _keep_off(robot: Body, obj: Body, t: float, times: np.ndarray, position: np.ndarray,
+              object_states: dict[str, np.ndarray], impacts: list[PlannedImpact], pending: PlannedImpact | None,
+              margin_m: float, contact_window_s: float, velocity: np.ndarray | None,
+              braking_mps2: float | None) -> AvoidSpec:
     s = object_states[obj.name]
     centers = s[:2] + np.outer(times - t, s[2:4])
     active = np.ones(len(times), dtype=bool)
@@ -43,7 +82,15 @@ def object_keep_off(robot: Body, objects: list[Body], t: float, times: np.ndarra
             active &= np.abs(times - imp.time_s) > contact_window_s
     if pending is not None and pending.object == obj.name:
         active &= times < pending.time_s - contact_window_s
-    return AvoidSpec(centers=centers, min_distance=robot.radius_m + obj.radius_m + margin_m, active=active)
+    extra = 0.0
+    if velocity is not None and braking_mps2 is not None:
+        # the contact the robot approaches on this object is met at the plan's relative speed: only closing
+        # faster than that needs room to slow down (a push at speed is the plan, not a collision)
+        allowed = 0.0
+        if pending is not None and pending.robot == robot.name and pending.object == obj.name:
+            allowed = float(np.hypot(*(np.subtract(pending.robot_velocity_before, pending.object_velocity_before))))
+        extra = braking_margin(position, velocity, s, braking_mps2, allowed)
+    return AvoidSpec(centers=centers, min_distance=robot.radius_m + obj.radius_m + margin_m + extra, active=active)
 
 
 def robot_keep_off(robot: Body, other: Body, centers: np.ndarray, margin_m: float) -> AvoidSpec:
