@@ -156,7 +156,7 @@ def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario
             raise UnflyableHandoverError(
                 f"no plan of {scenario.name!r} satisfies the task without a hand-over or an approach its robot "
                 f"cannot fly (cut: "
-                + "; ".join(h.describe(handover.margin) for h in cut) + ")", cut,
+                + "; ".join(h.describe(handover.margin_of(h)) for h in cut) + ")", cut,
                 groups=list(dict.fromkeys([*exc.groups, HANDOVER_GROUP]))) from exc
         result = solution.result
         plan = extract(solution.x, result.solver, result.solve_time_s, result.mip_gap or 0.0)
@@ -165,7 +165,7 @@ def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario
         if handover is None:
             break
         found, ways = handovers(plan, scenario), approaches(plan, scenario)
-        bad = [h for h in [*found, *ways] if not h.flyable(handover.margin)]
+        bad = [h for h in [*found, *ways] if not h.flyable(handover.margin_of(h))]
         if not bad:
             for key, done in (("handovers", found), ("approaches", ways),
                               ("handovers_cut", [h for h in cut if isinstance(h, Handover)]),
@@ -179,7 +179,7 @@ def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario
                                 if any(isinstance(h, t) for h in bad))
             raise UnflyableHandoverError(
                 f"the plan of {scenario.name!r} has {kinds} its robot cannot fly: "
-                + "; ".join(h.describe(handover.margin) for h in bad) + f" (HandoverConfig(repairs="
+                + "; ".join(h.describe(handover.margin_of(h)) for h in bad) + f" (HandoverConfig(repairs="
                 f"{handover.repairs}) {what})", bad, plan=plan)
         for h in bad:
             (cut_handover if isinstance(h, Handover) else cut_approach)(staged, h)

@@ -147,14 +147,17 @@ class MissionConfig:
     ``min_robustness_m``): every object then flies freely, so the prediction is what will happen, while a re-plan's
     new impacts would take the post-impact noise again (a drift that would leave a held goal is station
     keeping's). False: the threshold alone decides (the mission layer before this option)."""
-    finer_grid_retry: bool = True
+    finer_grid_retry: bool = False
     """When the planner finds no remainder on the plan's grid, with or without end states, try both once more on
     a grid twice as fine (within the same attempt): a robot that has just pushed an object needs knots to get
     round it to its other side (one_robot_two_objects seed 19 at 0.02 m/s: the re-plans at 20.2 and 21.2 s, R1
     behind O2 that it has just pushed, both infeasible on 8 intervals, and the attempts spent). Only against a
     predicted failure (at most ``min_robustness_m``): a predicted success that the plan's grid cannot improve is
     kept (held_drift seed 16 at 0.02 m/s: predicted +0.013 m at 27.1 s, the finer re-plan's new impacts lost
-    it). False: the plan's grid only."""
+    it). Off by default: on one_robot_two_objects it rescued none of the 50 episodes at 0.02 m/s (seeds 19 and
+    28 end closer, still lost), and on relay at restitution 0.15 (seed 0) its finer re-plan at 26.1 s, where the
+    plan's grid had none that gets round the object to its first push (:mod:`planners.plan.approach`), was
+    accepted and lost the episode that the re-plan at 27.1 s delivers. False: the plan's grid only."""
     impact_robust_replans: bool = True
     """Re-plan an impact-robust plan with the impact-robust planner (under the same node budget), falling back
     to the spatially robust one, with the reason in the record, when that finds no delta > 0; False: always
@@ -512,8 +515,11 @@ class MissionPlanner:
         warm = resample_plan(plan, t, self.scenario.tf_s, intervals, self.degree)
         # min_robustness_m=0: a remainder that only reaches rho = 0 is still the best continuation in flight,
         # and the remainders stay the plans 0.2 made (the offline planners refuse such a task up front)
+        handover = self.planner_config.handover
+        if handover is not None and cfg.observed_handover_margin is not None:  # the re-plan starts observed
+            handover = dataclasses.replace(handover, start_approach_margin=cfg.observed_handover_margin)
         config = dataclasses.replace(self.planner_config, intervals=intervals, robot_degree=self.degree,
-                                     solver_options=budget, refine_nodes=cfg.refine_nodes,
+                                     handover=handover, solver_options=budget, refine_nodes=cfg.refine_nodes,
                                      refine_time_s=_time_limit(budget), warm_start=warm,
                                      diagnose_infeasibility=False, min_robustness_m=0.0)
         started = time.perf_counter()
