@@ -165,7 +165,8 @@ def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario
         if handover is None:
             break
         found, ways = handovers(plan, scenario), approaches(plan, scenario)
-        bad = [h for h in [*found, *ways] if not h.flyable(handover.margin_of(h))]
+        checks: list[Handover | Approach] = [*found, *ways]
+        bad = [h for h in checks if not h.flyable(handover.margin_of(h))]
         if not bad:
             for key, done in (("handovers", found), ("approaches", ways),
                               ("handovers_cut", [h for h in cut if isinstance(h, Handover)]),
