@@ -183,7 +183,10 @@ def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario
                 + "; ".join(h.describe(handover.margin_of(h)) for h in bad) + f" (HandoverConfig(repairs="
                 f"{handover.repairs}) {what})", bad, plan=plan)
         for h in bad:
-            (cut_handover if isinstance(h, Handover) else cut_approach)(staged, h)
+            if isinstance(h, Handover):
+                cut_handover(staged, h)
+            else:
+                cut_approach(staged, h)
         cut += bad
         rounds += 1
         warm_start = None  # the last solution has the hand-over that is now cut
