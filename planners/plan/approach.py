@@ -27,7 +27,7 @@ import numpy as np
 
 from impact_env.transport.scenario import Scenario
 from planners.errors import PlanCheckError
-from planners.plan.handover import least_time_round_s, unit_change
+from planners.plan.handover import least_time_round_s, needed_text, time_suffices, unit_change
 from planners.plan.types import PlanLike, PlannedImpact
 
 __all__ = ["Approach", "approaches", "unflyable_approaches"]
@@ -55,12 +55,10 @@ class Approach:
 
     def flyable(self, margin: float) -> bool:
         """True if the time there is is at least ``1 + margin`` times the least time (as a hand-over's)."""
-        return self.available_s >= (1.0 + margin) * self.needed_s - 1e-9
+        return time_suffices(self.available_s, self.needed_s, margin)
 
     def describe(self, margin: float | None = None) -> str:
-        need = "can never get round (the object is faster than it can be)" if math.isinf(self.needed_s) else (
-            f"needs at least {self.needed_s:.2f} s" + (f" ({(1 + margin) * self.needed_s:.2f} s with the "
-                                                      f"{100 * margin:g} % margin)" if margin else ""))
+        need = needed_text(self.needed_s, margin)
         start = "its start" if self.by is None else f"{self.by}'s impact at {self.t0_s:.2f} s"
         return (f"{self.robot} round {self.object} to its first impact at {self.t1_s:.2f} s from {start}: "
                 f"{need}, has {self.available_s:.2f} s")

@@ -30,7 +30,8 @@ from planners.impact_law import mass_fractions
 from planners.plan.types import PlanLike, PlannedImpact
 
 __all__ = ["DIRECTIONS", "Handover", "handovers", "least_handover_time_s", "least_time_1d_s", "least_time_round_s",
-           "unflyable_handovers", "contact_relative_velocity", "unit_change", "PairModel"]
+           "unflyable_handovers", "contact_relative_velocity", "unit_change", "time_suffices", "needed_text",
+           "PairModel"]
 
 _EPS = 1e-9
 
@@ -66,12 +67,10 @@ class Handover:
     def flyable(self, margin: float) -> bool:
         """True if the time there is is at least ``1 + margin`` times the least time (the one margin
         convention of the offline planners and the mission layer, :class:`HandoverConfig.margin`)."""
-        return self.available_s >= (1.0 + margin) * self.needed_s - 1e-9
+        return time_suffices(self.available_s, self.needed_s, margin)
 
     def describe(self, margin: float | None = None) -> str:
-        need = "can never get round (the object is faster than it can be)" if math.isinf(self.needed_s) else (
-            f"needs at least {self.needed_s:.2f} s" + (f" ({(1 + margin) * self.needed_s:.2f} s with the "
-                                                      f"{100 * margin:g} % margin)" if margin else ""))
+        need = needed_text(self.needed_s, margin)
         return (f"{self.robot} round {self.object} between its impacts at {self.t1_s:.2f} s and {self.t2_s:.2f} s "
                 f"({math.degrees(self.angle_rad):.0f} degrees apart): {need}, has {self.available_s:.2f} s"
                 + ("" if self.from_s is None else f" from {self.from_s:.2f} s"))
@@ -82,6 +81,20 @@ class Handover:
                "angle_deg": math.degrees(self.angle_rad),
                "needed_s": None if math.isinf(self.needed_s) else self.needed_s, "available_s": self.available_s}
         return out if self.from_s is None else out | {"from_s": self.from_s}
+
+
+def time_suffices(available_s: float, needed_s: float, margin: float) -> bool:
+    """True if ``available_s`` is at least ``1 + margin`` times the least time ``needed_s`` (a way round's test:
+    a hand-over's, an approach's)."""
+    return available_s >= (1.0 + margin) * needed_s - 1e-9
+
+
+def needed_text(needed_s: float, margin: float | None = None) -> str:
+    """How a way round's least time reads in a message, with its margin when given."""
+    if math.isinf(needed_s):
+        return "can never get round (the object is faster than it can be)"
+    return f"needs at least {needed_s:.2f} s" + (f" ({(1 + margin) * needed_s:.2f} s with the "
+                                                 f"{100 * margin:g} % margin)" if margin else "")
 
 
 def _unit(v: np.ndarray) -> np.ndarray | None:
