@@ -36,10 +36,8 @@ def fly_batch(jobs: list[dict]) -> list[dict]:
     """Fly each job (a kept task's TOML text and plan, the stack, the condition and the env seed) with the
     ``impact_env`` and ``planners`` this process imports; one record per job. Imports nothing at module level:
     it runs under an older tree too."""
-    from impact_env.rollout import robot_object_impacts, run_episode
-    from impact_env.transport.gym_env import TransportEnv
+    from benchmarks.task_generator import fly
     from impact_env.transport.scenario_toml import scenario_from_toml
-    from planners.expert import Expert
     from planners.expert.stacks import stack_config
     from planners.plan import Plan
 
@@ -50,15 +48,10 @@ def fly_batch(jobs: list[dict]) -> list[dict]:
         options = {"nominal": {}, "impact": {"impact_velocity_noise_mps": job["level"]},
                    "thrust": {"thrust_noise": job["level"]},
                    "offset": {"initial_position_noise_m": job["level"]}}[job["axis"]]
-        env = TransportEnv(scenario, **options)
-        expert = Expert(scenario, plan=plan, config=stack_config(job["stack"]))
-        result = run_episode(env, expert, seed=job["seed"])
-        env.close()
-        out.append({"success": bool(result.success), "robustness": float(result.robustness),
-                    "impacts": len(robot_object_impacts(scenario, result.impacts)),
-                    "planned_impacts": len(plan.impacts), "steps": int(result.steps),
-                    "ms_per_step": float(statistics.median(result.controller_ms)),
-                    "wall_s": float(result.wall_time_s)})
+        flight = fly(scenario, plan, job["seed"], config=stack_config(job["stack"]), env_options=options)
+        out.append({"success": flight["success"], "robustness": flight["robustness_m"],
+                    "impacts": flight["impacts"], "planned_impacts": len(plan.impacts), "steps": flight["steps"],
+                    "ms_per_step": flight["ms_per_step"], "wall_s": flight["wall_s"]})
     return out
 
 

@@ -48,16 +48,17 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
     return max(0.0, centre - half), min(1.0, centre + half)
 
 
-def fly(scenario, plan, seed: int = 0) -> dict:
-    """One expert episode on ``scenario`` flying ``plan``: success, robustness, steps, ms per step."""
+def fly(scenario, plan, seed: int = 0, config=None, env_options: dict | None = None) -> dict:
+    """One expert episode on ``scenario`` flying ``plan``: success, robustness, steps, ms per step.
+    ``config``: the expert's (None: its default); ``env_options``: the env's keywords (noise, restitution)."""
     import numpy as np
 
     from impact_env.rollout import robot_object_impacts, run_episode
     from impact_env.transport.gym_env import TransportEnv
     from planners.expert import Expert
 
-    env = TransportEnv(scenario)
-    expert = Expert(scenario, plan=plan)
+    env = TransportEnv(scenario, **(env_options or {}))
+    expert = Expert(scenario, plan=plan, config=config)
     result = run_episode(env, expert, seed=seed)
     env.close()
     return {"seed": seed, "success": bool(result.success), "robustness_m": float(result.robustness),
