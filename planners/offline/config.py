@@ -162,6 +162,13 @@ class PlannerConfig:
     handover: HandoverConfig | None = field(default_factory=HandoverConfig)
     """Refuse or repair a plan in which a robot has too little time to get round an object between two of its
     impacts (:class:`HandoverConfig`); None: not checked."""
+    contact_cones: int | None = None
+    """Room for the disc robot behind each contact (``planners/offline/milp/contact_room.py``): the robot's
+    centre at an impact, a radius sum behind the object against the push, kept inside the world shrunk by its
+    radius and out of solid obstacles, the circle of push directions cut into this many cones (>= 4). None: the
+    robots are points that meet the object's centre (the paper's model; a push away from a wall can then ask
+    the disc robot to stand beyond the wall). The impact-robust planner's default is 8; the spatially robust
+    planner's stays None until the shipped plans are re-planned with it (``docs/generated_tasks.md``)."""
     _: KW_ONLY
     time_limit_s: InitVar[Any] = NOT_GIVEN
     """Deprecated: ``solver_options.time_limit_s``."""
@@ -195,6 +202,7 @@ class PlannerConfig:
         check_choice(self, "solver", PlannerError, SOLVERS)
         check_instance(self, "warm_start", PlannerError, Plan, what="a Plan", none="a cold start")
         check_instance(self, "handover", PlannerError, HandoverConfig, what="a HandoverConfig", none="not checked")
+        check_integer(self, "contact_cones", PlannerError, low=4, none="point contacts (no room for the disc)")
 
 
 @dataclass(frozen=True)
@@ -237,7 +245,6 @@ class IRPlannerConfig(PlannerConfig):
                  "numbers > 0", PlannerError)
         check_integer(self, "copy_intervals", PlannerError, low=1, none="the scenario's hint, else 2")
         check_flag(self, "disjunctive_resets", PlannerError)
-        check_integer(self, "contact_cones", PlannerError, low=4, none="point contacts (no room for the disc)")
         if self.robot_object_separation:
             fail("IRPlannerConfig.robot_object_separation", True, "False: with the impact-robust planner the "
                  "controller keeps robots off objects away from planned impacts", PlannerError)

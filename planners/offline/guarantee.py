@@ -22,8 +22,8 @@ import numpy as np
 
 from impact_env.transport.scenario import Scenario
 from planners.impact_law import mass_fractions
-from planners.offline.milp.contact_room import obstacle_bounds
 from planners.plan import BodyPlan, Plan, Segment
+from planners.plan.contact_room import contact_centre, room_m
 from planners.plan.funnels import box_coordinates
 
 
@@ -59,18 +59,11 @@ def contact_room(scenario: Scenario, robot: str, obj: str, position: np.ndarray,
     its centre is r_R + r_O behind the object's, against the push; the smallest distance of that centre
     inside the world box shrunk by r_R and outside every obstacle's bounding box grown by r_R (< 0: beyond a
     wall, or in an obstacle, as the planner's rows have it: :mod:`planners.offline.milp.contact_room`). A zero
-    push leaves the side open: inf."""
+    push leaves the side open: inf. The one measure of :mod:`planners.plan.contact_room`."""
     norm = float(np.hypot(*push))
     if norm <= 1e-12:
         return float("inf")
-    r = scenario.body(robot).radius_m
-    centre = np.asarray(position, float) - (r + scenario.body(obj).radius_m) * np.asarray(push, float) / norm
-    xmin, xmax, ymin, ymax = scenario.world_box
-    room = min(centre[0] - xmin - r, xmax - r - centre[0], centre[1] - ymin - r, ymax - r - centre[1])
-    for obstacle in scenario.obstacles:
-        x0, x1, y0, y1 = obstacle_bounds(obstacle)
-        room = min(room, max(x0 - r - centre[0], centre[0] - x1 - r, y0 - r - centre[1], centre[1] - y1 - r))
-    return float(room)
+    return room_m(scenario, robot, contact_centre(scenario, robot, obj, position, np.asarray(push, float) / norm))
 
 
 def rollout(plan: Plan, scenario: Scenario, errors: Sequence[np.ndarray] | np.ndarray) -> Outcome:

@@ -28,7 +28,7 @@ from planners.offline.common import add_obstacle_clearance, check_common_options
 from planners.offline.config import DEFAULT_COPY_INTERVALS, DEFAULT_FINAL_BOX, IRPlannerConfig, PlannerConfig
 from planners.offline.milp.boxes import ObjectBox
 from planners.offline.milp.collisions import add_robot_separation
-from planners.offline.milp.contact_room import add_contact_room, obstacle_bounds
+from planners.offline.milp.contact_room import add_contact_room
 from planners.offline.milp.copies import SIGNS, RobotCopies, add_copy_impacts
 from planners.offline.milp.impacts import ImpactVars, add_object_smoothness, impact_binaries
 from planners.offline.milp.model import LinExpr, Model
@@ -45,6 +45,7 @@ from planners.offline.milp.trajectories import (
 from planners.offline.solvers import lp_optimum
 from planners.offline.stages import StagedModel, solve_to_plan
 from planners.plan import BodyPlan, ImpactCopies, ObjectFunnel, Plan, PlannedImpact, Segment
+from planners.plan.contact_room import obstacle_bounds
 
 
 @dataclass

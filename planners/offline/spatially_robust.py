@@ -25,6 +25,7 @@ from planners.offline.common import DEFAULT_DEGREE, DEFAULT_INTERVALS, add_obsta
 from planners.offline.common import encode_task as _encode_task
 from planners.offline.config import PlannerConfig
 from planners.offline.milp.collisions import add_robot_object_separation, add_robot_separation
+from planners.offline.milp.contact_room import add_point_contact_room
 from planners.offline.milp.impacts import ImpactVars, add_impacts
 from planners.offline.milp.model import LinExpr, Model
 from planners.offline.milp.stl_encoding import STLEncoder
@@ -40,6 +41,7 @@ from planners.offline.milp.trajectories import (
 from planners.offline.solvers import lp_optimum
 from planners.offline.stages import StagedModel, solve_to_plan
 from planners.plan import BodyPlan, Plan, PlannedImpact, Segment
+from planners.plan.contact_room import obstacle_bounds
 
 __all__ = ["DEFAULT_DEGREE", "DEFAULT_INTERVALS", "BuiltModel", "PlannerConfig", "build_model", "extract_plan",
            "plan_spatially_robust"]
@@ -73,6 +75,9 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
     separation = add_robot_separation(model, robots, scenario.world_box)
     if config.robot_object_separation:
         add_robot_object_separation(model, robots, objects, impacts, scenario.world_box, separation)
+    if config.contact_cones is not None:
+        add_point_contact_room(model, robots, objects, impacts, scenario.world_box, config.contact_cones,
+                               [obstacle_bounds(ob) for ob in scenario.obstacles])
 
     trajectories = {t.spec.name: t for t in robots + objects}
     encoder = STLEncoder(model, grid, lambda body, k: trajectories[body].points(k), boxes, scenario.region_map(),
