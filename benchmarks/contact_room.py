@@ -82,12 +82,24 @@ def table(verdicts: list[dict], flights: list[dict], flagged: int, kept: int) ->
     plan_s = f"{statistics.median(v['plan_s'] for v in verdicts):.1f}" if verdicts else "-"
     lines.append(f"| {len(verdicts)} | {len(both)} | {', '.join(f'{k} {n}' for k, n in sorted(reasons.items()))} | "
                  f"{rho} | {plan_s} |")
-    lines += ["", "| condition | stack | plan | episodes (tasks) | success % (95 % CI) | robustness m (mean) | "
-              "only new / only old | McNemar p |", "|---|---|---|---:|---:|---:|---|---:|"]
+    lines += ["", "Tasks re-planned and kept, old and new plan on the same episodes; then the tasks the filter now "
+              "refuses, flown with their old plans (what refusing them loses):", "",
+              "| condition | stack | tasks | plan | episodes (tasks) | success % (95 % CI) | robustness m (mean) | "
+              "only new / only old | McNemar p |", "|---|---|---|---|---:|---:|---:|---|---:|"]
     groups: dict[tuple, dict[str, dict]] = {}
     for f in flights:
         groups.setdefault((f["condition"], f["stack"]), {}).setdefault(f["plan"], {})[(f["name"], f["seed"])] = f
+    refused = {v["name"] for v in verdicts if not v["kept"]}
     for (condition, stack), plans in sorted(groups.items()):
+        rows = [f for key, f in plans.get("old", {}).items() if key[0] in refused]
+        if rows:
+            k, n = sum(r["success"] for r in rows), len(rows)
+            lo, hi = wilson(k, n)
+            refused_rows = (f"| {condition} | {stack} | refused | old | {n} ({len({r['name'] for r in rows})}) | "
+                            f"{100 * k / n:.0f} ({100 * lo:.0f}-{100 * hi:.0f}) | "
+                            f"{statistics.fmean(r['robustness'] for r in rows):+.3f} | - | - |")
+        else:
+            refused_rows = ""
         paired = sorted(set(plans.get("old", {})) & set(plans.get("new", {})))
         for kind in ("old", "new"):
             rows = [plans[kind][key] for key in paired]
@@ -100,9 +112,11 @@ def table(verdicts: list[dict], flights: list[dict], flagged: int, kept: int) ->
                 test = mcnemar(np.array([plans["old"][key]["success"] for key in paired]),
                                np.array([plans["new"][key]["success"] for key in paired]))
                 versus, p = f"{test['only_residual']} / {test['only_expert']}", f"{test['p_two_sided']:.3f}"
-            lines.append(f"| {condition} | {stack} | {kind} | {n} ({len({r['name'] for r in rows})}) | "
+            lines.append(f"| {condition} | {stack} | kept | {kind} | {n} ({len({r['name'] for r in rows})}) | "
                          f"{100 * k / n:.0f} ({100 * lo:.0f}-{100 * hi:.0f}) | "
                          f"{statistics.fmean(r['robustness'] for r in rows):+.3f} | {versus} | {p} |")
+        if refused_rows:
+            lines.append(refused_rows)
     return "\n".join(lines)
 
 
@@ -143,10 +157,12 @@ def main(argv: list[str] | None = None) -> int:
         for _, _, cell in flagged:
             name = cell["name"]
             v = verdicts.get(name)
-            if v is None or not v["kept"]:
+            if v is None:
                 continue
             text = (args.tasks / f"{name}.toml").read_text(encoding="utf-8")
-            for kind, path in (("old", args.tasks / f"{name}.plan.json"), ("new", _plan_path(args.out, name))):
+            plans = [("old", args.tasks / f"{name}.plan.json")] + ([("new", _plan_path(args.out, name))]
+                                                                   if v["kept"] else [])
+            for kind, path in plans:  # a refused task's old plan too: what refusing it loses
                 for condition in CONDITIONS:
                     for seed in range(args.seeds):
                         job = {"name": name, "toml": text, "plan": kind, "plan_path": str(path),
