@@ -1,16 +1,16 @@
 """Generated tasks whose plans lack contact room, re-planned with the room rows and flown against the old plans.
 
-The task filter plans generated tasks with the spatially robust planner, whose robots were points: a push that
-sends an object away from a wall could ask the disc robot to stand beyond that wall. The filter now keeps the
-room (``FilterConfig.contact_cones``, the impact-robust planner's rows in the spatially robust model). This
-takes a folder of kept tasks planned without the rows (``--tasks``), measures every plan's contacts
-(:func:`planners.plan.contact_room.contacts_without_room`), re-plans those that lack room with the filter's
-default config, and flies the old and the new plan of each with the expert (``--stack``, default ``all``)
-under each condition (nominal and 0.02 m/s post-impact noise) on ``--seeds`` env seeds, in this tree, so the
+The task filter plans generated tasks with the spatially robust planner, whose robots were points: a push that sends
+an object away from a wall could ask the disc robot to stand beyond that wall. The filter keeps the room when asked
+(``FilterConfig.contact_cones``, the impact-robust planner's rows in the spatially robust model). This takes a folder
+of kept tasks planned without the rows (``--tasks``), measures every plan's contacts
+(:func:`planners.plan.contact_room.contacts_without_room`), re-plans those that lack room with the filter's config and
+``--cones`` cones (default 8), and flies the old and the new plan of each with the expert (``--stack``, default
+``all``) under each condition (nominal and 0.02 m/s post-impact noise) on ``--seeds`` env seeds, in this tree, so the
 two plans are paired on the same episodes. Verdicts and flights are lines of ``--out`` (``verdicts.jsonl``,
-``flights.jsonl``; a stopped run resumes); the table: the re-plans' verdicts, robustness and planning time,
-then per condition the old plans' and the new plans' success (Wilson 95 %), the episodes only one delivers
-and McNemar's exact p. From the repository root:
+``flights.jsonl``; a stopped run resumes); the table: the re-plans' verdicts, robustness and planning time, then per
+condition the old plans' and the new plans' success (Wilson 95 %), the episodes only one delivers and McNemar's exact
+p. From the repository root:
 
     python -m benchmarks.contact_room --tasks results/task_generator/throw_and_catch --out results/contact_room
     python -m benchmarks.contact_room --out results/contact_room --table-only
@@ -30,8 +30,8 @@ def _plan_path(out: Path, name: str) -> Path:
     return out / f"{name}.plan.json"
 
 
-def replan(job: tuple[str, str, str]) -> dict:
-    """Re-plan one task (name, TOML text, out folder) with the filter's default config (room kept); its
+def replan(job: tuple[str, str, str, int]) -> dict:
+    """Re-plan one task (name, TOML text, out folder, cones) with the filter's config and the room rows; its
     verdict as a dict, the plan saved next to the verdicts."""
     from dataclasses import asdict
 
@@ -39,8 +39,8 @@ def replan(job: tuple[str, str, str]) -> dict:
     from impact_env.transport.scenario_toml import scenario_from_toml
     from planners.task_filter import FilterConfig, filter_scenario
 
-    name, text, out = job
-    verdict, plan = filter_scenario(scenario_from_toml(text, source=name), FilterConfig())
+    name, text, out, cones = job
+    verdict, plan = filter_scenario(scenario_from_toml(text, source=name), FilterConfig(contact_cones=cones))
     if plan is not None:
         with atomic_path(_plan_path(Path(out), name)) as tmp:
             plan.save(tmp)
@@ -132,10 +132,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=1, help="env seeds per task and condition (default 1)")
     ap.add_argument("--stack", default="all", help="the expert's stack (default all)")
     ap.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    ap.add_argument("--cones", type=int, default=8, help="the room rows' cone count (FilterConfig.contact_cones, "
+                    "default 8)")
     ap.add_argument("--table-only", action="store_true", help="print the table of the stored cells and stop")
     args = ap.parse_args(argv)
-    if args.seeds < 1 or args.workers < 1:
-        ap.error("--seeds and --workers must be >= 1")
+    if args.seeds < 1 or args.workers < 1 or args.cones < 4:
+        ap.error("--seeds and --workers must be >= 1, --cones >= 4")
     args.out.mkdir(parents=True, exist_ok=True)
     verdicts = CellStore(args.out / "verdicts.jsonl", key=lambda c: c["name"])
     flights = CellStore(args.out / "flights.jsonl",
@@ -144,8 +146,8 @@ def main(argv: list[str] | None = None) -> int:
     flagged = [(sc, plan, cell) for sc, plan, cell in kept if contacts_without_room(plan, sc)]
     if not args.table_only:
         print(f"{len(flagged)} of {len(kept)} kept plans in {args.tasks} have a contact without room", flush=True)
-        todo = [(cell["name"], (args.tasks / f"{cell['name']}.toml").read_text(encoding="utf-8"), str(args.out))
-                for _, _, cell in flagged if cell["name"] not in verdicts]
+        todo = [(cell["name"], (args.tasks / f"{cell['name']}.toml").read_text(encoding="utf-8"), str(args.out),
+                 args.cones) for _, _, cell in flagged if cell["name"] not in verdicts]
         old = {cell["name"]: cell for _, _, cell in flagged}
         with ProcessPoolExecutor(args.workers) as pool:
             for verdict in pool.map(replan, todo):

@@ -27,6 +27,11 @@ def test_parse_seeds_and_config_errors():
         FilterConfig(node_limit=0)
     with pytest.raises(PlannerError, match="min_robustness_m"):
         FilterConfig(min_robustness_m=-1.0)
+    with pytest.raises(PlannerError, match="contact_cones"):
+        FilterConfig(contact_cones=3)
+    # the room rows are opt-in (docs/generated_tasks.md#room-for-the-disc-robot): point robots by default
+    assert FilterConfig().planner_config().contact_cones is None
+    assert FilterConfig(contact_cones=8).planner_config().contact_cones == 8
 
 
 def test_cli_filter_keeps_a_planned_task_with_its_plan_and_resumes(tmp_path, capsys, monkeypatch):
