@@ -1,4 +1,4 @@
-"""Room for a disc robot behind every copy's contact: the impact-robust planner's robots are discs at impacts.
+"""Room for a disc robot behind every contact: the planners' robots are discs at impacts.
 
 The copies of :mod:`planners.offline.milp.copies` are points that meet the object's box vertex at the
 object's centre. The robot flown is a disc of radius r_R that touches the object (radius r_O) on the side
@@ -18,6 +18,10 @@ across it (8 cones: 0.71 D beside a stop's path, where it needs ~0). The same bo
 lie outside every solid obstacle grown by r_R (its bounding box: exact for the box obstacles of the shipped
 scenarios), on one of its four sides picked by a binary: a contact in narrow_gap's gap put the disc 0.02 m
 into the wall above it at the nominal push already, and it scraped the wall and missed the push by 8 delta.
+
+The spatially robust planner takes the same rows when asked (``PlannerConfig.contact_cones``,
+:func:`add_point_contact_room`): one robot curve and one object point per impact, so the push's range and the
+object's box are single points. Both planners build them through :func:`_add_rows`.
 """
 
 from __future__ import annotations
