@@ -63,8 +63,10 @@ UNSTAMPED_CONFIG = {"paper": "3720cb004e2e", "+id": "3d61b070a04a", "+mission": 
 # as flown with the second. Issue 22's held-goal aim, way-round test and attempt budget added ExpertConfig and
 # MissionConfig fields that the paper's stack sets off or has no mission layer for, so its flights did not move
 # (3720cb004e2e -> e0cb7260bd3c); then the finer re-plan grid and the keep-off options (off in ``paper`` and
-# ``+id``, and neither has a mission layer) moved ``paper`` and ``+id`` again
-SAME_FLIGHTS = {"3720cb004e2e": "5275d5c9b93d", "e0cb7260bd3c": "5275d5c9b93d", "fc3c6319afa8": "476b7a8562a8"}
+# ``+id``, and neither has a mission layer) moved ``paper`` and ``+id`` again. ``PlannerConfig.contact_cones``
+# (None) moved ``all``'s (a5658451c33f -> 8fd8a232db00): at None the re-plans' models are the same to the bit
+SAME_FLIGHTS = {"3720cb004e2e": "5275d5c9b93d", "e0cb7260bd3c": "5275d5c9b93d", "fc3c6319afa8": "476b7a8562a8",
+                "a5658451c33f": "8fd8a232db00"}
 _WORKER: dict = {}
 
 
