@@ -83,7 +83,8 @@ class Contact:
                 f"{-self.room_m:.3f} m beyond a wall or into an obstacle")
 
     def to_dict(self) -> dict:
-        """For ``plan.stats``."""
+        """The contact as a JSON record (the planned impact left out). Nothing in the planners stores it yet:
+        the repair that put it in ``plan.stats`` was not kept (``docs/generated_tasks.md``)."""
         return {"robot": self.robot, "object": self.object, "time_s": self.time_s, "centre_m": list(self.centre),
                 "room_m": self.room_m}
 
