@@ -96,6 +96,10 @@ def check_output_file(path: str | os.PathLike, option: str | None = None) -> Pat
         hint = " (a file path is expected here; --out takes a folder)" if stat.S_ISDIR(status.st_mode) else ""
         raise OutputPathError(f"{named} is {_kind(status.st_mode)}, not a file{hint}")
     _make_folder(path.parent, named)
+    if status is None:  # again, now that the folder exists: a name too long only shows inside an existing folder
+        status = _stat(path, named)
+        if status is not None and not stat.S_ISREG(status.st_mode):  # created meanwhile by another writer
+            raise OutputPathError(f"{named} is {_kind(status.st_mode)}, not a file")
     _probe(path.parent, named)
     return path
 
@@ -132,7 +136,8 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     if status is not None and not stat.S_ISREG(status.st_mode):  # never rename over /dev/full or a folder
         raise OutputPathError(f"{path} is {_kind(status.st_mode)}, not a file: not replaced")
     _make_folder(path.parent, str(path))
-    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}{path.suffix}")
+    # the stem is cut so that the temporary name is never longer than a name the file system took for ``path``
+    tmp = path.with_name(f".{path.stem[:64]}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}{path.suffix[:32]}")
     try:
         yield tmp
         fd = os.open(tmp, os.O_RDONLY)

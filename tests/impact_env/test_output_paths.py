@@ -49,6 +49,23 @@ def test_file_checks_accept_new_files_replaced_files_and_dangling_links(paths):
     assert not list(paths.glob(".write-check-*")) and not list((paths / "new" / "deep").iterdir())
 
 
+def test_a_name_too_long_is_refused_by_the_check_even_in_a_folder_not_made_yet(tmp_path):
+    """The file system reports a name too long only inside a folder that exists: the check looks again once it
+    has made the folder, so that what it passes, the write takes (a fuzzer found the gap)."""
+    too_long = tmp_path / "new" / ("n" * 300 + ".json")
+    with pytest.raises(OutputPathError, match="cannot be checked: File name too long"):
+        check_output_file(too_long, "--json")
+    with pytest.raises(OutputPathError, match="cannot be checked: File name too long"):
+        check_output_file(too_long, "--json")  # the same answer once the folder is there
+
+
+def test_the_longest_name_the_file_system_takes_is_written(tmp_path):
+    """The temporary file beside it has a bounded name, so it never is the one too long."""
+    longest = tmp_path / ("n" * (os.pathconf(tmp_path, "PC_NAME_MAX") - 5) + ".json")
+    write_atomic(check_output_file(longest), "data")
+    assert longest.read_text() == "data" and [p.name for p in tmp_path.iterdir()] == [longest.name]
+
+
 @pytest.mark.parametrize("path, message", [("/dev/full", "is a character device, not a file"),
                                            ("/proc/x/out.json", "cannot create the folder"),
                                            ("/proc/out.json", "cannot create files in /proc")])
