@@ -65,8 +65,10 @@ UNSTAMPED_CONFIG = {"paper": "3720cb004e2e", "+id": "3d61b070a04a", "+mission": 
 # (3720cb004e2e -> e0cb7260bd3c); then the finer re-plan grid and the keep-off options (off in ``paper`` and
 # ``+id``, and neither has a mission layer) moved ``paper`` and ``+id`` again. ``PlannerConfig.contact_cones``
 # (None) moved ``all``'s (a5658451c33f -> 8fd8a232db00): at None the re-plans' models are the same to the bit
+# ``conjunct_weight`` (0 in ``PlannerConfig`` and ``MissionConfig``: the re-plans' models unchanged) moved ``all``'s
+# (8fd8a232db00 -> 5970a6b79492) and ``+mission``'s (0b1e9dfd2c02 -> 544e93092cd1)
 SAME_FLIGHTS = {"3720cb004e2e": "5275d5c9b93d", "e0cb7260bd3c": "5275d5c9b93d", "fc3c6319afa8": "476b7a8562a8",
-                "a5658451c33f": "8fd8a232db00"}
+                "a5658451c33f": "5970a6b79492", "8fd8a232db00": "5970a6b79492", "0b1e9dfd2c02": "544e93092cd1"}
 _WORKER: dict = {}
 
 

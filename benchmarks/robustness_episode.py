@@ -444,12 +444,18 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--significance", type=float, metavar="K",
                     help="turn identification's significance test on at k = K standard errors "
                          "(IdentificationConfig.significance)")
+    ap.add_argument("--conjunct-weight", type=float, metavar="W",
+                    help="the mission re-plans' weight on each conjunct's own robustness "
+                         "(MissionConfig.conjunct_weight)")
     args = ap.parse_args(argv)
     stack = args.stack
     config = expert_config(stack, args.allow_side_switches)
     if args.significance is not None:
         config = dataclasses.replace(config, identification=dataclasses.replace(
             config.identification, significance=args.significance))
+    if args.conjunct_weight is not None and config.mission is not None:
+        config = dataclasses.replace(config, mission=dataclasses.replace(
+            config.mission, conjunct_weight=args.conjunct_weight))
     scenario, expert, record, result, options = fly(args.scenario, stack, args.axis, args.level, args.seed,
                                                     args.plan, config)
     sig = "" if args.significance is None else f" / significance {args.significance:g}"

@@ -169,6 +169,13 @@ class PlannerConfig:
     robots are points that meet the object's centre (the paper's model; a push away from a wall can then ask
     the disc robot to stand beyond the wall). The impact-robust planner's default is 8; the spatially robust
     planner's stays None until the shipped plans are re-planned with it (``docs/generated_tasks.md``)."""
+    conjunct_weight: float = 0.0
+    """The own robustness of each top-level conjunct on an object, added to the maximised rho with this weight
+    (the spatially robust planner): rho, the least of them, still leads, and among plans of (nearly) the same
+    rho the one whose other objects keep more margin wins, instead of any plan that leaves them at rho (where
+    the noise of a late impact has that margin to use). Conjuncts on robots alone (keep out of an obstacle)
+    are left out: a robot is flown, not thrown. 0: rho alone (the paper's objective). A trade of rho for the
+    others is accepted only at more than 1/weight to 1."""
     _: KW_ONLY
     time_limit_s: InitVar[Any] = NOT_GIVEN
     """Deprecated: ``solver_options.time_limit_s``."""
@@ -203,6 +210,7 @@ class PlannerConfig:
         check_instance(self, "warm_start", PlannerError, Plan, what="a Plan", none="a cold start")
         check_instance(self, "handover", PlannerError, HandoverConfig, what="a HandoverConfig", none="not checked")
         check_integer(self, "contact_cones", PlannerError, low=4, none="point contacts (no room for the disc)")
+        check_number(self, "conjunct_weight", PlannerError, low=0, high=1)
 
 
 @dataclass(frozen=True)

@@ -59,6 +59,9 @@ class BuiltModel:
     acceleration_cost: LinExpr
     build_time_s: float
     conjunct_groups: list[str] = field(default_factory=list)
+    primary: LinExpr | None = None
+    """What stage 1 maximises and later stages keep: rho, plus the conjuncts' own robustness times
+    ``PlannerConfig.conjunct_weight``; None: rho."""
 
 
 def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
@@ -98,8 +101,13 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
     # fewer impacts among equally robust plans: a touch with no momentum exchange is a valid point-mass
     # "impact" but not something a robot can fly
     n_impacts = sum(impacts.z.values(), LinExpr())
-    model.set_objective(rho - cost * weight - n_impacts * config.impact_weight, maximize=True)
-    return BuiltModel(model, grid, robots, objects, impacts, rho, cost, time.perf_counter() - start, task.groups)
+    # the objects' conjuncts' own margins second to rho (PlannerConfig.conjunct_weight); stage 2 keeps the sum
+    object_names = {o.name for o in scenario.objects}
+    own = [r for c, r in zip(task.conjuncts, task.robustness) if c.bodies() & object_names]
+    primary = rho + sum(own, LinExpr()) * config.conjunct_weight if config.conjunct_weight and own else rho
+    model.set_objective(primary - cost * weight - n_impacts * config.impact_weight, maximize=True)
+    return BuiltModel(model, grid, robots, objects, impacts, rho, cost, time.perf_counter() - start, task.groups,
+                      primary)
 
 
 def _acceleration_scale(robots: list[RobotTrajectory]) -> float:
@@ -109,7 +117,8 @@ def _acceleration_scale(robots: list[RobotTrajectory]) -> float:
 
 def staged_model(built: BuiltModel) -> StagedModel:
     """What the lexicographic stages need from the spatially robust model."""
-    return StagedModel(built.model, built.rho, "robustness", sum(built.impacts.z.values(), LinExpr()),
+    primary = built.rho if built.primary is None else built.primary
+    return StagedModel(built.model, primary, "robustness", sum(built.impacts.z.values(), LinExpr()),
                        built.acceleration_cost, _acceleration_scale(built.robots),
                        [r.acceleration_points(k) for r in built.robots for k in range(built.grid.intervals)],
                        impacts=built.impacts, grid_dt_s=built.grid.dt_s)

@@ -162,6 +162,11 @@ class MissionConfig:
     """Re-plan an impact-robust plan with the impact-robust planner (under the same node budget), falling back
     to the spatially robust one, with the reason in the record, when that finds no delta > 0; False: always
     the spatially robust planner."""
+    conjunct_weight: float = 0.0
+    """The spatially robust re-plans' :attr:`~planners.offline.config.PlannerConfig.conjunct_weight`: each
+    conjunct's own robustness joins the maximised rho with this weight, so that an object whose goal does not
+    set rho keeps the margin it can have instead of any down to rho (where a late impact's noise has it to
+    use). 0: rho alone, as the offline plan. The planner config's own weight is not used in re-plans."""
     _: KW_ONLY
     node_limit: InitVar[Any] = NOT_GIVEN
     """Deprecated: ``solver_options.node_limit``."""
@@ -183,6 +188,7 @@ class MissionConfig:
         for name in ("check_period_s", "min_remaining_s", "quiet_s"):
             check_number(self, name, PlannerError, low=0, low_open=True)
         check_number(self, "robustness_fraction", PlannerError, low=0, high=1)
+        check_number(self, "conjunct_weight", PlannerError, low=0, high=1)
         check_number(self, "min_robustness_m", PlannerError)
         for name in ("refine_nodes", "max_replans", "max_attempts"):
             check_integer(self, name, PlannerError, low=0)
@@ -519,7 +525,8 @@ class MissionPlanner:
         if handover is not None and cfg.observed_handover_margin is not None:  # the re-plan starts observed
             handover = dataclasses.replace(handover, start_approach_margin=cfg.observed_handover_margin)
         config = dataclasses.replace(self.planner_config, intervals=intervals, robot_degree=self.degree,
-                                     handover=handover, solver_options=budget, refine_nodes=cfg.refine_nodes,
+                                     handover=handover, conjunct_weight=cfg.conjunct_weight,
+                                     solver_options=budget, refine_nodes=cfg.refine_nodes,
                                      refine_time_s=_time_limit(budget), warm_start=warm,
                                      diagnose_infeasibility=False, min_robustness_m=0.0)
         started = time.perf_counter()

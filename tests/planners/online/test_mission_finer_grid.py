@@ -14,6 +14,7 @@ import json
 import numpy as np
 import pytest
 
+from impact_env.stl import robustness
 from impact_env.transport.scenario import load_scenario
 from planners.errors import PlannerError
 from planners.online.mission import MissionConfig, MissionPlanner
@@ -24,7 +25,7 @@ from tests.paths import DATA
 CASE = DATA / "one_robot_two_objects_replan_at_20s.json"
 
 
-def replan(finer_grid_retry: bool, predicted_m: float | None = None):
+def replan(finer_grid_retry: bool, predicted_m: float | None = None, **options):
     """The mission planner's re-plan from the case's state (the planner built on the offline plan, whose grid is
     the re-plan's, flying the plan of the case), against the case's prediction or ``predicted_m``: (its outcome,
     its record)."""
@@ -33,13 +34,21 @@ def replan(finer_grid_retry: bool, predicted_m: float | None = None):
     plan = Plan.from_dict(case["plan"])
     index = {name: i for i, name in enumerate(case["bodies"])}
     offline = Plan.load(DATA / "plans" / "robustness" / "one_robot_two_objects.json")  # the benchmark's plan
-    mission = MissionPlanner(scenario, offline, MissionConfig(finer_grid_retry=finer_grid_retry),
+    mission = MissionPlanner(scenario, offline, MissionConfig(finer_grid_retry=finer_grid_retry, **options),
                              aim_final_position=True, held=held_goal_regions(scenario))
     mission.trace = list(np.array(case["trace_m"]))
     mission.plan_robustness = case["plan_robustness_m"]
     predicted = case["predicted_robustness_m"] if predicted_m is None else predicted_m
     out = mission._replan(case["time_s"], np.array(case["states"]), index, plan, predicted, case["threshold_m"])
     return out, mission.records[-1]
+
+
+def held_margins(spliced: Plan) -> list[float]:
+    """Each conjunct's robustness (the two held goals) on the spliced plan, sampled at 0.1 s."""
+    scenario = load_scenario("one_robot_two_objects")
+    times = np.arange(0.0, scenario.tf_s + 1e-9, 0.1)
+    trace = {name: spliced.position(name, times) for name in spliced.bodies}
+    return [robustness(c, trace, scenario.region_map(), dt=0.1) for c in scenario.formula.children]
 
 
 def test_on_the_plans_grid_the_replan_is_infeasible():
@@ -65,6 +74,17 @@ def test_a_predicted_success_is_not_replanned_on_the_finer_grid():
     out, record = replan(finer_grid_retry=True, predicted_m=0.01)
     assert out is None
     assert record.status == "kept: InfeasiblePlanError" and record.intervals == 8
+
+
+def test_the_conjunct_weight_reaches_the_replan_and_keeps_the_other_objects_margin():
+    """``MissionConfig.conjunct_weight``: the same re-plan with the weight leaves both objects at the least margin
+    no more (0.039 m each without it); the object that does not set rho keeps 0.35 m, for 4 mm of rho."""
+    (spliced, _), record = replan(finer_grid_retry=True)
+    assert max(held_margins(spliced)) == pytest.approx(record.new_robustness, abs=1e-3)
+    (spliced, _), weighted = replan(finer_grid_retry=True, conjunct_weight=0.3)
+    low, high = sorted(held_margins(spliced))
+    assert low == pytest.approx(weighted.new_robustness, abs=1e-3) and low > 0.5 * record.new_robustness
+    assert high > 0.3
 
 
 def test_finer_grid_retry_must_be_a_bool():

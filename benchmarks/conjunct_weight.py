@@ -1,0 +1,143 @@
+"""The mission re-plans' weight on each object's own margin (``MissionConfig.conjunct_weight``) in closed loop.
+
+A mission re-plan maximises the task's least robustness rho. An object whose goal does not set rho may then be
+sent anywhere within rho of its goal's edge, and the noise of its last impact has that margin to use. With a
+weight w > 0 each conjunct on an object adds w times its own robustness to the objective
+(``PlannerConfig.conjunct_weight``), so that object keeps the margin it can have. This script flies the full
+expert (``ExpertConfig()``, the robustness benchmark's ``all``) with the weights asked for, weight 0 (today's
+default) among them as the baseline of the same run, on the robustness benchmark's episodes: the same plan
+(``results/robustness/plans/``), env options and seeds (:mod:`benchmarks.robustness`). At weight 0 the
+episodes are those of the benchmark's cells, bit for bit. Cells go to ``--out``/cells.jsonl as each finishes
+(a rerun resumes) and the table to ``--out``/table.md. From the repository root:
+
+    python -m benchmarks.conjunct_weight [--scenarios one_robot_two_objects,two_objects,...]
+        [--weights 0,0.3] [--noise 0.02] [--seeds 50] [--workers 2] [--out results/conjunct_weight]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+from pathlib import Path
+
+from benchmarks import open_engine
+from benchmarks.robustness import RESULTS as ROBUSTNESS
+from benchmarks.robustness import env_options, expert_config, plan_for
+from impact_env.results_store import CellStore, write_atomic
+from impact_env.sweep import EngineConfig
+
+RESULTS = Path(__file__).resolve().parents[1] / "results" / "conjunct_weight"
+SCENARIOS = ("one_robot_two_objects", "two_objects", "held_drift", "four_robots", "relay", "obstacle_avoidance",
+             "narrow_gap", "timed_visits", "wall_start", "corridor", "ping_pong_stop", "long_throw_trim",
+             "throw_and_catch_exp")
+_EXPERTS: dict = {}  # per worker: (scenario, weight) -> Expert (its MPCs compiled once)
+
+
+def config(weight: float):
+    """``ExpertConfig()`` with its mission re-plans at ``weight``."""
+    base = expert_config("all")
+    return dataclasses.replace(base, mission=dataclasses.replace(base.mission, conjunct_weight=weight))
+
+
+def fly(job: tuple[str, float, dict, float, int]) -> dict:
+    """One episode: (scenario, weight, plan as a dict, noise m/s, seed) -> what it did."""
+    from impact_env.rollout import run_episode
+    from impact_env.transport.gym_env import TransportEnv
+    from impact_env.transport.scenario import load_scenario
+    from planners.expert import Expert
+    from planners.plan import Plan
+
+    name, weight, plan, noise, seed = job
+    if (name, weight) not in _EXPERTS:
+        _EXPERTS[(name, weight)] = Expert(load_scenario(name), plan=Plan.from_dict(plan), config=config(weight))
+    expert = _EXPERTS[(name, weight)]
+    result = run_episode(TransportEnv(expert.scenario, **env_options(expert.scenario, "impact", noise, seed)),
+                         expert, seed=seed)
+    mission = expert.report().get("mission") or {}
+    return {"seed": seed, "success": bool(result.success), "robustness": float(result.robustness),
+            "mission_replans": int(mission.get("replans", 0)), "mission_attempts": int(mission.get("attempts", 0))}
+
+
+def cell_key(cell: dict) -> tuple[str, float, float]:
+    return (str(cell["scenario"]), float(cell["weight"]), float(cell["noise_mps"]))
+
+
+def table(cells: list[dict]) -> str:
+    """Success per scenario and weight, and the seeds each weight lost and gained against weight 0."""
+    lines = []
+    for noise in sorted({c["noise_mps"] for c in cells}):
+        at = {(c["scenario"], c["weight"]): c for c in cells if c["noise_mps"] == noise}
+        weights = sorted({w for _, w in at})
+        names = list(dict.fromkeys(c["scenario"] for c in cells if c["noise_mps"] == noise))
+        lines += [f"Post-impact noise {noise:g} m/s per axis, the full expert; success / episodes, and against "
+                  "weight 0 the seeds lost (-) and gained (+)", "",
+                  "| scenario | " + " | ".join(f"weight {w:g}" for w in weights) + " |",
+                  "|---|" + "---|" * len(weights)]
+        totals = {w: [0, 0] for w in weights}
+        for name in names:
+            base = at.get((name, 0.0))
+            row = []
+            for w in weights:
+                c = at.get((name, w))
+                if c is None:
+                    row.append("-")
+                    continue
+                ok = {e["seed"]: e["success"] for e in c["episodes"]}
+                text = f"{sum(ok.values())} / {len(ok)}"
+                if base is not None and w != 0.0:
+                    was = {e["seed"]: e["success"] for e in base["episodes"]}
+                    lost = [s for s in ok if s in was and was[s] and not ok[s]]
+                    gained = [s for s in ok if s in was and ok[s] and not was[s]]
+                    for sign, seeds in (("-", lost), ("+", gained)):
+                        text += f" {sign}{','.join(map(str, seeds))}" if seeds else ""
+                row.append(text)
+                totals[w][0] += sum(ok.values())
+                totals[w][1] += len(ok)
+            lines.append(f"| {name} | " + " | ".join(row) + " |")
+        lines += ["| **all** | " + " | ".join(f"**{s} / {n}**" for s, n in totals.values()) + " |", ""]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    parser.add_argument("--scenarios", default=",".join(SCENARIOS))
+    parser.add_argument("--weights", default="0,0.3", help="weights in [0, 1], comma-separated (0 is the baseline)")
+    parser.add_argument("--noise", default="0.02", help="post-impact noise levels, m/s (comma-separated)")
+    parser.add_argument("--seeds", type=int, default=50)
+    parser.add_argument("--workers", type=int, default=None, help="local worker processes (default: the CPUs)")
+    parser.add_argument("--out", type=Path, default=RESULTS)
+    args = parser.parse_args(argv)
+    try:
+        weights = [float(x) for x in args.weights.split(",") if x.strip()]
+        levels = [float(x) for x in args.noise.split(",") if x.strip()]
+    except ValueError:
+        parser.error("--weights and --noise take comma-separated numbers")
+    if any(not 0.0 <= w <= 1.0 for w in weights):
+        parser.error(f"--weights must lie in [0, 1], got {args.weights!r}")
+    if args.seeds < 1:
+        parser.error(f"--seeds must be >= 1, got {args.seeds}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    store = CellStore(args.out / "cells.jsonl", cell_key)
+    names = [s for s in args.scenarios.split(",") if s]
+    todo = [(n, w, x) for x in levels for n in names for w in weights]
+    with open_engine(EngineConfig(workers=args.workers)) as pool:
+        for k, (name, weight, noise) in enumerate(todo, 1):
+            cell = store.get((name, weight, noise))
+            if cell is None or len(cell["episodes"]) < args.seeds:
+                plan = plan_for(name, ROBUSTNESS)
+                start = time.perf_counter()
+                episodes = list(pool.map(fly, [(name, weight, plan, noise, s) for s in range(args.seeds)]))
+                cell = {"scenario": name, "weight": weight, "noise_mps": noise, "episodes": episodes,
+                        "wall_s": round(time.perf_counter() - start, 1)}
+                store.put(cell)
+            print(f"[{k}/{len(todo)}] {name} weight {weight:g} at {noise:g} m/s: "
+                  f"{sum(e['success'] for e in cell['episodes'])} / {len(cell['episodes'])} ({cell['wall_s']:.0f} s)",
+                  flush=True)
+    text = table(store.cells())
+    write_atomic(args.out / "table.md", text)
+    print("\n" + text)
+
+
+if __name__ == "__main__":
+    main()
