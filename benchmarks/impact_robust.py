@@ -23,7 +23,8 @@ mission re-plans per episode, and the final restitution estimates' error against
 episode the largest over the pairs; ``-`` for a stack without identification or a cell flown before the
 episodes recorded it; :func:`benchmarks.robustness.identification_record`). Every cell is a line of
 ``--out``/cells.jsonl, written atomically when the cell is done (a rerun resumes;
-:mod:`impact_env.results_store`), and the table of every cell goes to ``--out``/table.md; episodes run in
+:mod:`impact_env.results_store`), the table of every cell goes to ``--out``/table.md and the successes of
+the current cells to ``--out``/summary.md (:func:`summary`); episodes run in
 ``--workers`` spawned processes. A cell records the fingerprint of its
 stack's config (``config``, as in :mod:`benchmarks.robustness`; a cell without one was flown before 0.4), and
 ``--stale STACKS`` flies those cells again whose config is not the stack's current one; ``--factors`` and
@@ -324,10 +325,41 @@ def plan_fingerprints(out: Path) -> dict[tuple[str, str], str]:
             for planner in PLANNERS for path in sorted((out / "plans" / planner).glob("*.json"))}
 
 
+def summary(cells: list[dict], scenarios, deltas: dict[str, float], plans: dict[tuple[str, str], str]) -> str:
+    """Successes per scenario, stack and plan at 1, 2 and 5 x delta and over the restitution cells, of the cells
+    that are current: today's config of the stack (through ``same_flights``), today's delta and plan. A cell
+    that is not current is left out ("-"); the full table has it, marked."""
+    current: dict[tuple[str, str, str], list[dict]] = {}
+    for c in cells:
+        plan = plans.get((c["scenario"], c["planner"]))
+        if (same_flights(c.get("config")) == config_fingerprint(c["stack"]) and c["delta"] == deltas.get(c["scenario"])
+                and c.get("plan", plan) == plan):
+            current.setdefault((c["scenario"], c["stack"], c["planner"]), []).append(c)
+    lines = ["| scenario | delta (m/s) | stack | plan | 1 x delta | 2 x delta | 5 x delta | e -0.2 .. +0.2 |",
+             "|---|---:|---|---|---:|---:|---:|---:|"]
+    for name in scenarios:
+        for stack in STACKS:
+            for planner in PLANNERS:
+                group = current.get((name, stack, planner))
+                if not group:
+                    continue
+                cols = []
+                for axis, factor in (("noise", 1), ("noise", 2), ("noise", 5), ("e", None)):
+                    at = [c for c in group if c["axis"] == axis
+                          and (factor is None or abs(c["level"] - factor * c["delta"]) < 1e-12)]
+                    eps = [e for c in at for e in c["episodes"]]
+                    cols.append(f"{sum(e['success'] for e in eps)} / {len(eps)}" if eps else "-")
+                lines.append(f"| {name} | {deltas[name]:.4g} | {stack} | {planner} | " + " | ".join(cols) + " |")
+    return "\n".join(lines)
+
+
 def write_table(out: Path, cells: list[dict]) -> Path:
-    """``out``/table.md: the table of every cell (atomically, as the cells), cells of an earlier plan marked."""
-    text = table(cells, all_scenarios(cells), plan_deltas(out), plan_fingerprints(out))
-    return write_atomic(out / "table.md", text + "\n")
+    """``out``/table.md: the table of every cell (atomically, as the cells), cells of an earlier plan marked;
+    and ``out``/summary.md, the successes of the current cells (:func:`summary`)."""
+    deltas, plans = plan_deltas(out), plan_fingerprints(out)
+    scenarios = all_scenarios(cells)
+    write_atomic(out / "summary.md", summary(cells, scenarios, deltas, plans) + "\n")
+    return write_atomic(out / "table.md", table(cells, scenarios, deltas, plans) + "\n")
 
 
 def estimate(scenarios, stacks, seeds: int) -> float:

@@ -461,3 +461,19 @@ def test_impact_robust_cells_of_an_earlier_plan_are_marked(tmp_path):
     assert "| impact noise 1 delta (0.06 m/s) | paper † | ir |" in text
     assert text.endswith("not what today's plans do") and "flies it again" not in text
     assert "†" not in impact_robust.table(cells[:1], ["throw_and_catch_exp"], deltas)
+
+
+def test_the_impact_robust_summary_counts_the_current_cells_only():
+    """summary.md: successes per scenario, stack and plan at 1, 2, 5 x delta and over the restitution cells, of the
+    cells flown with today's config, delta and plan; any other cell is left out ("-")."""
+    today = impact_robust.config_fingerprint("all")
+
+    def cell(axis, level, successes, config=today, delta=0.01, plan="p"):
+        return {"scenario": "s", "planner": "ir", "stack": "all", "axis": axis, "level": level, "delta": delta,
+                "config": config, "plan": plan, "episodes": [{"success": ok} for ok in successes]}
+
+    cells = [cell("noise", 0.01, [True, True, False]), cell("noise", 0.02, [True], config="0" * 12),
+             cell("noise", 0.05, [False], delta=0.02), cell("noise", 0.05, [True, False], plan="q"),
+             cell("e", -0.2, [True]), cell("e", 0.2, [False])]
+    text = impact_robust.summary(cells, ["s"], {"s": 0.01}, {("s", "ir"): "p"})
+    assert "| s | 0.01 | all | ir | 2 / 3 | - | - | 1 / 2 |" in text.splitlines()
