@@ -23,7 +23,7 @@ from pathlib import Path
 
 from benchmarks import open_engine
 from benchmarks.robustness import RESULTS as ROBUSTNESS
-from benchmarks.robustness import env_options, expert_config, plan_for
+from benchmarks.robustness import _episode, expert_config, plan_for
 from impact_env.results_store import CellStore, write_atomic
 from impact_env.sweep import EngineConfig
 
@@ -31,7 +31,6 @@ RESULTS = Path(__file__).resolve().parents[1] / "results" / "conjunct_weight"
 SCENARIOS = ("one_robot_two_objects", "two_objects", "held_drift", "four_robots", "relay", "obstacle_avoidance",
              "narrow_gap", "timed_visits", "wall_start", "corridor", "ping_pong_stop", "long_throw_trim",
              "throw_and_catch_exp")
-_EXPERTS: dict = {}  # per worker: (scenario, weight) -> Expert (its MPCs compiled once)
 
 
 def config(weight: float):
@@ -41,22 +40,10 @@ def config(weight: float):
 
 
 def fly(job: tuple[str, float, dict, float, int]) -> dict:
-    """One episode: (scenario, weight, plan as a dict, noise m/s, seed) -> what it did."""
-    from impact_env.rollout import run_episode
-    from impact_env.transport.gym_env import TransportEnv
-    from impact_env.transport.scenario import load_scenario
-    from planners.expert import Expert
-    from planners.plan import Plan
-
+    """One episode: (scenario, weight, plan as a dict, noise m/s, seed) -> what it did: the robustness
+    benchmark's episode (:func:`benchmarks.robustness._episode`) with the weight's config."""
     name, weight, plan, noise, seed = job
-    if (name, weight) not in _EXPERTS:
-        _EXPERTS[(name, weight)] = Expert(load_scenario(name), plan=Plan.from_dict(plan), config=config(weight))
-    expert = _EXPERTS[(name, weight)]
-    result = run_episode(TransportEnv(expert.scenario, **env_options(expert.scenario, "impact", noise, seed)),
-                         expert, seed=seed)
-    mission = expert.report().get("mission") or {}
-    return {"seed": seed, "success": bool(result.success), "robustness": float(result.robustness),
-            "mission_replans": int(mission.get("replans", 0)), "mission_attempts": int(mission.get("attempts", 0))}
+    return _episode((name, f"all, weight {weight:g}", plan, "impact", noise, seed, config(weight)))
 
 
 def cell_key(cell: dict) -> tuple[str, float, float]:

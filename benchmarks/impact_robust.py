@@ -255,6 +255,18 @@ def label(cell: dict) -> str:
     return f"e {cell['level']:+g}"
 
 
+def flown_with_todays_config(cell: dict) -> bool:
+    """Whether the cell was flown with its stack's config as it is now (through ``same_flights``; a cell without a
+    config was flown with another one)."""
+    return same_flights(cell.get("config")) == config_fingerprint(cell["stack"])
+
+
+def flown_with_todays_plan(cell: dict, delta: float | None, plan: str | None) -> bool:
+    """Whether the cell was flown at the IR plan's delta now and with its planner's plan now (``None``: not
+    known, not held against it; a cell that recorded no plan counts as flying today's)."""
+    return not ((delta is not None and cell["delta"] != delta) or (plan is not None and cell.get("plan", plan) != plan))
+
+
 def row(cell: dict, delta: float | None = None, plan: str | None = None) -> str:
     """A cell's table row; ``delta``: the scenario's IR plan's delta now, ``plan``: the fingerprint of the plan
     the cell's planner has now (a cell flown at another delta, or with another plan where it recorded one, is
@@ -262,9 +274,8 @@ def row(cell: dict, delta: float | None = None, plan: str | None = None) -> str:
     eps = cell["episodes"]
     rho = [e["robustness"] for e in eps]
     speed = [e["final_speed"] for e in eps]
-    current = same_flights(cell.get("config")) == config_fingerprint(cell["stack"])  # no config: another one's
-    stack = cell["stack"] if current else f"{cell['stack']} *"
-    if (delta is not None and cell["delta"] != delta) or (plan is not None and cell.get("plan", plan) != plan):
+    stack = cell["stack"] if flown_with_todays_config(cell) else f"{cell['stack']} *"
+    if not flown_with_todays_plan(cell, delta, plan):
         stack += " †"
     return (f"| {cell['scenario']} | {label(cell)} | {stack} | {cell['planner']} | {len(eps)} | "
             f"{100 * np.mean([e['success'] for e in eps]):.0f}% | {np.mean(rho):+.3f} ({min(rho):+.3f}) | "
@@ -331,9 +342,8 @@ def summary(cells: list[dict], scenarios, deltas: dict[str, float], plans: dict[
     that is not current is left out ("-"); the full table has it, marked."""
     current: dict[tuple[str, str, str], list[dict]] = {}
     for c in cells:
-        plan = plans.get((c["scenario"], c["planner"]))
-        if (same_flights(c.get("config")) == config_fingerprint(c["stack"]) and c["delta"] == deltas.get(c["scenario"])
-                and c.get("plan", plan) == plan):
+        if (c["scenario"] in deltas and flown_with_todays_config(c)
+                and flown_with_todays_plan(c, deltas[c["scenario"]], plans.get((c["scenario"], c["planner"])))):
             current.setdefault((c["scenario"], c["stack"], c["planner"]), []).append(c)
     lines = ["| scenario | delta (m/s) | stack | plan | 1 x delta | 2 x delta | 5 x delta | e -0.2 .. +0.2 |",
              "|---|---:|---|---|---:|---:|---:|---:|"]

@@ -159,7 +159,10 @@ def cell_seeds(axis: str, seeds: int) -> int:
 
 
 def _episode(args: tuple) -> dict:
-    scenario_name, stack, plan_dict, axis, level, seed = args
+    """One episode: (scenario, stack, plan as a dict, axis, level, seed[, config]) -> what it did. ``config``, an
+    ``ExpertConfig`` flown instead of the stack's (``stack`` then only names it in the worker's cache of experts,
+    e.g. :mod:`benchmarks.conjunct_weight`'s variants)."""
+    scenario_name, stack, plan_dict, axis, level, seed, *given = args
     from impact_env.rollout import robot_object_impacts, run_episode
     from impact_env.transport.gym_env import TransportEnv
     from impact_env.transport.scenario import load_scenario
@@ -169,7 +172,7 @@ def _episode(args: tuple) -> dict:
     key = (scenario_name, stack)
     if key not in _WORKER:  # one expert (compiled MPCs) per worker, scenario and stack
         _WORKER[key] = Expert(load_scenario(scenario_name), plan=Plan.from_dict(plan_dict),
-                              config=expert_config(stack))
+                              config=given[0] if given else expert_config(stack))
     expert = _WORKER[key]
     options = env_options(expert.scenario, axis, level, seed)
     env = TransportEnv(expert.scenario, **options)

@@ -56,12 +56,12 @@ class BuiltModel:
     objects: list[ObjectTrajectory]
     impacts: ImpactVars
     rho: LinExpr
+    primary: LinExpr
+    """What stage 1 maximises and later stages keep: rho, plus the objects' conjuncts' own robustness times
+    ``PlannerConfig.conjunct_weight`` when it is > 0."""
     acceleration_cost: LinExpr
     build_time_s: float
     conjunct_groups: list[str] = field(default_factory=list)
-    primary: LinExpr | None = None
-    """What stage 1 maximises and later stages keep: rho, plus the conjuncts' own robustness times
-    ``PlannerConfig.conjunct_weight``; None: rho."""
 
 
 def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
@@ -106,8 +106,8 @@ def build_model(scenario: Scenario, config: PlannerConfig) -> BuiltModel:
     own = [r for c, r in zip(task.conjuncts, task.robustness) if c.bodies() & object_names]
     primary = rho + sum(own, LinExpr()) * config.conjunct_weight if config.conjunct_weight and own else rho
     model.set_objective(primary - cost * weight - n_impacts * config.impact_weight, maximize=True)
-    return BuiltModel(model, grid, robots, objects, impacts, rho, cost, time.perf_counter() - start, task.groups,
-                      primary)
+    return BuiltModel(model, grid, robots, objects, impacts, rho, primary, cost, time.perf_counter() - start,
+                      task.groups)
 
 
 def _acceleration_scale(robots: list[RobotTrajectory]) -> float:
@@ -117,8 +117,7 @@ def _acceleration_scale(robots: list[RobotTrajectory]) -> float:
 
 def staged_model(built: BuiltModel) -> StagedModel:
     """What the lexicographic stages need from the spatially robust model."""
-    primary = built.rho if built.primary is None else built.primary
-    return StagedModel(built.model, primary, "robustness", sum(built.impacts.z.values(), LinExpr()),
+    return StagedModel(built.model, built.primary, "robustness", sum(built.impacts.z.values(), LinExpr()),
                        built.acceleration_cost, _acceleration_scale(built.robots),
                        [r.acceleration_points(k) for r in built.robots for k in range(built.grid.intervals)],
                        impacts=built.impacts, grid_dt_s=built.grid.dt_s)
