@@ -13,10 +13,12 @@ so compare rows of one run. Rows are appended to ``--out`` (JSON lines) as they 
 
     python -m benchmarks.planner_speed [--scenarios timed_visits,relay,four_robots] [--ref 0378a64]
                                        [--repeats 1] [--threads 1,2] [--time-limit S] [--out FILE]
-                                       [--planner sr|ir] [--node-limit N]
+                                       [--planner sr|ir] [--node-limit N] [--margins M1,M2]
 
 ``--planner ir`` times the impact-robust planner instead (its objective column is delta, m/s);
 ``--node-limit N`` sets this checkout's stage-1 node budget (0 lifts it), to measure what a budget costs.
+``--margins 0.0001,0`` plans this checkout once with each satisfaction margin (``min_robustness_m``, m): the
+margin changes the model's rows, and so HiGHS's path, where it does not bind.
 """
 
 from __future__ import annotations
@@ -54,9 +56,10 @@ def _planner(planner: str):
 
 
 def plan_call(scenario_path: str, threads: int | None, time_limit_s: float | None, planner: str = "sr",
-              node_limit: int | None = None) -> dict:
+              node_limit: int | None = None, margin: float | None = None) -> dict:
     """One planner call with the tree's defaults (run in the tree's own process): its times, work and plan.
-    ``node_limit`` 0 lifts the default node budget (this checkout's planners; older trees have none)."""
+    ``node_limit`` 0 lifts the default node budget, ``margin`` sets ``min_robustness_m`` (this checkout's
+    planners; older trees have neither)."""
     from impact_env import errors
 
     try:
@@ -75,6 +78,8 @@ def plan_call(scenario_path: str, threads: int | None, time_limit_s: float | Non
         config = dataclasses.replace(config, solver_options=dataclasses.replace(budget, **changes))
     elif changes:
         config = dataclasses.replace(config, **changes)
+    if margin is not None:
+        config = dataclasses.replace(config, min_robustness_m=margin)
     scenario = load_scenario(scenario_path)
     start, cpu = time.perf_counter(), _cpu_s()
     ended = "optimal"
@@ -112,6 +117,8 @@ def main() -> None:
                         "impact-robust (delta)")
     parser.add_argument("--node-limit", type=int, default=None, help="stage-1 node budget of this checkout (0: none; "
                         "default: the planner's)")
+    parser.add_argument("--margins", default="", help="comma-separated satisfaction margins (min_robustness_m, m) "
+                        "this checkout is planned with, one row each (default: the planner's)")
     args = parser.parse_args()
     if args.node_limit is not None and args.node_limit < 0:
         parser.error(f"--node-limit must be >= 0, got {args.node_limit}")
@@ -122,10 +129,17 @@ def main() -> None:
     missing = [n for n in names if not (folder / f"{n}.toml").is_file()]
     if missing:
         parser.error(f"not shipped: {', '.join(missing)}")
+    try:
+        margins = [float(m) for m in args.margins.split(",") if m] or [None]
+    except ValueError:
+        parser.error(f"--margins must be comma-separated numbers, got {args.margins!r}")
+    if any(m is not None and not 0 <= m <= 1 for m in margins):
+        parser.error(f"--margins must lie in [0, 1] (m), got {args.margins!r}")
     threads = [int(t) for t in args.threads.split(",") if t] or [None]
-    trees = [("this checkout", str(ROOT), threads, args.node_limit)]
+    trees = [("this checkout" + ("" if m is None else f", margin {m:g} m"), str(ROOT), threads, args.node_limit, m)
+             for m in margins]
     if args.ref:
-        trees.append((args.ref, export_tree(args.ref), [None], None))
+        trees.append((args.ref, export_tree(args.ref), [None], None, None))
     out = Path(args.out) if args.out else None
 
     print(f"{os.cpu_count()} CPUs; load average before: {_load()}\n")
@@ -137,10 +151,10 @@ def main() -> None:
     for name in names:
         path = str(folder / f"{name}.toml")
         for repeat in range(args.repeats):
-            for label, tree, counts, node_limit in trees:
+            for label, tree, counts, node_limit, margin in trees:
                 for n in counts:
                     r = run_in_tree(tree, "benchmarks.planner_speed:plan_call", path, n, args.time_limit,
-                                    args.planner, node_limit)
+                                    args.planner, node_limit, margin)
                     load = _load()
                     nodes = "-" if r["stage1_nodes"] is None else str(r["stage1_nodes"])
                     stage2 = "-" if r["stage2_s"] is None else f"{r['stage2_s']:.1f}"
@@ -150,7 +164,8 @@ def main() -> None:
                     if out is not None:
                         with out.open("a") as f:
                             f.write(json.dumps({"scenario": name, "tree": label, "planner": args.planner,
-                                                "threads": n, "node_limit": node_limit, "repeat": repeat,
+                                                "threads": n, "node_limit": node_limit, "margin": margin,
+                                                "repeat": repeat,
                                                 "load": load, **r}) + "\n")
     print(f"\nload average after: {_load()}")
 
