@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 from benchmarks import open_engine
+from benchmarks.expert_variants import against_baseline
 from benchmarks.robustness import RESULTS as ROBUSTNESS
 from benchmarks.robustness import _episode, expert_config, plan_for
 from impact_env.results_store import CellStore, write_atomic
@@ -52,38 +53,7 @@ def cell_key(cell: dict) -> tuple[str, float, float]:
 
 def table(cells: list[dict]) -> str:
     """Success per scenario and weight, and the seeds each weight lost and gained against weight 0."""
-    lines = []
-    for noise in sorted({c["noise_mps"] for c in cells}):
-        at = {(c["scenario"], c["weight"]): c for c in cells if c["noise_mps"] == noise}
-        weights = sorted({w for _, w in at})
-        names = list(dict.fromkeys(c["scenario"] for c in cells if c["noise_mps"] == noise))
-        lines += [f"Post-impact noise {noise:g} m/s per axis, the full expert; success / episodes, and against "
-                  "weight 0 the seeds lost (-) and gained (+)", "",
-                  "| scenario | " + " | ".join(f"weight {w:g}" for w in weights) + " |",
-                  "|---|" + "---|" * len(weights)]
-        totals = {w: [0, 0] for w in weights}
-        for name in names:
-            base = at.get((name, 0.0))
-            row = []
-            for w in weights:
-                c = at.get((name, w))
-                if c is None:
-                    row.append("-")
-                    continue
-                ok = {e["seed"]: e["success"] for e in c["episodes"]}
-                text = f"{sum(ok.values())} / {len(ok)}"
-                if base is not None and w != 0.0:
-                    was = {e["seed"]: e["success"] for e in base["episodes"]}
-                    lost = [s for s in ok if s in was and was[s] and not ok[s]]
-                    gained = [s for s in ok if s in was and ok[s] and not was[s]]
-                    for sign, seeds in (("-", lost), ("+", gained)):
-                        text += f" {sign}{','.join(map(str, seeds))}" if seeds else ""
-                row.append(text)
-                totals[w][0] += sum(ok.values())
-                totals[w][1] += len(ok)
-            lines.append(f"| {name} | " + " | ".join(row) + " |")
-        lines += ["| **all** | " + " | ".join(f"**{s} / {n}**" for s, n in totals.values()) + " |", ""]
-    return "\n".join(lines)
+    return against_baseline(cells, lambda c: float(c["weight"]), 0.0, lambda w: f"weight {w:g}", "weight 0")
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -66,9 +66,14 @@ UNSTAMPED_CONFIG = {"paper": "3720cb004e2e", "+id": "3d61b070a04a", "+mission": 
 # ``+id``, and neither has a mission layer) moved ``paper`` and ``+id`` again. ``PlannerConfig.contact_cones``
 # (None) moved ``all``'s (a5658451c33f -> 8fd8a232db00): at None the re-plans' models are the same to the bit
 # ``conjunct_weight`` (0 in ``PlannerConfig`` and ``MissionConfig``: the re-plans' models unchanged) moved ``all``'s
-# (8fd8a232db00 -> 5970a6b79492) and ``+mission``'s (0b1e9dfd2c02 -> 544e93092cd1)
-SAME_FLIGHTS = {"3720cb004e2e": "5275d5c9b93d", "e0cb7260bd3c": "5275d5c9b93d", "fc3c6319afa8": "476b7a8562a8",
-                "a5658451c33f": "5970a6b79492", "8fd8a232db00": "5970a6b79492", "0b1e9dfd2c02": "544e93092cd1"}
+# (8fd8a232db00 -> 5970a6b79492) and ``+mission``'s (0b1e9dfd2c02 -> 544e93092cd1). ``ExpertConfig.way_round``,
+# ``MissionConfig.later_approaches`` and ``HandoverConfig.later_approaches`` (all off by default: the same
+# segments, re-plans and repairs) moved all four: paper 5275d5c9b93d -> f777d71e62fc, +id 476b7a8562a8 ->
+# 55ed3f5d261b, +mission 544e93092cd1 -> 1ff7ca4cde67, all 5970a6b79492 -> ec880eece4b1
+SAME_FLIGHTS = {"3720cb004e2e": "f777d71e62fc", "e0cb7260bd3c": "f777d71e62fc", "5275d5c9b93d": "f777d71e62fc",
+                "fc3c6319afa8": "55ed3f5d261b", "476b7a8562a8": "55ed3f5d261b",
+                "a5658451c33f": "ec880eece4b1", "8fd8a232db00": "ec880eece4b1", "5970a6b79492": "ec880eece4b1",
+                "0b1e9dfd2c02": "1ff7ca4cde67", "544e93092cd1": "1ff7ca4cde67"}
 _WORKER: dict = {}
 
 

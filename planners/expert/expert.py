@@ -97,6 +97,11 @@ class ExpertConfig:
     delivered 36 episodes against 38 without, its seeds 50-149 73 against 71 (with ``kept_off_objects`` 2);
     from any closing speed 41 and 75, but obstacle_avoidance's pushes came slower (seed 31 lost; 0.5: worse;
     docs/robustness.md). Not a gain the noise of 150 episodes tells apart."""
+    way_round: bool = False
+    """A replanned approach whose straight way to its contact crosses the object's disc (the robot on the far side
+    of it) gets round the object (:class:`planners.online.segment_qp.WayRound`: tangent rows at a bearing that
+    turns to the contact's), instead of a segment through it that the MPC's keep-off deflects only 1 s ahead.
+    False: the segment as before (the object is the MPC's keep-off only). Measured: docs/robustness.md."""
     kept_off_objects: int = 1
     """The MPC keeps off this many of the objects nearest the robot (:func:`planners.online.keep_off.objects_keep_off`,
     one keep-off row each). A robot on its way to one object past another can be nearer the one it is not
@@ -139,7 +144,7 @@ class ExpertConfig:
         check_instance(self, "identification", PlannerError, IdentificationConfig, what="an IdentificationConfig",
                        none="off")
         check_instance(self, "mission", PlannerError, MissionConfig, what="a MissionConfig", none="off")
-        for name in ("safe_segments", "aim_final_position", "aim_held_goal_center", "disc_offset"):
+        for name in ("safe_segments", "aim_final_position", "aim_held_goal_center", "disc_offset", "way_round"):
             check_flag(self, name, PlannerError)
         for name in ("object_margin_m", "robot_margin_m", "wall_margin_m", "contact_window_s", "late_grace_s"):
             check_number(self, name, PlannerError, low=0)
@@ -211,7 +216,8 @@ class Expert:
 
             strategy = CopyContact(sc, fallback=strategy)  # the plan's copies as contingency plans
         self.selector = ReferenceSelector(plan, self.grid_dt, self.dt, strategy, cfg.replan_intervals,
-                                          disc_offset=cfg.disc_offset, box=self._safe_box)
+                                          disc_offset=cfg.disc_offset, box=self._safe_box,
+                                          way_round=cfg.way_round)
         self.mission = (MissionPlanner(sc, plan, cfg.mission, planner_config, cfg.aim_final_position,
                                        cfg.late_grace_s, identified=cfg.identification is not None, held=held)
                         if cfg.mission is not None else None)

@@ -80,6 +80,11 @@ class HandoverConfig:
     stricter one (timed_visits seed 3 at 0.02 m/s: the trim round O1, 1.39 times its least time, refused by
     the planner at 0.5 and the goal lost). Offline, 0.5 stays: the corridor's IR plan at 1.49 times lost 29 of
     50 episodes flown by the paper's stack, which has no mission layer to fly the way round."""
+    later_approaches: bool = False
+    """Also test (and repair) each later impact of a robot whose previous impact was on another object, when its
+    way there must get round the object (:func:`planners.plan.approach.approaches` with ``later``; one robot
+    serving two objects). False: first impacts only, as the committed plans were made; the mission layer's
+    re-plans set it from ``MissionConfig.later_approaches``."""
     repairs: int = 20
     """Re-solves with the unflyable hand-overs cut out before the planner gives up with
     ``UnflyableHandoverError``; 0 refuses such a plan at once. Each cut excludes one pair of knots, so a task
@@ -91,10 +96,12 @@ class HandoverConfig:
         if self.start_approach_margin is not None:
             check_number(self, "start_approach_margin", PlannerError, low=0)
         check_integer(self, "repairs", PlannerError, low=0)
+        check_flag(self, "later_approaches", PlannerError)
 
     def margin_of(self, check) -> float:
         """The margin a hand-over or approach (:class:`planners.plan.approach.Approach`) is tested with."""
-        start = getattr(check, "by", False) is None  # an approach from the robot's start state
+        # an approach from the robot's start state (nothing hit its object before, and it hit nothing before)
+        start = getattr(check, "by", False) is None and getattr(check, "after", None) is None
         return self.start_approach_margin if start and self.start_approach_margin is not None else self.margin
 
 

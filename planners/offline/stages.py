@@ -164,7 +164,7 @@ def solve_to_plan(staged: StagedModel, config: PlannerConfig, scenario: Scenario
         plan.check(scenario, tol=1e-6)
         if handover is None:
             break
-        found, ways = handovers(plan, scenario), approaches(plan, scenario)
+        found, ways = handovers(plan, scenario), approaches(plan, scenario, handover.later_approaches)
         checks: list[Handover | Approach] = [*found, *ways]
         bad = [h for h in checks if not h.flyable(handover.margin_of(h))]
         if not bad:
@@ -217,7 +217,9 @@ def cut_approach(staged: StagedModel, approach: Approach) -> None:
     """Exclude ``approach`` from ``staged.model``: its robot may not make its first impact on its object at
     that knot with the object's last flight before it starting where it did (at its start, or at the other
     robot's impact at its knot), unless the robot hits something before or the object is hit in between (a
-    row of group :data:`HANDOVER_GROUP`). As :func:`cut_handover`, the exact no-good of those knots."""
+    row of group :data:`HANDOVER_GROUP`). As :func:`cut_handover`, the exact no-good of those knots. A later
+    approach (``approach.after``, the robot's previous impact on another object) is cut the same way with that
+    impact's binary in the row: the robot may hit something between the two, or the object be hit."""
     if staged.impacts is None or staged.grid_dt_s is None:
         raise PlannerError("cut_approach needs a model with impact binaries and its grid (StagedModel.impacts and "
                            "grid_dt_s): the spatially robust planner's")
@@ -225,12 +227,20 @@ def cut_approach(staged: StagedModel, approach: Approach) -> None:
     k1 = round(approach.t1_s / dt)
     k0 = -1 if approach.by is None else round(approach.t0_s / dt)
     row = z[(approach.robot, approach.object, k1)]
+    ones = 0
     if approach.by is not None:
         row = row + z[(approach.by, approach.object, k0)]
+        ones += 1
+    kr = -1
+    if approach.after is not None:
+        kr = round(approach.after.time_s / dt)
+        row = row + z[(approach.robot, approach.after.object, kr)]
+        ones += 1
     for (robot, obj, k), hit in z.items():
-        if k < k1 and (robot == approach.robot or (obj == approach.object and k > k0)):
+        if kr < k < k1 and (robot == approach.robot or (obj == approach.object and k > k0)) \
+                and (robot, obj, k) != (approach.robot, approach.object, k1):
             row = row - hit
-    staged.model.add(row <= (0 if approach.by is None else 1), group=HANDOVER_GROUP)
+    staged.model.add(row <= ones, group=HANDOVER_GROUP)
 
 
 def copy_model(m: Model, name: str, integer: bool = True) -> Model:

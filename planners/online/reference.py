@@ -23,7 +23,7 @@ from impact_env.geometry import ConvexPolygon
 from impact_env.transport.scenario import Body, Scenario
 from planners.online.impact_model import ContactPlan, required_contact
 from planners.online.mpc import ImpactSpec
-from planners.online.replanner import SegmentLimits, replan_around_impact, replan_segment
+from planners.online.replanner import SegmentLimits, WayRound, replan_around_impact, replan_segment
 from planners.online.sampling import PlanSampler
 from planners.plan import Plan, PlannedImpact, Segment
 
@@ -161,13 +161,17 @@ class ReferenceSelector:
         thrust_fraction: share of the thrust limit a replanned segment may use (see acceleration_bound).
         disc_offset: before the approach window, fly the plan shifted to where a disc meets the object
         (:meth:`_offset_toward`); box: robot -> the box its centre must stay in (for that shift).
+        way_round: a pre-impact segment whose straight way to the contact crosses the object's disc gets round it
+        (:class:`~planners.online.segment_qp.WayRound`, the object's free flight until the impact).
     """
 
     def __init__(self, plan: Plan, grid_dt: float, dt: float, strategy: ContactStrategy | None = None,
                  replan_intervals: int = 2, thrust_fraction: float = 0.8, disc_offset: bool = False,
-                 box: Callable[[Body], tuple[float, float, float, float]] | None = None) -> None:
+                 box: Callable[[Body], tuple[float, float, float, float]] | None = None,
+                 way_round: bool = False) -> None:
         self.grid_dt, self.dt = grid_dt, dt
         self.disc_offset, self.box = disc_offset, box
+        self.way_round = way_round
         self.thrust_fraction = thrust_fraction
         self.strategy = strategy or PlanContact()
         self.replan_intervals = replan_intervals
@@ -254,8 +258,20 @@ class ReferenceSelector:
         if t_rejoin <= impact.time_s + 1e-9:
             t_rejoin = impact.time_s + self.grid_dt
         p1, v1 = self._plan_point(robot.name, t_rejoin)
+        way_round = None
+        if self.way_round:
+            x_o, v_o = np.asarray(x_o, float), np.asarray(v_o, float)
+            t_hit = impact.time_s
+
+            def centre(times: np.ndarray) -> np.ndarray:  # the object's free flight to the impact
+                return x_o + np.outer(np.asarray(times, float) - t_hit, v_o)
+
+            d = robot.radius_m + obj.radius_m
+            if WayRound.needed(state[:2], contact.robot_position, centre(np.array([t]))[0], x_o, d):
+                way_round = WayRound.between(state[:2], contact.robot_position, centre, t, t_hit, d)
         pre, post = replan_around_impact(t, state[:2], state[3:5], impact.time_s, contact, t_rejoin, p1, v1,
-                                         robot.velocity_bound_mps, limits, self.acceleration_bound(robot))
+                                         robot.velocity_bound_mps, limits, self.acceleration_bound(robot),
+                                         way_round=way_round)
         self.replans += 1
         return Replanned(impact, pre, post)
 

@@ -16,6 +16,7 @@ infeasible. Why the bounds, with the measurements: ``docs/expert_design.md#repla
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -23,7 +24,7 @@ import numpy as np
 from planners import bezier
 from planners.errors import ReplanInputError
 from planners.online.segment_feasibility import FEASIBILITY_TOL, bounds_feasible, least_acceleration_bound
-from planners.online.segment_qp import DEGREE, SegmentLimits, bounded_segment, hermite, separation_rows
+from planners.online.segment_qp import DEGREE, SegmentLimits, WayRound, bounded_segment, hermite, separation_rows
 from planners.plan import Segment
 
 # a raised acceleration bound is this much (relative) above the least one: at the least one the QP's feasible set
@@ -120,12 +121,16 @@ def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
 
 def replan_around_impact(t_now: float, position, velocity, t_impact: float, contact, t_rejoin: float,
                          rejoin_position, rejoin_velocity, velocity_bound=None,
-                         limits: SegmentLimits | None = None, acceleration_bound=None) -> tuple[Segment, Segment]:
-    """The robot's new pre- and post-impact segments (see the module docstring)."""
+                         limits: SegmentLimits | None = None, acceleration_bound=None,
+                         way_round: WayRound | None = None) -> tuple[Segment, Segment]:
+    """The robot's new pre- and post-impact segments (see the module docstring). ``way_round``: the object the
+    pre-impact segment must get round to its contact (:class:`~planners.online.segment_qp.WayRound`), added to
+    that segment's limits only."""
     if not t_now < t_impact < t_rejoin:
         raise ReplanInputError(f"need t_now < t_impact < t_rejoin, got {t_now}, {t_impact}, {t_rejoin}")
+    pre_limits = limits if way_round is None else dataclasses.replace(limits or SegmentLimits(), way_round=way_round)
     pre = replan_segment(position, velocity, contact.robot_position, contact.robot_velocity_before, t_now, t_impact,
-                         velocity_bound, limits, acceleration_bound)
+                         velocity_bound, pre_limits, acceleration_bound)
     post = replan_segment(contact.robot_position, contact.robot_velocity_after, rejoin_position, rejoin_velocity,
                           t_impact, t_rejoin, velocity_bound, limits, acceleration_bound)
     return pre, post
@@ -149,5 +154,5 @@ def distance_to_box(position, box) -> float:
     return min(x - box[0], box[1] - x, y - box[2], box[3] - y)
 
 
-__all__ = ["SegmentLimits", "bounded_segment", "distance_to_box", "hermite", "obstacle_half_planes",
+__all__ = ["SegmentLimits", "WayRound", "bounded_segment", "distance_to_box", "hermite", "obstacle_half_planes",
            "replan_around_impact", "replan_segment", "respects", "within_bounds"]

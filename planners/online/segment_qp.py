@@ -5,7 +5,8 @@ integral of |r''|^2 (Eq. 29's acceleration cost). Without bounds the minimiser i
 (:func:`hermite`, closed form). With bounds it is a convex QP over degree-10 Bezier control points (bounding
 control points is conservative; the hull tightens with the degree): velocity bounds (Eq. 25), acceleration
 bounds (the thrust limits) and the :class:`SegmentLimits` ("safe segments": the world box, obstacle faces,
-and at sample times the half-plane off another robot's disc, :func:`separation_rows`).
+and at sample times the half-plane off another robot's disc, :func:`separation_rows`; and, for a segment that
+must get round the object it ends in contact with, the tangent half-planes of a :class:`WayRound`).
 
 The QP is built ONCE per degree as a CasADi ``conic`` (DAQP, dense) with a fixed sparsity; each call only
 fills numbers with numpy. DAQP's "solved" is checked, not trusted: an answer that moves the fixed end states
@@ -15,7 +16,9 @@ fills numbers with numpy. DAQP's "solved" is checked, not trusted: an answer tha
 
 from __future__ import annotations
 
+import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -31,6 +34,57 @@ MAX_HALF_PLANES = 4  # obstacle faces (or other fixed half-planes) per segment
 SEPARATION_SAMPLES = 8  # sample times of the robot-robot separation rows
 
 
+@dataclass(frozen=True)
+class WayRound:
+    """The way round a moving disc to a contact on it: the object a pre-impact segment ends in contact with,
+    when the straight way from the robot to its contact point crosses the object's disc (a robot on the far side
+    of the object, e.g. after pushing another object; the test of :mod:`planners.plan.approach`).
+
+    A point robot flies through the object; a disc robot that follows such a segment meets the object on its way
+    (one_robot_two_objects at 0.02 m/s, seed 23: R1 touched O1 2.5 s before its planned push and then pushed it
+    from the wrong side). The rows keep the robot's centre beyond the disc's tangent at a bearing that turns, in
+    step with the segment's phase, from the robot's bearing at the start to the contact's bearing at the end, the
+    short way round: at each separation sample s_k (phase), with bearing b_k = b0 + s_k (b1 - b0) and
+    n_k = (cos b_k, sin b_k), ``n_k . p(s_k) >= n_k . c(t_k) + distance_m``. Each row is linear in the control
+    points, so the segment stays a convex QP; the turning schedule is one choice among the ways round (the
+    robot may go wider or wait, but not cut through).
+
+    ``centre(t)``: the object's centre at times ``t`` ((N,) -> (N, 2), its free flight); ``distance_m``: r_R + r_O;
+    ``bearing0`` and ``bearing1`` (rad): the robot's bearing from the object at the segment's start, and the
+    contact's at its end, unwrapped so that ``bearing1 - bearing0`` is the turn (at most pi either way)."""
+
+    centre: Callable[[np.ndarray], np.ndarray]
+    distance_m: float
+    bearing0: float
+    bearing1: float
+
+    @staticmethod
+    def needed(robot_position, contact_position, centre_now, centre_at_contact, distance_m: float) -> bool:
+        """True if the straight way from the robot to its contact crosses the disc, in the object's frame: the
+        robot's relative position r0 now and the contact's r1 (``|r1| = distance_m``) have r0 . r1 < d^2."""
+        r0 = np.subtract(robot_position, centre_now)
+        r1 = np.subtract(contact_position, centre_at_contact)
+        return float(r0 @ r1) < distance_m * distance_m - 1e-9
+
+    @classmethod
+    def between(cls, robot_position, contact_position, centre: Callable[[np.ndarray], np.ndarray], t0: float,
+                t1: float, distance_m: float) -> WayRound:
+        """The way round from the robot at ``robot_position`` (time ``t0``) to ``contact_position`` (``t1``)."""
+        c0, c1 = centre(np.array([t0, t1]))
+        r0, r1 = np.subtract(robot_position, c0), np.subtract(contact_position, c1)
+        b0 = math.atan2(r0[1], r0[0])
+        turn = math.remainder(math.atan2(r1[1], r1[0]) - b0, 2 * math.pi)  # the short way, in [-pi, pi]
+        return cls(centre, float(distance_m), b0, b0 + turn)
+
+    def rows(self, t0: float, t1: float) -> list[tuple[float, np.ndarray, float]]:
+        """(phase, normal, offset) of the tangent rows at the separation samples of a segment from t0 to t1."""
+        s = _SAMPLE_PHASES
+        centres = np.asarray(self.centre(t0 + s * (t1 - t0)), float)
+        bearings = self.bearing0 + s * (self.bearing1 - self.bearing0)
+        normals = np.column_stack([np.cos(bearings), np.sin(bearings)])
+        return [(float(s[k]), normals[k], float(normals[k] @ centres[k] + self.distance_m)) for k in range(len(s))]
+
+
 @dataclass
 class SegmentLimits:
     """What a replanned segment must respect besides its end states (all optional).
@@ -38,13 +92,15 @@ class SegmentLimits:
     ``box``: (xmin, xmax, ymin, ymax) the robot's centre stays in (the world box shrunk by its radius);
     ``half_planes``: (normal (2,), offset) pairs, each asking ``normal . p >= offset`` of the centre;
     ``others``: callables ``t -> (N, 2)`` positions of other robots' centres, to keep at least
-    ``separation_m`` (centre to centre) away from.
+    ``separation_m`` (centre to centre) away from; ``way_round``: the object to get round to the contact the
+    segment ends in (:class:`WayRound`; only a pre-impact segment has one).
     """
 
     box: tuple[float, float, float, float] | None = None
     half_planes: list[tuple[np.ndarray, float]] = field(default_factory=list)
     others: list = field(default_factory=list)
     separation_m: float = 0.0
+    way_round: WayRound | None = None
 
 
 def hermite(p0, v0, p1, v1, t0: float, t1: float) -> Segment:
@@ -58,15 +114,24 @@ _SAMPLE_PHASES = np.linspace(0.0, 1.0, SEPARATION_SAMPLES + 2)[1:-1]  # the ends
 _SAMPLE_PHASES.flags.writeable = False
 
 
-def separation_rows(segment: Segment, limits: SegmentLimits) -> list[tuple[np.ndarray, np.ndarray, float]]:
+def separation_rows(segment: Segment, limits: SegmentLimits) -> list[tuple[float, np.ndarray, float]]:
     """(phase, normal, offset) of the separation rows that the segment comes close to breaking.
 
     Linearised about ``segment``: at each sample where it comes within the separation (plus 5 cm) of another
     robot's centre q, the row ``normal . p >= normal . q + separation`` keeps this robot beside q, on the
     side it already passes: the normal is the part of (p - q) across the relative motion (a normal along
     the motion would ask it to stop short at one sample and be past at the next). A head-on pass picks the
-    left-hand side.
+    left-hand side. A :class:`WayRound`'s rows follow (all of its samples: they are its schedule, not
+    linearised); the QP takes the first ``SEPARATION_SAMPLES``.
     """
+    rows = _robot_rows(segment, limits)
+    if limits.way_round is not None:
+        rows += limits.way_round.rows(segment.t0_s, segment.t1_s)
+    return rows
+
+
+def _robot_rows(segment: Segment, limits: SegmentLimits) -> list[tuple[float, np.ndarray, float]]:
+    """The rows off other robots' discs (see :func:`separation_rows`)."""
     if not limits.others or limits.separation_m <= 0:
         return []
     s = _SAMPLE_PHASES
@@ -90,7 +155,7 @@ def separation_rows(segment: Segment, limits: SegmentLimits) -> list[tuple[np.nd
             if np.hypot(*lateral) < 1e-6:
                 lateral = np.array([-u[1], u[0]])
             n = lateral / np.hypot(*lateral)
-            rows.append((s[k], n, float(n @ q[k] + limits.separation_m)))
+            rows.append((float(s[k]), n, float(n @ q[k] + limits.separation_m)))
     return rows
 
 
@@ -272,5 +337,5 @@ def _linspace(start: float, stop: float, ramp: np.ndarray) -> np.ndarray:
     return y
 
 
-__all__ = ["DEGREE", "MAX_HALF_PLANES", "SEPARATION_SAMPLES", "SegmentLimits", "bounded_segment",
+__all__ = ["DEGREE", "MAX_HALF_PLANES", "SEPARATION_SAMPLES", "SegmentLimits", "WayRound", "bounded_segment",
            "hermite", "separation_rows"]

@@ -11,6 +11,12 @@ starting where the robot is when the object's last flight before the impact star
   it has hit nothing yet), in the frame of the object after that impact, for the time from t_a. Before t_a the
   object is elsewhere, so nothing is known of getting round it then.
 
+With ``later=True`` the same test covers each later impact of a robot whose previous impact was on another object
+(one robot serving two objects: it pushes O2, then must reach the far side of O1): the way starts at that
+previous impact, from the robot's state after it (its curve) and the object's state then (its curve: it flies
+freely), or at the last impact on the object after that, as above. A robot whose previous impact was on the same
+object makes a hand-over instead.
+
 The way needs getting round when the straight segment from the robot's relative position to its contact
 point ``-d n`` enters the disc of radius d = r_R + r_O (``r0 . r1 < d^2``); then its least time is
 :func:`least_time_round_s` (a lower bound at the thrust limit), and the plan needs ``1 + margin`` times it,
@@ -36,10 +42,12 @@ __all__ = ["Approach", "approaches", "unflyable_approaches"]
 @dataclass
 class Approach:
     """A robot's way to its first impact (on ``object`` at ``t1_s``) that must get round the object, from
-    ``t0_s`` (0: its start; else the impact ``by`` another robot that last sent the object off before).
+    ``t0_s`` (0: its start; else the impact ``by`` another robot that last sent the object off before); or to a
+    later impact, from its previous impact ``after`` on another object (at ``after.time_s``; ``t0_s`` is that,
+    or a later impact ``by`` another robot on the object).
 
     ``needed_s``: the least time getting there takes (inf if the object is faster than the robot can be);
-    ``available_s``: ``t1_s - t0_s``; ``impact``: the first impact."""
+    ``available_s``: ``t1_s - t0_s``; ``impact``: the impact it approaches."""
 
     robot: str
     object: str
@@ -48,6 +56,7 @@ class Approach:
     needed_s: float
     by: str | None = None
     impact: PlannedImpact | None = field(default=None, repr=False, compare=False)
+    after: PlannedImpact | None = field(default=None, repr=False, compare=False)
 
     @property
     def available_s(self) -> float:
@@ -59,23 +68,35 @@ class Approach:
 
     def describe(self, margin: float | None = None) -> str:
         need = needed_text(self.needed_s, margin)
-        start = "its start" if self.by is None else f"{self.by}'s impact at {self.t0_s:.2f} s"
-        return (f"{self.robot} round {self.object} to its first impact at {self.t1_s:.2f} s from {start}: "
+        if self.by is not None:
+            start = f"{self.by}'s impact at {self.t0_s:.2f} s"
+        elif self.after is not None:
+            start = f"its impact on {self.after.object} at {self.t0_s:.2f} s"
+        else:
+            start = "its start"
+        which = "first impact" if self.after is None else "impact"
+        return (f"{self.robot} round {self.object} to its {which} at {self.t1_s:.2f} s from {start}: "
                 f"{need}, has {self.available_s:.2f} s")
 
     def to_dict(self) -> dict:
         """For ``plan.stats`` (finite numbers only: an infinite least time is None)."""
-        return {"robot": self.robot, "object": self.object, "t0_s": self.t0_s, "t1_s": self.t1_s, "by": self.by,
-                "needed_s": None if math.isinf(self.needed_s) else self.needed_s, "available_s": self.available_s}
+        out = {"robot": self.robot, "object": self.object, "t0_s": self.t0_s, "t1_s": self.t1_s, "by": self.by,
+               "needed_s": None if math.isinf(self.needed_s) else self.needed_s, "available_s": self.available_s}
+        if self.after is not None:
+            out["after"] = {"object": self.after.object, "time_s": self.after.time_s}
+        return out
 
 
-def approaches(plan: PlanLike, scenario: Scenario) -> list[Approach]:
+def approaches(plan: PlanLike, scenario: Scenario, later: bool = False) -> list[Approach]:
     """The plan's approaches that must get round their object (see :class:`Approach`), one per robot at
-    most, in time order, with their least times (the robot's velocity at the contact is the plan's)."""
+    most (with ``later``, also one per later impact after an impact on another object), in time order, with
+    their least times (the robot's velocity at the contact is the plan's)."""
     ordered = sorted(plan.impacts, key=lambda i: i.time_s)
     out = []
     for name in dict.fromkeys(i.robot for i in ordered):
         first = next(i for i in ordered if i.robot == name)
+        if later:
+            out += _later_approaches(plan, scenario, name, ordered)
         normal = unit_change(first)
         if normal is None:
             continue
@@ -105,6 +126,48 @@ def approaches(plan: PlanLike, scenario: Scenario) -> list[Approach]:
     return sorted(out, key=lambda a: a.t1_s)
 
 
-def unflyable_approaches(plan: PlanLike, scenario: Scenario, margin: float) -> list[Approach]:
+def _later_approaches(plan: PlanLike, scenario: Scenario, name: str, ordered: list[PlannedImpact]) -> list[Approach]:
+    """The approaches of robot ``name`` to its impacts after one on another object (see the module docstring)."""
+    mine = [i for i in ordered if i.robot == name]
+    curve = plan.bodies.get(name)
+    out = []
+    for previous, impact in zip(mine, mine[1:]):
+        if previous.object == impact.object or impact.time_s <= previous.time_s + 1e-9:
+            continue  # a hand-over (handover.py), or two impacts at one knot
+        normal = unit_change(impact)
+        if normal is None:
+            continue
+        if curve is None:
+            raise PlanCheckError([f"the plan has no curve of {name}: its way to its impact at {impact.time_s:g} s "
+                                  f"starts where the curve has it after its impact at {previous.time_s:g} s"])
+        robot, obj = scenario.body(name), scenario.body(impact.object)
+        between = [i for i in ordered if i.object == impact.object and previous.time_s - 1e-9 <= i.time_s
+                   < impact.time_s - 1e-9]
+        if between:  # another robot sends the object off after the robot's previous impact: the way starts there
+            last = between[-1]
+            t0, by = last.time_s, last.robot
+            p_obj, v_obj = np.asarray(last.position, float), np.asarray(last.object_velocity_after, float)
+            p_robot, v_robot = curve.position(t0), curve.velocity(t0)
+        else:  # from the robot's state after its previous impact, the object in free flight then
+            t0, by = previous.time_s, None
+            p_robot, v_robot = np.asarray(curve.position(t0), float), np.asarray(previous.robot_velocity_after, float)
+            body = plan.bodies.get(impact.object)
+            if body is None:
+                raise PlanCheckError([f"the plan has no curve of {impact.object}: {name}'s way to it starts where "
+                                      f"the curve has it at {t0:g} s"])
+            p_obj = np.asarray(body.position(t0), float)
+            v_obj = np.asarray(body.velocity(min(t0 + 1e-6, impact.time_s)), float)  # its flight after t0
+        d = robot.radius_m + obj.radius_m
+        r0, u0 = p_robot - p_obj, v_robot - v_obj
+        r1 = -d * normal
+        if float(r0 @ r1) >= d * d - 1e-9:  # the straight way to the contact stays outside the disc
+            continue
+        u1 = np.subtract(impact.robot_velocity_before, impact.object_velocity_before)
+        needed = least_time_round_s(robot, v_obj, d, r0, u0, r1, u1)
+        out.append(Approach(name, impact.object, t0, impact.time_s, needed, by, impact=impact, after=previous))
+    return out
+
+
+def unflyable_approaches(plan: PlanLike, scenario: Scenario, margin: float, later: bool = False) -> list[Approach]:
     """The approaches with less than ``1 + margin`` times their least time."""
-    return [a for a in approaches(plan, scenario) if not a.flyable(margin)]
+    return [a for a in approaches(plan, scenario, later) if not a.flyable(margin)]
