@@ -126,6 +126,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--beta-decay", type=float, default=0.5,
                    help="round i flies the expert's action with probability beta_decay**i (default 0.5)")
     p.add_argument("--eval-episodes", type=int, default=10, help="episodes the learner flies alone after each fit")
+    p.add_argument("--select-episodes", type=int, default=0,
+                   help="validation episodes (seeds of their own) the learner flies after each fit; the run returns "
+                        "the round with the most successes on them (default 0: the last round)")
     p.add_argument("--plan", default=None, metavar="JSON", help="the expert's saved plan; planned with the MILP if "
                                                                 "omitted")
     p.add_argument("--max-replans", type=int, default=3, help="mission re-plans the expert may run per episode")
@@ -284,6 +287,7 @@ def _dagger(args: argparse.Namespace) -> int:
     run_dir = dagger(DAggerConfig(
         scenario=args.scenario, rounds=args.rounds, initial_episodes=args.initial_episodes, dataset_dir=args.dataset,
         episodes_per_round=args.episodes_per_round, beta_decay=args.beta_decay, eval_episodes=args.eval_episodes,
+        select_episodes=args.select_episodes,
         plan=args.plan, max_replans=args.max_replans, env_options=options or None, epochs=args.epochs,
         batch_size=args.batch_size, learning_rate=args.lr, seed=args.seed, out=args.out, runs_dir=args.runs_dir,
         resume=args.resume, quiet=args.quiet))

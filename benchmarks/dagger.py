@@ -37,7 +37,17 @@ METHODS = ("bc", "dagger")
 def _store():
     from impact_env.results_store import CellStore
 
-    return CellStore(OUT / "cells.jsonl", key=lambda c: (c["scenario"], c["budget_episodes"], c["method"], c["seed"]))
+    return CellStore(OUT / "cells.jsonl", key=_key)
+
+
+def _key(cell: dict) -> tuple:
+    """(scenario, budget, method, seed, validation episodes DAgger selects its round on; 0: the last round)."""
+    return (cell["scenario"], cell["budget_episodes"], cell["method"], cell["seed"], cell.get("select_episodes", 0))
+
+
+def _final(cell: dict) -> dict:
+    """The row of the round the cell's run returned (the selected one, else the last)."""
+    return cell["rows"][cell.get("selected_round", len(cell["rows"]) - 1)]
 
 
 def run_cell(scenario: str, budget: int, method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
@@ -47,16 +57,20 @@ def run_cell(scenario: str, budget: int, method: str, seed: int, args: argparse.
 
     initial = max(1, round(args.initial_share * budget))
     per_round = (budget - initial) // args.rounds
+    select = args.select_episodes if method == "dagger" else 0
     config = DAggerConfig(
         scenario, rounds=0 if method == "bc" else args.rounds,
         initial_episodes=budget if method == "bc" else initial, episodes_per_round=per_round,
-        beta_decay=args.beta_decay, eval_episodes=args.eval_episodes, plan=str(PLANS / f"{scenario}.json"),
-        env_options=NOISE, epochs=args.epochs, seed=seed, out=str(RUNS / f"{method}_{scenario}_b{budget}_s{seed}"),
+        beta_decay=args.beta_decay, eval_episodes=args.eval_episodes, select_episodes=select,
+        plan=str(PLANS / f"{scenario}.json"), env_options=NOISE, epochs=args.epochs, seed=seed,
+        out=str(RUNS / (f"{method}_{scenario}_b{budget}_s{seed}" + (f"_select{select}" if select else ""))),
         resume=True, quiet=False)
     start = time.perf_counter()
     run = dagger(config)
-    rows = json.loads((run / "dagger.json").read_text())["rounds"]
+    state = json.loads((run / "dagger.json").read_text())
+    rows = state["rounds"]
     return {"scenario": scenario, "method": method, "seed": seed, "budget_episodes": budget,
+            "select_episodes": select, "selected_round": state.get("selected_round", len(rows) - 1),
             "initial_episodes": config.initial_episodes, "rounds": config.rounds, "episodes_per_round": per_round,
             "beta_decay": config.beta_decay, "epochs": config.epochs, "env_options": NOISE,
             "eval_episodes": config.eval_episodes, "run": str(run), "rows": rows,
@@ -78,12 +92,17 @@ def table() -> str:
                     "their seconds | learner's error on its own states | validation error | learner's success % |",
                     "|" + "---|" * 10]
     for scenario, budget in dict.fromkeys((c["scenario"], c["budget_episodes"]) for c in cells):
-        for method in METHODS:
+        variants = sorted({(c["method"], c.get("select_episodes", 0)) for c in cells
+                           if c["scenario"] == scenario and c["budget_episodes"] == budget},
+                          key=lambda v: (METHODS.index(v[0]), v[1]))
+        for method, select in variants:
             mine = sorted((c for c in cells if c["scenario"] == scenario and c["method"] == method
-                           and c["budget_episodes"] == budget), key=lambda c: c["seed"])
-            if not mine:
-                continue
-            finals = [c["rows"][-1] for c in mine]
+                           and c["budget_episodes"] == budget and c.get("select_episodes", 0) == select),
+                          key=lambda c: c["seed"])
+            finals = [_final(c) for c in mine]
+            chosen = ", ".join(str(_final(c)["round"]) for c in mine)
+            name = "BC" if method == "bc" else "DAgger" if not select else \
+                f"DAgger, the best round on {select} validation episodes (rounds {chosen})"
             episodes = [e for f in finals for e in f["eval"]]
             wins = sum(e["success"] for e in episodes)
             lo, hi = wilson_interval(wins, len(episodes))
@@ -93,7 +112,7 @@ def table() -> str:
             replan_s = [_sum(c["rows"], "replan_label_s") for c in mine]
             label_s = [_sum(c["rows"], "label_s") for c in mine]
             lines.append(
-                f"| {scenario} | {method.upper() if method == 'bc' else 'DAgger'} | {mine[0]['budget_episodes']} "
+                f"| {scenario} | {name} | {mine[0]['budget_episodes']} "
                 f"({labels:.0f}) | {100 * wins / len(episodes):.0f} ({100 * lo:.0f}-{100 * hi:.0f}) of "
                 f"{len(episodes)} | {per_seed} | "
                 f"{statistics.fmean(e['robustness_m'] for e in episodes):+.3f} | "
@@ -101,7 +120,7 @@ def table() -> str:
                 f"{statistics.fmean(_sum(c['rows'], 'replan_cap_episodes') for c in mine):.1f} | "
                 f"{statistics.fmean(replan_s):.2f} / "
                 f"{statistics.fmean(label_s):.1f} | {statistics.fmean(f['wall_s'] for f in finals):.0f} |")
-            if method != "dagger":
+            if method != "dagger" or select:
                 continue
             for k in range(len(mine[0]["rows"])):
                 rows = [c["rows"][k] for c in mine if len(c["rows"]) > k]
@@ -136,6 +155,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--beta-decay", type=float, default=0.5)
     parser.add_argument("--eval-episodes", type=int, default=20, help="episodes each policy flies alone")
     parser.add_argument("--epochs", type=int, default=30)
+    parser.add_argument("--select-episodes", type=int, default=0,
+                        help="DAgger returns its best round on this many validation episodes (0: its last round)")
     parser.add_argument("--table-only", action="store_true")
     args = parser.parse_args(argv)
     budgets = [int(b) for b in args.budgets.split(",")]
@@ -144,17 +165,20 @@ def main(argv: list[str] | None = None) -> int:
         if args.rounds < 1 or initial >= budget or (budget - initial) % args.rounds:
             raise ImpactEnvError(f"budget {budget} minus DAgger's {initial} initial episodes must be a positive "
                                  f"multiple of --rounds {args.rounds} (both methods label the same episodes)")
+    if args.select_episodes < 0:
+        raise ImpactEnvError(f"--select-episodes must be >= 0, got {args.select_episodes}")
     store = _store()
     if not args.table_only:
         for scenario in args.scenarios.split(","):
             for budget in budgets:
                 for seed in (int(s) for s in args.seeds.split(",")):
                     for method in METHODS:
-                        if (scenario, budget, method, seed) in store:
+                        if (scenario, budget, method, seed, args.select_episodes if method == "dagger" else 0) \
+                                in store:
                             continue
                         cell = run_cell(scenario, budget, method, seed, args)
                         store.put(cell)
-                        final = cell["rows"][-1]
+                        final = _final(cell)
                         print(f"{scenario} budget {budget} {method} seed {seed}: learner alone "
                               f"{100 * final['eval_success']:.0f} %, {cell['cell_wall_s']:.0f} s", flush=True)
     text = table()

@@ -144,11 +144,42 @@ def test_a_stopped_run_resumes_to_the_same_rounds(full_run, tmp_path):
     assert (out / "model.zip").read_bytes() != b"" and json.loads((out / "train.json").read_text())["round"] == 2
 
 
+def test_a_run_returns_its_best_round_on_its_own_validation_episodes(tmp_path):
+    """With ``select_episodes`` every round's policy flies validation episodes of its own (seeds apart from the
+    training and evaluation ones), and the run folder's policy is the round that did best on them; each round's
+    policy stays in rounds/policy_NNN/, and the next round's learner was its round's."""
+    from baselines.dagger import SELECT_SEED0, dagger, selected_round
+
+    out = tmp_path / "selected"
+    dagger(_config(out=str(out), select_episodes=2))
+    state = json.loads((out / "dagger.json").read_text())
+    rows = state["rounds"]
+    assert all(r["select_successes"] in (0, 1, 2) and isinstance(r["select_robustness_m"], float) for r in rows)
+    chosen = state["selected_round"]
+    assert chosen == selected_round(rows)
+    assert (out / "model.zip").read_bytes() == (out / "rounds" / f"policy_{chosen:03d}" / "model.zip").read_bytes()
+    assert json.loads((out / "train.json").read_text())["round"] == chosen
+    assert all((out / "rounds" / f"policy_{k:03d}" / "vecnormalize.json").is_file() for k in range(3))
+    assert SELECT_SEED0 > 10**9 + 10**6  # past every evaluation seed a run can use
+
+
+def test_the_selected_round_is_the_most_successes_then_robustness_then_the_later_round():
+    from baselines.dagger import selected_round
+
+    def row(k, wins, rho):
+        return {"round": k, "select_successes": wins, "select_robustness_m": rho}
+
+    assert selected_round([row(0, 1, 0.1), row(1, 3, -0.2), row(2, 2, 0.5)]) == 1
+    assert selected_round([row(0, 3, 0.1), row(1, 3, 0.2), row(2, 1, 0.5)]) == 1
+    assert selected_round([row(0, 3, 0.2), row(1, 3, 0.2)]) == 1
+    assert selected_round([{"round": 0}, {"round": 1}]) == 1  # not validated: the last round
+
+
 @pytest.mark.parametrize(("field", "value", "message"), [
     ("rounds", -1, "rounds"), ("episodes_per_round", 0, "episodes_per_round"), ("beta_decay", 1.5, "beta_decay"),
     ("seed", 1000, "seed"), ("net_arch", (), "net_arch"), ("env_options", "noisy", "env_options"),
     ("epochs", 0, "epochs"), ("learning_rate", 0.0, "learning_rate"), ("max_replans", -1, "max_replans"),
-    ("resume", "yes", "resume"), ("scenario", "", "scenario")])
+    ("resume", "yes", "resume"), ("scenario", "", "scenario"), ("select_episodes", -1, "select_episodes")])
 def test_a_bad_config_is_a_typed_error_naming_the_field(field, value, message):
     from baselines.dagger import DAggerConfig
 
