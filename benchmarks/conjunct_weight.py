@@ -18,11 +18,10 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import time
 from pathlib import Path
 
 from benchmarks import open_engine
-from benchmarks.expert_variants import against_baseline
+from benchmarks.expert_variants import against_baseline, fly_missing
 from benchmarks.robustness import RESULTS as ROBUSTNESS
 from benchmarks.robustness import _episode, expert_config, plan_for
 from impact_env.results_store import CellStore, write_atomic
@@ -80,14 +79,10 @@ def main(argv: list[str] | None = None) -> None:
     todo = [(n, w, x) for x in levels for n in names for w in weights]
     with open_engine(EngineConfig(workers=args.workers)) as pool:
         for k, (name, weight, noise) in enumerate(todo, 1):
-            cell = store.get((name, weight, noise))
-            if cell is None or len(cell["episodes"]) < args.seeds:
-                plan = plan_for(name, ROBUSTNESS)
-                start = time.perf_counter()
-                episodes = list(pool.map(fly, [(name, weight, plan, noise, s) for s in range(args.seeds)]))
-                cell = {"scenario": name, "weight": weight, "noise_mps": noise, "episodes": episodes,
-                        "wall_s": round(time.perf_counter() - start, 1)}
-                store.put(cell)
+            plan = plan_for(name, ROBUSTNESS)
+            cell = fly_missing(store, pool, (name, weight, noise), {"scenario": name, "weight": weight,
+                                                                    "noise_mps": noise},
+                               fly, [(name, weight, plan, noise, s) for s in range(args.seeds)])
             print(f"[{k}/{len(todo)}] {name} weight {weight:g} at {noise:g} m/s: "
                   f"{sum(e['success'] for e in cell['episodes'])} / {len(cell['episodes'])} ({cell['wall_s']:.0f} s)",
                   flush=True)

@@ -63,6 +63,18 @@ def cell_key(cell: dict) -> tuple[str, str, float, int]:
     return (str(cell["scenario"]), str(cell["variant"]), float(cell["noise_mps"]), int(cell["first_seed"]))
 
 
+def fly_missing(store: CellStore, pool, key: tuple, fields: dict, fly: Callable, jobs: list) -> dict:
+    """The cell ``key`` of ``store``, flown (``fly`` over ``jobs`` on ``pool``) and stored first when it is missing
+    or has fewer episodes than ``jobs``; ``fields`` name it in the file, before its episodes and wall clock."""
+    cell = store.get(key)
+    if cell is None or len(cell["episodes"]) < len(jobs):
+        start = time.perf_counter()
+        episodes = list(pool.map(fly, jobs))
+        cell = {**fields, "episodes": episodes, "wall_s": round(time.perf_counter() - start, 1)}
+        store.put(cell)
+    return cell
+
+
 def against_baseline(cells: list[dict], column: Callable[[dict], object], baseline: object,
                      label: Callable[[object], str], what: str) -> str:
     """Success per scenario and column of ``cells`` (one table per noise level), with the seeds each column lost
@@ -141,14 +153,10 @@ def main(argv: list[str] | None = None) -> None:
     todo = [(n, v, x) for x in levels for n in names for v in variants]
     with open_engine(EngineConfig(workers=args.workers)) as pool:
         for k, (name, variant, noise) in enumerate(todo, 1):
-            cell = store.get((name, variant, noise, args.first_seed))
-            if cell is None or len(cell["episodes"]) < args.seeds:
-                plan = plan_for(name, ROBUSTNESS)
-                start = time.perf_counter()
-                episodes = list(pool.map(fly, [(name, variant, plan, noise, s) for s in seeds]))
-                cell = {"scenario": name, "variant": variant, "noise_mps": noise, "first_seed": args.first_seed,
-                        "episodes": episodes, "wall_s": round(time.perf_counter() - start, 1)}
-                store.put(cell)
+            plan = plan_for(name, ROBUSTNESS)
+            fields = {"scenario": name, "variant": variant, "noise_mps": noise, "first_seed": args.first_seed}
+            cell = fly_missing(store, pool, (name, variant, noise, args.first_seed), fields, fly,
+                               [(name, variant, plan, noise, s) for s in seeds])
             print(f"[{k}/{len(todo)}] {name} {variant} at {noise:g} m/s, seeds {seeds[0]}-{seeds[-1]}: "
                   f"{sum(e['success'] for e in cell['episodes'])} / {len(cell['episodes'])} ({cell['wall_s']:.0f} s)",
                   flush=True)

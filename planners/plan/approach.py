@@ -115,14 +115,9 @@ def approaches(plan: PlanLike, scenario: Scenario, later: bool = False) -> list[
             t0, by = 0.0, None
             p_obj, v_obj = np.asarray(obj.position_m, float), np.asarray(obj.velocity_mps, float)
             p_robot, v_robot = np.asarray(robot.position_m, float), np.asarray(robot.velocity_mps, float)
-        d = robot.radius_m + obj.radius_m
-        r0, u0 = p_robot - p_obj, v_robot - v_obj
-        r1 = -d * normal
-        if float(r0 @ r1) >= d * d - 1e-9:  # the straight way to the contact stays outside the disc
-            continue
-        u1 = np.subtract(first.robot_velocity_before, first.object_velocity_before)
-        needed = least_time_round_s(robot, v_obj, d, r0, u0, r1, u1)
-        out.append(Approach(name, first.object, t0, first.time_s, needed, by, impact=first))
+        needed = _time_round(robot, obj, first, normal, p_robot, v_robot, p_obj, v_obj)
+        if needed is not None:
+            out.append(Approach(name, first.object, t0, first.time_s, needed, by, impact=first))
     return sorted(out, key=lambda a: a.t1_s)
 
 
@@ -157,15 +152,22 @@ def _later_approaches(plan: PlanLike, scenario: Scenario, name: str, ordered: li
                                       f"the curve has it at {t0:g} s"])
             p_obj = np.asarray(body.position(t0), float)
             v_obj = np.asarray(body.velocity(min(t0 + 1e-6, impact.time_s)), float)  # its flight after t0
-        d = robot.radius_m + obj.radius_m
-        r0, u0 = p_robot - p_obj, v_robot - v_obj
-        r1 = -d * normal
-        if float(r0 @ r1) >= d * d - 1e-9:  # the straight way to the contact stays outside the disc
-            continue
-        u1 = np.subtract(impact.robot_velocity_before, impact.object_velocity_before)
-        needed = least_time_round_s(robot, v_obj, d, r0, u0, r1, u1)
-        out.append(Approach(name, impact.object, t0, impact.time_s, needed, by, impact=impact, after=previous))
+        needed = _time_round(robot, obj, impact, normal, p_robot, v_robot, p_obj, v_obj)
+        if needed is not None:
+            out.append(Approach(name, impact.object, t0, impact.time_s, needed, by, impact=impact, after=previous))
     return out
+
+
+def _time_round(robot, obj, impact: PlannedImpact, normal, p_robot, v_robot, p_obj, v_obj) -> float | None:
+    """The least time (s) from the robot's state to its contact at ``impact`` round the object flying at
+    ``v_obj`` (:func:`least_time_round_s`), or None when the straight way to the contact stays outside the disc."""
+    d = robot.radius_m + obj.radius_m
+    r0, u0 = p_robot - p_obj, v_robot - v_obj
+    r1 = -d * normal
+    if float(r0 @ r1) >= d * d - 1e-9:  # the straight way to the contact stays outside the disc
+        return None
+    u1 = np.subtract(impact.robot_velocity_before, impact.object_velocity_before)
+    return least_time_round_s(robot, v_obj, d, r0, u0, r1, u1)
 
 
 def unflyable_approaches(plan: PlanLike, scenario: Scenario, margin: float, later: bool = False) -> list[Approach]:
