@@ -80,7 +80,8 @@ def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
                    limits: SegmentLimits | None = None, acceleration_bound=None) -> Segment:
     """The cheapest segment that meets what can be met, in this order of giving up:
 
-    the closed form if it respects everything; else the QP with every bound and limit; else without the
+    the closed form if it respects everything; else the QP with every bound and limit; else without the way
+    round (:class:`~planners.online.segment_qp.WayRound`, if the limits have one); else without the
     limits (the MPC's keep-offs still guard walls and robots) but flyable (acceleration bound); else with the
     velocity bound alone (the paper's replanner); else the closed form. If no flyable segment exists, the
     acceleration bound of those QPs is the least that can be met (below).
@@ -106,6 +107,9 @@ def replan_segment(p0, v0, p1, v1, t0: float, t1: float, velocity_bound=None,
             return segment
         acc = np.where(least > acc, least * (1.0 + RAISED_MARGIN) + FEASIBILITY_TOL, acc)
     attempts: list[tuple[SegmentLimits | None, Any]] = [(limits, acc)] if limits is not None else []
+    if limits is not None and limits.way_round is not None:
+        # the way round is given up before the other limits: without it the segment is the one it was before
+        attempts.append((dataclasses.replace(limits, way_round=None), acc))
     if acc is not None:
         attempts.append((None, acc))
     for lim, bound in attempts:

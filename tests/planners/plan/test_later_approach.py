@@ -193,3 +193,27 @@ def test_a_re_plan_with_a_way_round_it_cannot_fly_is_repaired_or_refused():
         [("R1", "O1", "O2", 37.61, 9.2)]
     out, record = replan(finer_grid_retry=True, later_approaches=True)
     assert out is None and record.status == "kept: UnflyableHandoverError"
+
+
+def test_a_way_round_the_box_does_not_allow_is_given_up_before_the_box(monkeypatch):
+    """The short way round passes above the object (y up to 1.9 m); a world box that stops the robot's centre at
+    y = 1.8 m leaves no such segment. The replanner then tries the box without the way round, the segment it
+    flew before the option, before it drops every limit (the QPs it solves, in order: recorded)."""
+    import planners.online.replanner as replanner
+
+    robot, contact, centre, way = way_round_case(20.0)
+    assert math.sin(0.5 * (way.bearing0 + way.bearing1)) > 0.99  # halfway round: straight above the object
+    asked = []
+    solve = replanner.bounded_segment
+
+    def recording(*args, limits=None, **kwargs):
+        asked.append(limits)
+        return solve(*args, limits=limits, **kwargs)
+
+    monkeypatch.setattr(replanner, "bounded_segment", recording)
+    box = SegmentLimits(box=(0.0, 4.0, 1.0, 1.8))
+    both = SegmentLimits(box=box.box, way_round=way)
+    segment = replan_segment(robot, np.zeros(2), contact, np.array([-0.06, 0.0]), 0.0, 20.0, (0.3, 0.3), both,
+                             (0.8 * ACCEL, 0.8 * ACCEL))
+    assert [(a.box, a.way_round is not None) for a in asked] == [(box.box, True), (box.box, False)]
+    assert respects(segment, (0.3, 0.3), box, tol=1e-6) and not respects(segment, (0.3, 0.3), both, tol=1e-6)
