@@ -42,6 +42,22 @@ def store(out: Path) -> CellStore:
     return CellStore(out / "cells.jsonl", key=lambda c: (c["scenario"], c["controller"], c["train_seed"]))
 
 
+def expert_config_now() -> str:
+    """The fingerprint of the expert's config as it is now (the robustness benchmark's, of stack ``all``): a cell
+    records the one it was flown with (``config``)."""
+    from benchmarks.robustness import config_fingerprint
+
+    return config_fingerprint(STACK)
+
+
+def current(cell: dict | None) -> bool:
+    """True if ``cell`` was flown with today's expert config (:data:`benchmarks.robustness.SAME_FLIGHTS` counted);
+    a cell from before cells recorded it is not: the expert it paired with may have changed since."""
+    from benchmarks.robustness import same_flights
+
+    return cell is not None and same_flights(cell.get("config")) == expert_config_now()
+
+
 def fly_cell(scenario_name: str, run_dir: Path | None, seeds: list[int], plan: Path) -> dict[str, Any]:
     """The episodes of one controller: the expert alone (``run_dir`` None) or with the residual of ``run_dir``."""
     from baselines.residual import TRAINING_NOISE, ResidualController, build_expert
@@ -120,10 +136,12 @@ def table(out: Path) -> str:
              "RMS correction |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     over_seeds = []
+    stale = False
     for name in scenarios:
         expert = cells.get((name, "expert", -1))
         if expert is None:
             continue
+        old_expert = not current(expert)
         residuals = sorted((c for c in cells if c["scenario"] == name and c["controller"] == "residual"),
                            key=lambda c: c["train_seed"])
         diffs = []
@@ -133,8 +151,10 @@ def table(out: Path) -> str:
             lo, hi = cmp["success_diff_ci"]
             rlo, rhi = cmp["robustness_diff_ci"]
             n = cmp["episodes"]
+            mark = " *" if old_expert or not current(cell) else ""
+            stale = stale or bool(mark)
             lines.append(
-                f"| {name} | {cell['train_seed']} | {cell['train_env_steps']:,} | "
+                f"| {name}{mark} | {cell['train_seed']} | {cell['train_env_steps']:,} | "
                 f"{cell['train_wall_s'] / 60:.1f} min | {n} | {cmp['expert_successes']} | "
                 f"{cmp['residual_successes']} | {cmp['only_residual']} / "
                 f"{cmp['only_expert']} | {cmp['p_two_sided']:.3f}; {cmp['p_residual_better']:.3f} | "
@@ -154,10 +174,15 @@ def table(out: Path) -> str:
     experts = sorted((c for c in cells if c["controller"] == "expert"), key=lambda c: c["scenario"])
     text += ("\n\nThe expert alone (stack all), every scenario flown:\n\n| scenario | episodes | successes | "
              "robustness mean (min) m | controller ms per step (median) |\n|---|---:|---:|---:|---:|\n")
-    text += "\n".join(f"| {c['scenario']} | {len(c['episodes'])} | {sum(e['success'] for e in c['episodes'])} | "
+    text += "\n".join(f"| {c['scenario']}{'' if current(c) else ' *'} | {len(c['episodes'])} | "
+                      f"{sum(e['success'] for e in c['episodes'])} | "
                       f"{np.mean([e['robustness'] for e in c['episodes']]):+.3f} "
                       f"({min(e['robustness'] for e in c['episodes']):+.3f}) | "
                       f"{np.median([e['ms_per_step'] for e in c['episodes']]):.2f} |" for c in experts)
+    if stale or any(not current(c) for c in experts):
+        text += ("\n\n\\* flown with an earlier expert (another config, or from before cells recorded it): not "
+                 "a comparison with today's expert; `python -m benchmarks.residual --scenarios NAME --train-seeds "
+                 "S` flies it again")
     return text
 
 
@@ -186,10 +211,10 @@ def main(argv: list[str] | None = None) -> int:
         plan = PLANS / f"{name}.json"
         if not plan.is_file():
             ap.error(f"no cached plan {plan}: run python -m benchmarks.robustness --scenarios {name} first")
-        if (name, "expert", -1) not in cells:
+        if not current(cells.get((name, "expert", -1))):
             cell = fly_cell(name, None, seeds, plan)
             cells.put({"scenario": name, "controller": "expert", "train_seed": -1, "stack": STACK, "seeds": seeds,
-                       **cell})
+                       "config": expert_config_now(), **cell})
             n = sum(e["success"] for e in cell["episodes"])
             print(f"{name}: expert alone {n}/{len(seeds)} ({cell['wall_s']:.0f} s)", flush=True)
         for train_seed in ([] if args.expert_only else train_seeds):
@@ -200,12 +225,13 @@ def main(argv: list[str] | None = None) -> int:
                       f"--seed {train_seed} --out {run_dir}); skipped", flush=True)
                 continue
             done = cells.get((name, "residual", train_seed))
-            if done is not None and done["train_env_steps"] == meta["timesteps_trained"]:
+            if done is not None and done["train_env_steps"] == meta["timesteps_trained"] and current(done):
                 continue
             cell = fly_cell(name, run_dir, seeds, plan)
             cells.put({"scenario": name, "controller": "residual", "train_seed": train_seed, "run": str(run_dir),
                        "train_env_steps": int(meta["timesteps_trained"]), "train_wall_s": float(meta["wall_time_s"]),
-                       "scale": meta["scale"], "stack": meta["stack"], "seeds": seeds, **cell})
+                       "scale": meta["scale"], "stack": meta["stack"], "seeds": seeds, "config": expert_config_now(),
+                       **cell})
             n = sum(e["success"] for e in cell["episodes"])
             print(f"{name}: expert + residual (seed {train_seed}, {meta['timesteps_trained']:,} env-steps) "
                   f"{n}/{len(seeds)} ({cell['wall_s']:.0f} s)", flush=True)

@@ -177,6 +177,32 @@ def test_the_benchmark_pairs_the_same_seeds():
     assert cmp["robustness_diff_ci"][0] <= 0.2 <= cmp["robustness_diff_ci"][1]
 
 
+def test_cells_flown_with_an_earlier_expert_are_marked_and_flown_again(tmp_path):
+    """A cell records the expert config it was flown with; one from another config, or from before cells recorded
+    it, is not today's comparison: the table marks it, and the benchmark flies it again."""
+    import json
+
+    from benchmarks.residual import current, expert_config_now, table
+    from benchmarks.robustness import SAME_FLIGHTS
+
+    now = expert_config_now()
+    assert current({"config": now}) and not current({}) and not current(None)
+    assert current({"config": next(old for old, new in SAME_FLIGHTS.items() if new == now)})
+    assert not current({"config": "000000000000"})
+
+    def cell(controller, config=None, seed=-1):
+        out = {"scenario": "corridor", "controller": controller, "train_seed": seed, "train_env_steps": 10,
+               "train_wall_s": 60.0, "episodes": [{"seed": k, "success": True, "robustness": 0.1,
+                                                   "ms_per_step": 1.0} for k in range(3)]}
+        return out if config is None else {**out, "config": config}
+
+    (tmp_path / "cells.jsonl").write_text("".join(json.dumps(c) + "\n" for c in
+                                                  [cell("expert", now), cell("residual", now, 0),
+                                                   cell("residual", None, 1)]))
+    text = table(tmp_path)
+    assert "| corridor | 0 |" in text and "| corridor * | 1 |" in text and "flown with an earlier expert" in text
+
+
 def test_the_controller_refuses_a_folder_without_a_residual_policy(tmp_path):
     from baselines.residual import ResidualController, build_expert
     from impact_env.errors import ControllerError

@@ -135,7 +135,12 @@ def test_rllib_iterations_checkpoint_restore_and_fly(rllib_run, tmp_path, capsys
     assert main(args + ["--resume", "--trust-pickle"]) == 0
     meta = json.loads((run / "train.json").read_text())
     assert meta["timesteps_trained"] == 1200
-    assert [row["iteration"] for row in csv.DictReader(open(run / "progress.csv"))] == ["1", "2", "3"]
+    # one row per iteration, numbered on from the first run (3 iterations of 400 env steps at low load; on a busy
+    # machine RLlib's env runners can return shorter samples, so more iterations reach the same 1,200)
+    rows = list(csv.DictReader(open(run / "progress.csv")))
+    assert [row["iteration"] for row in rows] == [str(k) for k in range(1, len(rows) + 1)] and len(rows) >= 3
+    steps = [int(row["env_steps"]) for row in rows]
+    assert steps == sorted(set(steps)) and 800 in steps and steps[-1] == 1200
     with np.load(run / "eval" / "evaluations.npz", allow_pickle=False) as ev:
         assert list(ev["timesteps"]) == [400, 800, 1200]
 
