@@ -237,8 +237,7 @@ def cut_approach(staged: StagedModel, approach: Approach) -> None:
         row = row + z[(approach.robot, approach.after.object, kr)]
         ones += 1
     for (robot, obj, k), hit in z.items():
-        if kr < k < k1 and (robot == approach.robot or (obj == approach.object and k > k0)) \
-                and (robot, obj, k) != (approach.robot, approach.object, k1):
+        if kr < k < k1 and (robot == approach.robot or (obj == approach.object and k > k0)):
             row = row - hit
     staged.model.add(row <= ones, group=HANDOVER_GROUP)
 

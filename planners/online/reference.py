@@ -266,9 +266,8 @@ class ReferenceSelector:
             def centre(times: np.ndarray) -> np.ndarray:  # the object's free flight to the impact
                 return x_o + np.outer(np.asarray(times, float) - t_hit, v_o)
 
-            d = robot.radius_m + obj.radius_m
-            if WayRound.needed(state[:2], contact.robot_position, centre(np.array([t]))[0], x_o, d):
-                way_round = WayRound.between(state[:2], contact.robot_position, centre, t, t_hit, d)
+            way_round = WayRound.between(state[:2], contact.robot_position, centre, t, t_hit,
+                                         robot.radius_m + obj.radius_m)
         pre, post = replan_around_impact(t, state[:2], state[3:5], impact.time_s, contact, t_rejoin, p1, v1,
                                          robot.velocity_bound_mps, limits, self.acceleration_bound(robot),
                                          way_round=way_round)

@@ -28,6 +28,7 @@ import numpy as np
 from planners import bezier
 from planners.online.segment_feasibility import FEASIBILITY_TOL
 from planners.plan import Segment
+from planners.plan.approach import way_blocked
 
 DEGREE = 10
 MAX_HALF_PLANES = 4  # obstacle faces (or other fixed half-planes) per segment
@@ -58,20 +59,16 @@ class WayRound:
     bearing0: float
     bearing1: float
 
-    @staticmethod
-    def needed(robot_position, contact_position, centre_now, centre_at_contact, distance_m: float) -> bool:
-        """True if the straight way from the robot to its contact crosses the disc, in the object's frame: the
-        robot's relative position r0 now and the contact's r1 (``|r1| = distance_m``) have r0 . r1 < d^2."""
-        r0 = np.subtract(robot_position, centre_now)
-        r1 = np.subtract(contact_position, centre_at_contact)
-        return float(r0 @ r1) < distance_m * distance_m - 1e-9
-
     @classmethod
     def between(cls, robot_position, contact_position, centre: Callable[[np.ndarray], np.ndarray], t0: float,
-                t1: float, distance_m: float) -> WayRound:
-        """The way round from the robot at ``robot_position`` (time ``t0``) to ``contact_position`` (``t1``)."""
+                t1: float, distance_m: float) -> WayRound | None:
+        """The way round from the robot at ``robot_position`` (time ``t0``) to ``contact_position`` (``t1``); None
+        when the straight way there stays outside the disc, in the object's frame (the approach test's criterion,
+        :func:`planners.plan.approach.way_blocked`)."""
         c0, c1 = centre(np.array([t0, t1]))
         r0, r1 = np.subtract(robot_position, c0), np.subtract(contact_position, c1)
+        if not way_blocked(r0, r1, distance_m):
+            return None
         b0 = math.atan2(r0[1], r0[0])
         turn = math.remainder(math.atan2(r1[1], r1[0]) - b0, 2 * math.pi)  # the short way, in [-pi, pi]
         return cls(centre, float(distance_m), b0, b0 + turn)

@@ -36,7 +36,7 @@ from planners.errors import PlanCheckError
 from planners.plan.handover import least_time_round_s, needed_text, time_suffices, unit_change
 from planners.plan.types import PlanLike, PlannedImpact
 
-__all__ = ["Approach", "approaches", "unflyable_approaches"]
+__all__ = ["Approach", "approaches", "unflyable_approaches", "way_blocked"]
 
 
 @dataclass
@@ -158,13 +158,19 @@ def _later_approaches(plan: PlanLike, scenario: Scenario, name: str, ordered: li
     return out
 
 
+def way_blocked(r0, r1, distance_m: float) -> bool:
+    """True if the straight way from relative position ``r0`` to the contact point ``r1`` (``|r1| = distance_m``,
+    both in the object's frame) enters the disc of radius ``distance_m``: ``r0 . r1 < d^2``."""
+    return float(np.dot(r0, r1)) < distance_m * distance_m - 1e-9
+
+
 def _time_round(robot, obj, impact: PlannedImpact, normal, p_robot, v_robot, p_obj, v_obj) -> float | None:
     """The least time (s) from the robot's state to its contact at ``impact`` round the object flying at
     ``v_obj`` (:func:`least_time_round_s`), or None when the straight way to the contact stays outside the disc."""
     d = robot.radius_m + obj.radius_m
     r0, u0 = p_robot - p_obj, v_robot - v_obj
     r1 = -d * normal
-    if float(r0 @ r1) >= d * d - 1e-9:  # the straight way to the contact stays outside the disc
+    if not way_blocked(r0, r1, d):
         return None
     u1 = np.subtract(impact.robot_velocity_before, impact.object_velocity_before)
     return least_time_round_s(robot, v_obj, d, r0, u0, r1, u1)

@@ -127,8 +127,9 @@ def way_round_case(duration_s: float):
 
 def test_the_way_round_takes_the_short_turn_and_its_rows_are_tangents():
     robot, contact, centre, way = way_round_case(20.0)
-    assert WayRound.needed(robot, contact, centre, centre, 0.4)
-    assert not WayRound.needed(contact + [0.5, 0.0], contact, centre, centre, 0.4)  # already on the right
+    assert way is not None
+    assert WayRound.between(contact + [0.5, 0.0], contact, lambda t: np.tile(centre, (len(t), 1)), 0.0, 20.0,
+                            0.4) is None  # already on the right: the straight way misses the disc
     assert abs(way.bearing1 - way.bearing0) == pytest.approx(math.pi)
     rows = way.rows(0.0, 20.0)
     assert len(rows) == 8
